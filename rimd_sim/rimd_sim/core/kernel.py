@@ -1,0 +1,916 @@
+"""Compiled integration kernel: the embarked pendulum with Filippov contact switching.
+
+This module is the hot loop. It is written in the subset of Python that numba compiles; with the
+environment variable ``RIMD_NO_JIT=1`` the very same functions run as plain Python (slow, for debugging
+and for the test that both paths agree). The public, typed interface is :mod:`rimd_sim.core.model`; the
+arrays and integer codes here are an implementation detail.
+
+Method
+------
+* State ``y = (theta, theta_dot, J)``: embarked pendulum angle, its rate, and the impulse of the current
+  contact (``J' = F``), integrated by the explicit Dormand-Prince 5(4) pair with local extrapolation,
+  PI-free standard step control on ``(theta, theta_dot)`` and its 4th-order continuous extension (the
+  same coefficients as ``scipy.integrate.RK45``). Global error is O(h^5) (order 5 method).
+* The right-hand side is smooth inside each *mode* (FREE or CONTACT) and within a motor segment (constant
+  angular acceleration of the motor). Every step ends at a motor breakpoint (ramp start/end).
+* Events (switches) are located on the dense output by the Illinois method to ``event_tolerance``; the
+  step is then recomputed from its start to the event time, so the state at the switch carries the
+  method's full order. Modes change only at located events, never by testing the sign of a state inside
+  the right-hand side, so a switch can neither be missed by an oscillating sign nor be applied twice.
+* FREE mode watches ``delta`` crossing 0 upwards (contact starts, Filippov surface Sigma_alpha), a double
+  crossing of ``delta`` inside one step (found from the cubic Hermite of delta and its rate), and, while
+  the hammer is separated but still beyond the stop position (``delta > 0`` after a dashpot release), the
+  law's force crossing 0 upwards (re-contact) and ``delta`` returning to 0 (the impact is over).
+  CONTACT mode watches the force crossing 0 downwards (Sigma_beta) and ``delta`` crossing 0 downwards.
+* An *impact* is the interval from ``delta`` rising through 0 to ``delta`` falling back through 0; it
+  may hold several contact intervals. Its duration runs to the last instant the force vanished.
+* A chattering guard stops with a status code when more than ``ZENO_MAX_EVENTS`` switches happen within
+  ``ZENO_WINDOW`` seconds, instead of stalling.
+
+Chunk independence: an ``advance`` call never shortens a step to land on its stop time. The current
+step (with its dense output) persists between calls and samples are drawn from it, so the trajectory and
+every sample are bit-identical however the simulated time is cut into calls. Only commands (see
+``truncate``) end a step early, at the command's time.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+if os.environ.get("RIMD_NO_JIT") == "1":  # pragma: no cover - exercised by a subprocess test
+
+    def _jit(func):
+        return func
+
+    JIT = False
+else:
+    from numba import njit
+
+    def _jit(func):
+        return njit(cache=True, fastmath=False, nogil=True)(func)
+
+    JIT = True
+
+# ---- parameter vector ------------------------------------------------------------------------------
+P_L, P_M, P_A0, P_GL, P_WN, P_ZETA, P_GAP, P_LAW, P_K, P_C, P_N, P_E, P_VMIN = range(13)
+P_RTOL, P_ATOL, P_HMAX, P_EVTOL, P_HCONT0 = range(13, 18)
+N_PARAM = 18
+
+# ---- float state -----------------------------------------------------------------------------------
+F_TA, F_TB, F_H, F_HFREE, F_HCONT = range(5)
+F_MT0, F_MPHI0, F_MW0, F_MALPHA, F_MTEND, F_MWSET = range(5, 11)
+F_VIMP = 11
+F_RT0, F_RPEAK, F_RJ, F_RV, F_RPEN, F_RFREQ, F_RPHASE, F_RLAST = range(12, 20)
+F_ZT0 = 20
+N_FSTATE = 24
+
+# ---- integer state ---------------------------------------------------------------------------------
+I_MODE, I_PEND, I_REC, I_CYC, I_NIMP, I_NSTEP, I_NREJ, I_NEV = range(8)
+I_RCYC, I_RSUB, I_ZCNT, I_NEEDF, I_IMPOUT, I_STRK, I_STROUT, I_STATUS = range(8, 16)
+N_ISTATE = 16
+
+# ---- codes -----------------------------------------------------------------------------------------
+FREE, CONTACT = 0, 1
+EV_NONE, EV_ENTER, EV_REENTER, EV_EXIT, EV_EXIT_CLOSE, EV_CLOSE, EV_MOTOR = range(7)
+ST_OK, ST_IMPACTS_FULL, ST_STROBE_FULL, ST_STEP_UNDERFLOW, ST_ZENO, ST_NONFINITE = range(6)
+
+# Channel quantities.
+Q_CART, Q_RIMD, Q_ACC, Q_FORCE = range(4)
+# Rows of the truth block.
+T_THETA, T_OMEGA, T_XC, T_X, T_V, T_A, T_DELTA, T_F, T_PHASE, T_FREQ, T_CONTACT = range(11)
+N_TRUTH = 11
+# Columns of an impact record.
+(R_T0, R_DURATION, R_PEAK, R_IMPULSE, R_VELOCITY, R_PENETRATION, R_FREQ, R_PHASE, R_CYCLE, R_INDEX, R_TEND,
+ R_NCONTACT) = range(12)
+N_RECORD = 12
+# Columns of a stroboscopic (Poincare) point.
+S_T, S_THETA, S_OMEGA, S_CYCLE = range(4)
+N_STROBE = 4
+
+ZENO_WINDOW = 1e-3
+ZENO_MAX_EVENTS = 400
+TWO_PI = 2.0 * math.pi
+
+# Dormand-Prince 5(4) tableau (scipy.integrate.RK45).
+_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0])
+_A = np.array([
+    [0.0, 0.0, 0.0, 0.0, 0.0],
+    [1 / 5, 0.0, 0.0, 0.0, 0.0],
+    [3 / 40, 9 / 40, 0.0, 0.0, 0.0],
+    [44 / 45, -56 / 15, 32 / 9, 0.0, 0.0],
+    [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0],
+    [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
+])
+_B = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84])
+_E = np.array([-71 / 57600, 0.0, 71 / 16695, -71 / 1920, 17253 / 339200, -22 / 525, 1 / 40])
+_P = np.array([
+    [1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432],
+    [0.0, 0.0, 0.0, 0.0],
+    [0.0, 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799],
+    [0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072],
+    [0.0, 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632],
+    [0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844],
+    [0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423],
+])
+
+
+# ======================================================================================================
+# Physics
+# ======================================================================================================
+
+
+@_jit
+def spow(x, n):
+    """Signed power ``sign(x) |x|^n``."""
+    if x >= 0.0:
+        return x**n
+    return -((-x) ** n)
+
+
+@_jit
+def law_force(delta, ddelta, p, vimp):
+    """Force of the configured contact law, unclipped (may be negative near a switch)."""
+    code = int(p[P_LAW])
+    if code == 0:
+        return p[P_K] * delta + p[P_C] * ddelta
+    dn = spow(delta, p[P_N])
+    if code == 1:
+        return p[P_K] * dn
+    if code == 2:
+        return dn * (p[P_K] + p[P_C] * ddelta)
+    e = p[P_E]
+    return p[P_K] * dn * (1.0 + 0.75 * (1.0 - e * e) * ddelta / vimp)
+
+
+@_jit
+def motor_phase(fs, t):
+    """Motor phase (rad, relative to the segment base; add ``I_CYC`` turns for the absolute phase)."""
+    tau = t - fs[F_MT0]
+    return fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau
+
+
+@_jit
+def motor_omega(fs, t):
+    """Motor angular frequency (rad/s)."""
+    return fs[F_MW0] + fs[F_MALPHA] * (t - fs[F_MT0])
+
+
+@_jit
+def cart_kinematics(fs, p, t):
+    """Cart position, velocity and acceleration ``x_c = A0 sin(phi)`` and its derivatives."""
+    tau = t - fs[F_MT0]
+    alpha = fs[F_MALPHA]
+    w = fs[F_MW0] + alpha * tau
+    phi = fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha * tau * tau
+    sp = math.sin(phi)
+    cp = math.cos(phi)
+    a0 = p[P_A0]
+    return a0 * sp, a0 * w * cp, a0 * (alpha * cp - w * w * sp)
+
+
+@_jit
+def cart_accel(fs, p, t):
+    """Cart acceleration only (the forcing of the embarked pendulum)."""
+    tau = t - fs[F_MT0]
+    alpha = fs[F_MALPHA]
+    w = fs[F_MW0] + alpha * tau
+    phi = fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha * tau * tau
+    if alpha == 0.0:
+        return -p[P_A0] * w * w * math.sin(phi)
+    return p[P_A0] * (alpha * math.cos(phi) - w * w * math.sin(phi))
+
+
+@_jit
+def theta_accel(t, th, om, mode, p, fs):
+    """Angular acceleration and contact force: the paper's Eqs. 2-3 with the sign erratum fixed.
+
+    ``theta'' = -(a_c / l) cos(theta) - (g / l) sin(theta) - 2 zeta w_n theta' - F / (m l)``, where
+    ``a_c = -A0 Omega^2 sin(Omega t)`` at constant motor speed. The contact force pushes the hammer out
+    of the stop (the paper prints ``+F/(ml)``).
+    """
+    s = math.sin(th)
+    c = math.cos(th)
+    lg = p[P_L]
+    acc = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
+    force = 0.0
+    if mode == CONTACT:
+        force = law_force(lg * s - p[P_GAP], lg * om * c, p, fs[F_VIMP])
+        acc -= force / (p[P_M] * lg)
+    return acc, force
+
+
+@_jit
+def rhs(t, y, mode, p, fs, out):
+    """Right-hand side of the augmented state ``(theta, theta_dot, J)``."""
+    acc, force = theta_accel(t, y[0], y[1], mode, p, fs)
+    out[0] = y[1]
+    out[1] = acc
+    out[2] = force
+
+
+@_jit
+def penetration(th, om, p):
+    """Penetration ``delta = l sin(theta) - gap`` and its rate ``l theta' cos(theta)``."""
+    return p[P_L] * math.sin(th) - p[P_GAP], p[P_L] * om * math.cos(th)
+
+
+# ======================================================================================================
+# Runge-Kutta step and dense output
+# ======================================================================================================
+
+
+@_jit
+def rk_step(t, y, f, h, mode, p, fs, K, ynew, ytmp, A, B, C, E):
+    """One Dormand-Prince step from ``(t, y)`` with ``f = rhs(t, y)``; fills ``K`` (7 stages) and ``ynew``.
+
+    Returns the RMS error norm over ``(theta, theta_dot)`` scaled by ``atol + rtol * |y|``. The stages
+    are unrolled (the tableau's zeros skipped); ``A, B, C, E`` are kept in the signature for clarity.
+    """
+    y0 = y[0]
+    y1 = y[1]
+    y2 = y[2]
+    k00 = f[0]
+    k01 = f[1]
+    k02 = f[2]
+    K[0, 0] = k00
+    K[0, 1] = k01
+    K[0, 2] = k02
+    # stage 2
+    c0 = h / 5.0
+    k10, k11, k12 = _stage(t + c0, y0 + c0 * k00, y1 + c0 * k01, mode, p, fs)
+    # stage 3
+    c0 = 3.0 / 40.0 * h
+    c1 = 9.0 / 40.0 * h
+    k20, k21, k22 = _stage(t + 0.3 * h, y0 + c0 * k00 + c1 * k10, y1 + c0 * k01 + c1 * k11, mode, p, fs)
+    # stage 4
+    c0 = 44.0 / 45.0 * h
+    c1 = -56.0 / 15.0 * h
+    c2 = 32.0 / 9.0 * h
+    k30, k31, k32 = _stage(t + 0.8 * h, y0 + c0 * k00 + c1 * k10 + c2 * k20,
+                           y1 + c0 * k01 + c1 * k11 + c2 * k21, mode, p, fs)
+    # stage 5
+    c0 = 19372.0 / 6561.0 * h
+    c1 = -25360.0 / 2187.0 * h
+    c2 = 64448.0 / 6561.0 * h
+    c3 = -212.0 / 729.0 * h
+    k40, k41, k42 = _stage(t + 8.0 / 9.0 * h, y0 + c0 * k00 + c1 * k10 + c2 * k20 + c3 * k30,
+                           y1 + c0 * k01 + c1 * k11 + c2 * k21 + c3 * k31, mode, p, fs)
+    # stage 6
+    c0 = 9017.0 / 3168.0 * h
+    c1 = -355.0 / 33.0 * h
+    c2 = 46732.0 / 5247.0 * h
+    c3 = 49.0 / 176.0 * h
+    c4 = -5103.0 / 18656.0 * h
+    k50, k51, k52 = _stage(t + h, y0 + c0 * k00 + c1 * k10 + c2 * k20 + c3 * k30 + c4 * k40,
+                           y1 + c0 * k01 + c1 * k11 + c2 * k21 + c3 * k31 + c4 * k41, mode, p, fs)
+    b0 = 35.0 / 384.0 * h
+    b2 = 500.0 / 1113.0 * h
+    b3 = 125.0 / 192.0 * h
+    b4 = -2187.0 / 6784.0 * h
+    b5 = 11.0 / 84.0 * h
+    n0 = y0 + b0 * k00 + b2 * k20 + b3 * k30 + b4 * k40 + b5 * k50
+    n1 = y1 + b0 * k01 + b2 * k21 + b3 * k31 + b4 * k41 + b5 * k51
+    n2 = y2 + b0 * k02 + b2 * k22 + b3 * k32 + b4 * k42 + b5 * k52
+    k60, k61, k62 = _stage(t + h, n0, n1, mode, p, fs)
+    ynew[0] = n0
+    ynew[1] = n1
+    ynew[2] = n2
+    K[1, 0] = k10
+    K[1, 1] = k11
+    K[1, 2] = k12
+    K[2, 0] = k20
+    K[2, 1] = k21
+    K[2, 2] = k22
+    K[3, 0] = k30
+    K[3, 1] = k31
+    K[3, 2] = k32
+    K[4, 0] = k40
+    K[4, 1] = k41
+    K[4, 2] = k42
+    K[5, 0] = k50
+    K[5, 1] = k51
+    K[5, 2] = k52
+    K[6, 0] = k60
+    K[6, 1] = k61
+    K[6, 2] = k62
+    e0 = h * (E[0] * k00 + E[2] * k20 + E[3] * k30 + E[4] * k40 + E[5] * k50 + E[6] * k60)
+    e1 = h * (E[0] * k01 + E[2] * k21 + E[3] * k31 + E[4] * k41 + E[5] * k51 + E[6] * k61)
+    rtol = p[P_RTOL]
+    atol = p[P_ATOL]
+    r0 = e0 / (atol + rtol * max(abs(y0), abs(n0)))
+    r1 = e1 / (atol + rtol * max(abs(y1), abs(n1)))
+    return math.sqrt(0.5 * (r0 * r0 + r1 * r1))
+
+
+@_jit
+def _stage(t, th, om, mode, p, fs):
+    """Derivative of the augmented state at ``(t, theta, theta_dot)``."""
+    acc, force = theta_accel(t, th, om, mode, p, fs)
+    return om, acc, force
+
+
+@_jit
+def dense_coeffs(K, P, Q):
+    """``Q = K.T @ P``: coefficients of the 4th-order continuous extension."""
+    for i in range(3):
+        for j in range(4):
+            acc = 0.0
+            for s in range(7):
+                acc += K[s, i] * P[s, j]
+            Q[i, j] = acc
+
+
+@_jit
+def dense_theta(ya, Q, h, x):
+    """Angle and rate at fraction ``x`` of the current step."""
+    x2 = x * x
+    x3 = x2 * x
+    x4 = x3 * x
+    th = ya[0] + h * (Q[0, 0] * x + Q[0, 1] * x2 + Q[0, 2] * x3 + Q[0, 3] * x4)
+    om = ya[1] + h * (Q[1, 0] * x + Q[1, 1] * x2 + Q[1, 2] * x3 + Q[1, 3] * x4)
+    return th, om
+
+
+@_jit
+def dense_impulse(ya, Q, h, x):
+    """Impulse state at fraction ``x`` of the current step."""
+    return ya[2] + h * (Q[2, 0] * x + Q[2, 1] * x * x + Q[2, 2] * x * x * x + Q[2, 3] * x * x * x * x)
+
+
+@_jit
+def event_value(kind, ya, Q, h, x, p, fs):
+    """Value of event function ``kind`` (0: delta, 1: law force) at fraction ``x`` of the step."""
+    th, om = dense_theta(ya, Q, h, x)
+    d, dd = penetration(th, om, p)
+    if kind == 0:
+        return d
+    return law_force(d, dd, p, fs[F_VIMP])
+
+
+@_jit
+def find_root(kind, ya, Q, h, lo, glo, hi, ghi, p, fs):
+    """Illinois regula falsi for a sign change of event ``kind`` in ``[lo, hi]`` (fractions of the step).
+
+    Returns the end of the final bracket on the far side of the crossing, so the event state is on the
+    new side of the switching surface (or on it).
+    """
+    tol = p[P_EVTOL] / h
+    side = 0
+    for _ in range(200):
+        if hi - lo <= tol:
+            break
+        x = (lo * ghi - hi * glo) / (ghi - glo)
+        if not (lo < x < hi):
+            x = 0.5 * (lo + hi)
+        g = event_value(kind, ya, Q, h, x, p, fs)
+        if (g > 0.0) == (glo > 0.0) and g != 0.0:
+            lo = x
+            glo = g
+            if side == -1:
+                ghi *= 0.5
+            side = -1
+        else:
+            hi = x
+            ghi = g
+            if side == 1:
+                glo *= 0.5
+            side = 1
+    return hi
+
+
+@_jit
+def hermite_peak(d0, d1, s0, s1):
+    """Location in ``(0, 1)`` of the maximum of the cubic Hermite with values d0, d1 and slopes s0, s1.
+
+    The slopes are per unit step fraction. Returns -1 when the cubic has no interior maximum.
+    """
+    # p(x) = d0 + s0 x + a x^2 + b x^3
+    a = 3.0 * (d1 - d0) - 2.0 * s0 - s1
+    b = 2.0 * (d0 - d1) + s0 + s1
+    # p'(x) = s0 + 2 a x + 3 b x^2 = 0
+    if b == 0.0:
+        if a >= 0.0:
+            return -1.0
+        x = -s0 / (2.0 * a)
+        return x if 0.0 < x < 1.0 else -1.0
+    disc = a * a - 3.0 * b * s0
+    if disc < 0.0:
+        return -1.0
+    r = math.sqrt(disc)
+    for x in ((-a - r) / (3.0 * b), (-a + r) / (3.0 * b)):
+        if 0.0 < x < 1.0 and 2.0 * a + 6.0 * b * x < 0.0:
+            return x
+    return -1.0
+
+
+@_jit
+def detect_event(mode, ya, yb, h, Q, p, fs):
+    """Earliest switch inside the step ``[0, 1]``: returns ``(fraction, event code)`` or ``(2, EV_NONE)``."""
+    best = 2.0
+    code = EV_NONE
+    da, dda = penetration(ya[0], ya[1], p)
+    db, ddb = penetration(yb[0], yb[1], p)
+    if mode == FREE:
+        if da <= 0.0:
+            if db > 0.0:
+                best = find_root(0, ya, Q, h, 0.0, da, 1.0, db, p, fs)
+                code = EV_ENTER
+            elif dda > 0.0 and ddb < 0.0:
+                xm = hermite_peak(da, db, dda * h, ddb * h)
+                if xm > 0.0:
+                    gm = event_value(0, ya, Q, h, xm, p, fs)
+                    if gm > 0.0:
+                        best = find_root(0, ya, Q, h, 0.0, da, xm, gm, p, fs)
+                        code = EV_ENTER
+        else:
+            # Separated by a vanishing force while still beyond the stop position.
+            if db <= 0.0:
+                best = find_root(0, ya, Q, h, 0.0, da, 1.0, db, p, fs)
+                code = EV_CLOSE
+            fa = law_force(da, dda, p, fs[F_VIMP])
+            fb = law_force(db, ddb, p, fs[F_VIMP])
+            if fa < 0.0 and fb >= 0.0:
+                x = find_root(1, ya, Q, h, 0.0, fa, 1.0, fb, p, fs)
+                if x < best:
+                    best = x
+                    code = EV_REENTER
+    else:
+        fa = law_force(da, dda, p, fs[F_VIMP])
+        fb = law_force(db, ddb, p, fs[F_VIMP])
+        if fa >= 0.0 and fb < 0.0:
+            best = find_root(1, ya, Q, h, 0.0, fa, 1.0, fb, p, fs)
+            code = EV_EXIT
+        if da >= 0.0 and db < 0.0:
+            x = find_root(0, ya, Q, h, 0.0, da, 1.0, db, p, fs)
+            if x < best:
+                best = x
+                code = EV_EXIT_CLOSE
+    return best, code
+
+
+# ======================================================================================================
+# Motor
+# ======================================================================================================
+
+
+@_jit
+def motor_rebase(fs, ist, t):
+    """Start a new motor segment at ``t`` with the phase wrapped to ``[0, 2 pi)`` (keeps it precise)."""
+    phi = motor_phase(fs, t)
+    w = motor_omega(fs, t)
+    turns = math.floor(phi / TWO_PI)
+    ist[I_CYC] += int(turns)
+    fs[F_MPHI0] = phi - turns * TWO_PI
+    fs[F_MW0] = w
+    fs[F_MT0] = t
+
+
+@_jit
+def motor_command(fs, ist, t, w_set, rate):
+    """Set a new setpoint ``w_set`` (rad/s) at time ``t``, ramping at ``rate`` (rad/s^2, > 0)."""
+    motor_rebase(fs, ist, t)
+    w = fs[F_MW0]
+    fs[F_MWSET] = w_set
+    if w_set == w:
+        fs[F_MALPHA] = 0.0
+        fs[F_MTEND] = np.inf
+    else:
+        fs[F_MALPHA] = rate if w_set > w else -rate
+        fs[F_MTEND] = t + abs(w_set - w) / rate
+
+
+@_jit
+def motor_finish_ramp(fs, ist, t):
+    """End of a ramp at ``t``: the frequency sits exactly on the setpoint from now on."""
+    motor_rebase(fs, ist, t)
+    fs[F_MW0] = fs[F_MWSET]
+    fs[F_MALPHA] = 0.0
+    fs[F_MTEND] = np.inf
+
+
+# ======================================================================================================
+# Sampling
+# ======================================================================================================
+
+
+@_jit
+def sample_quantity(qty, t, th, om, mode, p, fs):
+    """Noise-free value of a channel quantity at time ``t`` from the state ``(theta, theta_dot)``."""
+    tau = t - fs[F_MT0]
+    alpha = fs[F_MALPHA]
+    w = fs[F_MW0] + alpha * tau
+    phi = fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha * tau * tau
+    a0 = p[P_A0]
+    if qty == Q_CART:
+        return a0 * math.sin(phi)
+    if qty == Q_RIMD:
+        return p[P_L] * math.sin(th) + a0 * math.sin(phi)
+    if qty == Q_FORCE:
+        if mode != CONTACT:
+            return 0.0
+        d, dd = penetration(th, om, p)
+        return max(law_force(d, dd, p, fs[F_VIMP]), 0.0)
+    # Q_ACC: inertial acceleration of the hammer, x'' = l (theta'' cos - theta'^2 sin) + a_c.
+    sp = math.sin(phi)
+    ac = -a0 * w * w * sp
+    if alpha != 0.0:
+        ac += a0 * alpha * math.cos(phi)
+    s = math.sin(th)
+    c = math.cos(th)
+    lg = p[P_L]
+    acc = -(ac / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if mode == CONTACT:
+        acc -= law_force(lg * s - p[P_GAP], lg * om * c, p, fs[F_VIMP]) / (p[P_M] * lg)
+    return lg * (acc * c - om * om * s) + ac
+
+
+@_jit
+def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
+                 tr_rate, tr_next, tr_stop, tr_base, tr_out, st_out, t_stop):
+    """Emit every channel sample, truth sample and stroboscopic point that falls in the current step."""
+    ta = fs[F_TA]
+    tb = fs[F_TB]
+    h = tb - ta
+    if h <= 0.0:
+        return
+    mode = ist[I_MODE]
+    for c in range(ch_rate.shape[0]):
+        rate = ch_rate[c]
+        qty = ch_qty[c]
+        n = ch_next[c]
+        if qty == Q_FORCE and mode != CONTACT:
+            while n < ch_stop[c] and n / rate < tb:  # no contact in this step: the force is 0
+                ch_out[c, n - ch_base[c]] = 0.0
+                n += 1
+        while n < ch_stop[c]:
+            tn = n / rate
+            if tn >= tb:
+                break
+            th, om = dense_theta(ya, Q, h, (tn - ta) / h)
+            ch_out[c, n - ch_base[c]] = sample_quantity(qty, tn, th, om, mode, p, fs)
+            n += 1
+        ch_next[c] = n
+    n = tr_next[0]
+    while n < tr_stop[0]:
+        tn = n / tr_rate
+        if tn >= tb:
+            break
+        th, om = dense_theta(ya, Q, h, (tn - ta) / h)
+        k = n - tr_base[0]
+        xc, vc, ac = cart_kinematics(fs, p, tn)
+        acc, _ = theta_accel(tn, th, om, mode, p, fs)
+        s = math.sin(th)
+        c_ = math.cos(th)
+        d, dd = penetration(th, om, p)
+        force = 0.0
+        if mode == CONTACT:
+            force = max(law_force(d, dd, p, fs[F_VIMP]), 0.0)
+        phi = motor_phase(fs, tn)
+        tr_out[T_THETA, k] = th
+        tr_out[T_OMEGA, k] = om
+        tr_out[T_XC, k] = xc
+        tr_out[T_X, k] = p[P_L] * s + xc
+        tr_out[T_V, k] = p[P_L] * om * c_ + vc
+        tr_out[T_A, k] = p[P_L] * (acc * c_ - om * om * s) + ac
+        tr_out[T_DELTA, k] = d
+        tr_out[T_F, k] = force
+        tr_out[T_PHASE, k] = phi - math.floor(phi / TWO_PI) * TWO_PI
+        tr_out[T_FREQ, k] = motor_omega(fs, tn) / TWO_PI
+        tr_out[T_CONTACT, k] = 1.0 if mode == CONTACT else 0.0
+        n += 1
+    tr_next[0] = n
+    # Stroboscopic points: the motor phase crosses a multiple of 2 pi (cart at 0 moving forward).
+    if st_out.shape[0] > 0:
+        while ist[I_STROUT] < st_out.shape[0]:
+            k = ist[I_STRK] - ist[I_CYC]  # turns ahead of the segment base
+            target = k * TWO_PI - fs[F_MPHI0]
+            w0 = fs[F_MW0]
+            alpha = fs[F_MALPHA]
+            if alpha == 0.0:
+                if w0 <= 0.0:
+                    break  # motor stopped: no crossing ahead
+                tau = target / w0
+            else:
+                disc = w0 * w0 + 2.0 * alpha * target
+                if disc < 0.0 or w0 + math.sqrt(disc) <= 0.0:
+                    break  # a ramp down stops the motor before this crossing
+                tau = 2.0 * target / (w0 + math.sqrt(disc))
+            tk = fs[F_MT0] + tau
+            if tk < ta:  # already behind the current step (round-off at a rebase): skip it
+                ist[I_STRK] += 1
+                continue
+            if tk >= tb or tk >= t_stop:
+                break
+            th, om = dense_theta(ya, Q, h, (tk - ta) / h)
+            j = ist[I_STROUT]
+            st_out[j, S_T] = tk
+            st_out[j, S_THETA] = th
+            st_out[j, S_OMEGA] = om
+            st_out[j, S_CYCLE] = ist[I_STRK]
+            ist[I_STROUT] += 1
+            ist[I_STRK] += 1
+
+
+# ======================================================================================================
+# Events
+# ======================================================================================================
+
+
+@_jit
+def close_record(fs, ist, imp_out, t):
+    """Write the open impact record to ``imp_out`` (the caller guarantees room)."""
+    j = ist[I_IMPOUT]
+    imp_out[j, R_T0] = fs[F_RT0]
+    imp_out[j, R_DURATION] = fs[F_RLAST] - fs[F_RT0]
+    imp_out[j, R_PEAK] = fs[F_RPEAK]
+    imp_out[j, R_IMPULSE] = fs[F_RJ]
+    imp_out[j, R_VELOCITY] = fs[F_RV]
+    imp_out[j, R_PENETRATION] = fs[F_RPEN]
+    imp_out[j, R_FREQ] = fs[F_RFREQ]
+    imp_out[j, R_PHASE] = fs[F_RPHASE]
+    imp_out[j, R_CYCLE] = ist[I_RCYC]
+    imp_out[j, R_INDEX] = ist[I_NIMP]
+    imp_out[j, R_TEND] = t
+    imp_out[j, R_NCONTACT] = ist[I_RSUB]
+    ist[I_IMPOUT] += 1
+    ist[I_NIMP] += 1
+    ist[I_REC] = 0
+
+
+@_jit
+def open_record(fs, ist, p, t, y):
+    """Start an impact record at ``t`` (contact begins with ``delta`` rising through 0)."""
+    d, dd = penetration(y[0], y[1], p)
+    phi = motor_phase(fs, t)
+    turns = math.floor(phi / TWO_PI)
+    ist[I_REC] = 1
+    ist[I_RSUB] = 1
+    ist[I_RCYC] = ist[I_CYC] + int(turns)
+    fs[F_RT0] = t
+    fs[F_RLAST] = t
+    fs[F_RV] = dd
+    fs[F_VIMP] = max(dd, p[P_VMIN])
+    fs[F_RPEAK] = 0.0
+    fs[F_RJ] = 0.0
+    fs[F_RPEN] = max(d, 0.0)
+    fs[F_RFREQ] = motor_omega(fs, t) / TWO_PI
+    fs[F_RPHASE] = phi - turns * TWO_PI
+
+
+@_jit
+def apply_event(fs, ist, p, yb, imp_out):
+    """Apply the pending switch at the end of the current step. Returns False on a chattering contact."""
+    ev = ist[I_PEND]
+    ist[I_PEND] = EV_NONE
+    if ev == EV_NONE:
+        return True
+    t = fs[F_TB]
+    if ev == EV_MOTOR:
+        motor_finish_ramp(fs, ist, t)
+        ist[I_NEEDF] = 1
+        return True
+    ist[I_NEV] += 1
+    if t - fs[F_ZT0] > ZENO_WINDOW:
+        fs[F_ZT0] = t
+        ist[I_ZCNT] = 0
+    ist[I_ZCNT] += 1
+    if ist[I_ZCNT] > ZENO_MAX_EVENTS:
+        return False
+    if ev == EV_ENTER:
+        if ist[I_REC] == 1:  # defensive: a record can only be open here after a command changed the state
+            close_record(fs, ist, imp_out, t)
+        open_record(fs, ist, p, t, yb)
+        ist[I_MODE] = CONTACT
+        fs[F_HFREE] = fs[F_H]
+        fs[F_H] = min(fs[F_HCONT], fs[F_H])
+        yb[2] = 0.0
+        # The force may jump at first contact (dashpot): count it in the peak.
+        d, dd = penetration(yb[0], yb[1], p)
+        fs[F_RPEAK] = max(fs[F_RPEAK], law_force(d, dd, p, fs[F_VIMP]))
+    elif ev == EV_REENTER:
+        ist[I_MODE] = CONTACT
+        ist[I_RSUB] += 1
+        fs[F_H] = min(fs[F_HCONT], fs[F_H])
+        yb[2] = 0.0
+    elif ev == EV_EXIT or ev == EV_EXIT_CLOSE:
+        fs[F_RJ] += yb[2]
+        yb[2] = 0.0
+        fs[F_RLAST] = t
+        ist[I_MODE] = FREE
+        fs[F_HCONT] = fs[F_H]
+        fs[F_H] = max(fs[F_H], fs[F_HFREE])
+        d, _ = penetration(yb[0], yb[1], p)
+        if ev == EV_EXIT_CLOSE or d <= 0.0:
+            close_record(fs, ist, imp_out, t)
+    elif ev == EV_CLOSE:
+        if ist[I_REC] == 1:
+            close_record(fs, ist, imp_out, t)
+    ist[I_NEEDF] = 1
+    return True
+
+
+@_jit
+def track_contact_extremes(fs, p, ya, Q, h):
+    """Update the open record's peak force and penetration over the current (contact) step."""
+    best_f = -np.inf
+    best_i = 0
+    vals = np.empty(9)  # numba keeps this on the stack-like fast path; contact steps are few
+    for i in range(9):
+        x = i / 8.0
+        th, om = dense_theta(ya, Q, h, x)
+        d, dd = penetration(th, om, p)
+        vals[i] = law_force(d, dd, p, fs[F_VIMP])
+        if d > fs[F_RPEN]:
+            fs[F_RPEN] = d
+        if vals[i] > best_f:
+            best_f = vals[i]
+            best_i = i
+    peak = best_f
+    if 0 < best_i < 8:  # refine by a parabola through the three samples around the maximum
+        f0 = vals[best_i - 1]
+        f1 = vals[best_i]
+        f2 = vals[best_i + 1]
+        den = f0 - 2.0 * f1 + f2
+        if den < 0.0:
+            peak = f1 - 0.125 * (f2 - f0) * (f2 - f0) / den
+    if peak > fs[F_RPEAK]:
+        fs[F_RPEAK] = peak
+
+
+# ======================================================================================================
+# Driver
+# ======================================================================================================
+
+
+@_jit
+def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
+            ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
+            tr_rate, tr_next, tr_stop, tr_base, tr_out,
+            imp_out, st_out):
+    """Integrate until the current step reaches ``t_stop`` and every requested sample is emitted.
+
+    Channel ``c`` gets samples ``ch_next[c] .. ch_stop[c] - 1`` (sample ``n`` at ``n / ch_rate[c]``),
+    sample ``n`` written to column ``n - ch_base[c]`` of ``ch_out[c]``; likewise the truth block. Completed impacts are written to
+    ``imp_out`` and stroboscopic points to ``st_out`` (counts in ``ist[I_IMPOUT]``, ``ist[I_STROUT]``;
+    the caller resets them). Returns a status code; on ``ST_IMPACTS_FULL`` / ``ST_STROBE_FULL`` the caller
+    drains the buffers and calls again with the same stop.
+    """
+    K = np.empty((7, 3))
+    ynew = np.empty(3)
+    ytmp = np.empty(3)
+    A = _A
+    B = _B
+    C = _C
+    E = _E
+    P = _P
+    hmax = p[P_HMAX]
+    n_ch = ch_rate.shape[0]
+    strobe = st_out.shape[0] > 0
+    while True:
+        # Emit what falls in the current step (a cheap test first: most steps of a fast run have none).
+        t_next = np.inf
+        for c in range(n_ch):
+            if ch_next[c] < ch_stop[c]:
+                t_next = min(t_next, ch_next[c] / ch_rate[c])
+        if tr_next[0] < tr_stop[0]:
+            t_next = min(t_next, tr_next[0] / tr_rate)
+        if strobe or t_next < fs[F_TB]:
+            emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
+                         tr_rate, tr_next, tr_stop, tr_base, tr_out, st_out, t_stop)
+        if st_out.shape[0] > 0 and ist[I_STROUT] >= st_out.shape[0]:
+            return ST_STROBE_FULL
+        if fs[F_TB] >= t_stop and tr_next[0] >= tr_stop[0]:
+            done = True
+            for c in range(ch_next.shape[0]):
+                if ch_next[c] < ch_stop[c]:
+                    done = False
+            if done:
+                return ST_OK
+        if ist[I_IMPOUT] >= imp_out.shape[0]:
+            return ST_IMPACTS_FULL
+        # Move to the end of the current step and apply its switch.
+        for i in range(3):
+            ya[i] = yb[i]
+        t = fs[F_TB]
+        fs[F_TA] = t
+        if not apply_event(fs, ist, p, ya, imp_out):
+            return ST_ZENO
+        if fs[F_MTEND] <= t + 1e-12 * max(1.0, abs(t)):
+            motor_finish_ramp(fs, ist, t)
+            ist[I_NEEDF] = 1
+        if motor_phase(fs, t) > 2048.0 * TWO_PI:
+            motor_rebase(fs, ist, t)
+        mode = ist[I_MODE]
+        if ist[I_NEEDF] == 1:
+            rhs(t, ya, mode, p, fs, fa)
+            ist[I_NEEDF] = 0
+        # Adaptive step, never across a motor breakpoint.
+        h = min(fs[F_H], hmax)
+        while True:
+            limit = fs[F_MTEND] - t
+            at_break = False
+            if h >= limit:
+                h = limit
+                at_break = True
+            if h < 1e-14 * max(1.0, abs(t)):
+                return ST_STEP_UNDERFLOW
+            err = rk_step(t, ya, fa, h, mode, p, fs, K, ynew, ytmp, A, B, C, E)
+            if not (err == err):  # NaN
+                return ST_NONFINITE
+            if err <= 1.0:
+                factor = 10.0 if err == 0.0 else min(10.0, 0.9 * err ** -0.2)
+                break
+            ist[I_NREJ] += 1
+            h *= max(0.2, 0.9 * err ** -0.2)
+        ist[I_NSTEP] += 1
+        dense_coeffs(K, P, Q)
+        x, code = detect_event(mode, ya, ynew, h, Q, p, fs)
+        if code != EV_NONE and x < 1.0:
+            # Recompute the step exactly up to the switch.
+            h_full = h
+            h = x * h
+            rk_step(t, ya, fa, h, mode, p, fs, K, ynew, ytmp, A, B, C, E)
+            dense_coeffs(K, P, Q)
+            fs[F_H] = min(h_full * factor, hmax)
+            at_break = False
+        else:
+            code = EV_MOTOR if at_break else EV_NONE
+            fs[F_H] = min(h * factor, hmax)
+        for i in range(3):
+            yb[i] = ynew[i]
+            fa[i] = K[6, i]
+        if not (math.isfinite(yb[0]) and math.isfinite(yb[1])):
+            return ST_NONFINITE
+        fs[F_TB] = t + h
+        ist[I_PEND] = code
+        if mode == CONTACT:
+            track_contact_extremes(fs, p, ya, Q, h)
+
+
+@_jit
+def truncate(p, fs, ist, ya, yb, fa, Q, t, imp_out):
+    """End the current step at ``t`` (``F_TA <= t <= F_TB``), discarding what lies beyond.
+
+    Used before a command so that it acts at exactly ``t``. A switch pending at exactly ``t`` is applied
+    first (``imp_out`` must have room for one record). Afterwards the current step is empty at ``t`` and
+    the right-hand side is marked stale. Returns False on a chattering contact.
+    """
+    K = np.empty((7, 3))
+    ynew = np.empty(3)
+    ytmp = np.empty(3)
+    ta = fs[F_TA]
+    tb = fs[F_TB]
+    if t < tb and t > ta:
+        h = t - ta
+        rk_step(ta, ya, fa, h, ist[I_MODE], p, fs, K, ynew, ytmp, _A, _B, _C, _E)
+        for i in range(3):
+            yb[i] = ynew[i]
+        ist[I_PEND] = EV_NONE
+        if ist[I_MODE] == CONTACT:
+            dense_coeffs(K, _P, Q)
+            track_contact_extremes(fs, p, ya, Q, h)
+    fs[F_TB] = t
+    for i in range(3):
+        ya[i] = yb[i]
+    fs[F_TA] = t
+    ok = apply_event(fs, ist, p, ya, imp_out)
+    for i in range(3):
+        yb[i] = ya[i]
+    ist[I_NEEDF] = 1
+    return ok
+
+
+@_jit
+def resync(p, fs, ist, ya, yb, imp_out):
+    """Make the mode agree with the Filippov sets after a command changed the state or the parameters.
+
+    Call on an empty current step (after :func:`truncate`). ``imp_out`` must have room for one record.
+    """
+    t = fs[F_TA]
+    d, dd = penetration(ya[0], ya[1], p)
+    force = law_force(d, dd, p, fs[F_VIMP])
+    if ist[I_MODE] == CONTACT:
+        if d <= 0.0 or force < 0.0:
+            fs[F_RJ] += ya[2]
+            ya[2] = 0.0
+            fs[F_RLAST] = t
+            ist[I_MODE] = FREE
+            if d <= 0.0:
+                close_record(fs, ist, imp_out, t)
+    else:
+        if d > 0.0:
+            if ist[I_REC] == 0:
+                open_record(fs, ist, p, t, ya)
+                force = law_force(d, dd, p, fs[F_VIMP])
+            if force >= 0.0:
+                ist[I_MODE] = CONTACT
+                ya[2] = 0.0
+                fs[F_RPEAK] = max(fs[F_RPEAK], force)
+        elif ist[I_REC] == 1:
+            close_record(fs, ist, imp_out, t)
+    for i in range(3):
+        yb[i] = ya[i]
+    ist[I_NEEDF] = 1

@@ -1,0 +1,431 @@
+"""The rig model as a streaming integrator: advance in simulation time, get exact samples and impacts.
+
+:class:`RigModel` owns the state of one trajectory of the paper's model (SPEC section 2) and the compiled
+kernel (:mod:`rimd_sim.core.kernel`). It knows nothing of noise or ROS: it returns noise-free physical
+quantities on exact sample grids (sample ``n`` of a channel at ``n / rate`` seconds of simulation time),
+the impacts completed so far, stroboscopic (Poincare) points and the motor state.
+
+Commands act *now*, at the model's current time :attr:`RigModel.time`: the current integration step is
+ended exactly there (see :func:`~rimd_sim.core.kernel.truncate`). :class:`~rimd_sim.core.simulator.RigSimulator`
+schedules commands at stated simulation times on top of this.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import NamedTuple
+
+import numpy as np
+
+from . import kernel as k
+from .config import CHANNEL_NAMES, RigParams, SimConfig
+from .contact import CONTACT_LAWS
+from .errors import CommandError, IntegrationError
+
+__all__ = ["Impact", "ModelOutput", "MotorState", "RigModel", "StroboPoint", "samples_before"]
+
+#: Channel name -> quantity computed by the kernel.
+CHANNEL_QUANTITY = {
+    "cart_displacement": k.Q_CART,
+    "rimd_displacement": k.Q_RIMD,
+    "rimd_acceleration": k.Q_ACC,
+    "impact_force": k.Q_FORCE,
+}
+
+#: Names of the rows of a truth block (:attr:`ModelOutput.truth`).
+TRUTH_FIELDS = (
+    "theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity", "rimd_acceleration",
+    "penetration", "contact_force", "motor_phase", "motor_frequency", "in_contact",
+)
+
+
+class Impact(NamedTuple):
+    """One completed impact: from ``delta`` rising through 0 until it falls back through 0.
+
+    Attributes:
+        t_start: Contact start (s, simulation time).
+        duration: Time from contact start to the last instant the force vanished (s).
+        peak_force: Largest contact force (N).
+        impulse: Integral of the contact force (N s).
+        impact_velocity: Relative velocity ``delta_dot`` at contact start (m/s).
+        max_penetration: Largest ``delta`` (m).
+        excitation_frequency: Motor frequency at contact start (Hz).
+        excitation_phase: Motor phase at contact start (rad, in [0, 2 pi)).
+        cycle_index: Excitation cycle (motor turn) in which the contact started.
+        index: Running number of the impact since the model started.
+        t_end: Time ``delta`` returned below 0 (s).
+        contacts: Number of contact intervals in the impact (more than 1 after a dashpot release and
+            re-contact).
+    """
+
+    t_start: float
+    duration: float
+    peak_force: float
+    impulse: float
+    impact_velocity: float
+    max_penetration: float
+    excitation_frequency: float
+    excitation_phase: float
+    cycle_index: int
+    index: int
+    t_end: float
+    contacts: int
+
+
+class StroboPoint(NamedTuple):
+    """State when the motor phase crosses a multiple of 2 pi (the cart at 0, moving forward)."""
+
+    t: float
+    theta: float
+    theta_dot: float
+    cycle_index: int
+
+
+class MotorState(NamedTuple):
+    """Motor state at an instant."""
+
+    t: float
+    frequency_setpoint: float
+    frequency: float
+    ramp_rate: float
+    phase: float
+    cycle_index: int
+    cart_position: float
+
+
+@dataclass
+class ModelOutput:
+    """What one :meth:`RigModel.advance` produced.
+
+    Attributes:
+        t_start: Simulation time the call started from (s).
+        t_stop: Simulation time reached (s).
+        channels: Channel name -> ``(first_index, samples)`` of noise-free values.
+        truth: ``(first_index, array of shape (11, n))``, rows in :data:`TRUTH_FIELDS` order, or None.
+        impacts: Impacts completed in ``[t_start, t_stop)``.
+        strobe: Stroboscopic points in ``[t_start, t_stop)``.
+    """
+
+    t_start: float
+    t_stop: float
+    channels: dict[str, tuple[int, np.ndarray]]
+    truth: tuple[int, np.ndarray] | None
+    impacts: list[Impact]
+    strobe: list[StroboPoint]
+
+
+def samples_before(t: Fraction, rate: Fraction) -> int:
+    """Number of samples ``n >= 0`` with ``n / rate < t`` (exact rational arithmetic)."""
+    if t <= 0:
+        return 0
+    return math.ceil(t * rate)
+
+
+def _as_fraction(x: float | int | Fraction) -> Fraction:
+    return x if isinstance(x, Fraction) else Fraction(x)
+
+
+def _params_vector(rig: RigParams, config: SimConfig) -> np.ndarray:
+    p = np.zeros(k.N_PARAM)
+    c = rig.contact
+    length = rig.length
+    p[k.P_L] = length
+    p[k.P_M] = rig.mass
+    p[k.P_A0] = rig.amplitude
+    p[k.P_GL] = rig.gravity / length
+    p[k.P_WN] = rig.omega_n
+    p[k.P_ZETA] = rig.damping_ratio
+    p[k.P_GAP] = rig.gap
+    p[k.P_LAW] = CONTACT_LAWS[c.model].code
+    p[k.P_K] = c.stiffness
+    p[k.P_C] = c.damping
+    p[k.P_N] = 1.0 if c.model == "spring_dashpot" else c.exponent
+    p[k.P_E] = c.restitution
+    p[k.P_VMIN] = c.min_impact_velocity
+    p[k.P_RTOL] = config.integrator.rtol
+    p[k.P_ATOL] = config.integrator.atol
+    p[k.P_HMAX] = config.integrator.max_step
+    p[k.P_EVTOL] = config.integrator.event_tolerance
+    # First contact step: 1/40 of the period of the linearised contact oscillator at 1 um penetration.
+    n = p[k.P_N]
+    k_eff = c.stiffness * n * (1e-6 ** (n - 1.0))
+    p[k.P_HCONT0] = min(config.integrator.max_step, 2.0 * math.pi * math.sqrt(rig.mass / k_eff) / 40.0)
+    return p
+
+
+_STATUS_MESSAGES = {
+    k.ST_STEP_UNDERFLOW: "step size underflow: the integrator cannot make progress",
+    k.ST_ZENO: (f"chattering contact: more than {k.ZENO_MAX_EVENTS} switches within {k.ZENO_WINDOW * 1e3:g} ms"
+                " (Zeno behaviour); check the contact parameters"),
+    k.ST_NONFINITE: "the state became non-finite (NaN or infinity)",
+}
+
+
+class RigModel:
+    """One trajectory of the rig model, advanced in simulation time.
+
+    Args:
+        config: The validated configuration; its rig, motor, integrator, channel rates, truth rate and
+            initial state are used.
+        channels: Produce the four DAQ channels (noise-free).
+        truth: Produce the ground-truth block.
+        strobe: Produce stroboscopic (Poincare) points.
+
+    Example:
+        >>> from rimd_sim.core import RigModel, SimConfig
+        >>> cfg = SimConfig().with_parameters({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75})
+        >>> model = RigModel(cfg, channels=False, truth=False)
+        >>> out = model.advance(10.0)
+        >>> len(out.impacts) > 0
+        True
+    """
+
+    def __init__(self, config: SimConfig, *, channels: bool = True, truth: bool = True, strobe: bool = False):
+        self._config = config
+        self._p = _params_vector(config.rig, config)
+        self._fs = np.zeros(k.N_FSTATE)
+        self._is = np.zeros(k.N_ISTATE, dtype=np.int64)
+        self._ya = np.zeros(3)
+        self._yb = np.zeros(3)
+        self._fa = np.zeros(3)
+        self._Q = np.zeros((3, 4))
+        self._time = Fraction(0)
+        self._want_channels = channels
+        self._want_truth = truth
+        self._want_strobe = strobe
+        self._rates = [Fraction(ch.sample_rate) for ch in config.channels] if channels else []
+        self._ch_rate = np.array([float(r) for r in self._rates], dtype=np.float64)
+        self._ch_qty = np.array([CHANNEL_QUANTITY[ch.name] for ch in config.channels][: len(self._rates)],
+                                dtype=np.int64)
+        self._ch_next = np.zeros(len(self._rates), dtype=np.int64)
+        self._truth_rate = Fraction(config.truth_rate)
+        self._tr_next = np.zeros(1, dtype=np.int64)
+        self._no_impacts = np.zeros((0, k.N_RECORD))
+        self._init_state()
+
+    # ---- state -----------------------------------------------------------------------------------
+
+    def _init_state(self) -> None:
+        cfg = self._config
+        fs, ist = self._fs, self._is
+        fs[:] = 0.0
+        ist[:] = 0
+        self._ya[:] = (cfg.initial_theta, cfg.initial_theta_dot, 0.0)
+        self._yb[:] = self._ya
+        fs[k.F_H] = min(1e-4, cfg.integrator.max_step)
+        fs[k.F_HFREE] = cfg.integrator.max_step
+        fs[k.F_HCONT] = self._p[k.P_HCONT0]
+        fs[k.F_VIMP] = self._p[k.P_VMIN]
+        fs[k.F_ZT0] = -1.0
+        two_pi = 2.0 * math.pi
+        fs[k.F_MW0] = two_pi * cfg.motor.initial_frequency
+        fs[k.F_MWSET] = fs[k.F_MW0]
+        fs[k.F_MTEND] = np.inf
+        ist[k.I_MODE] = k.FREE
+        ist[k.I_NEEDF] = 1
+        if cfg.motor.initial_setpoint != cfg.motor.initial_frequency:
+            k.motor_command(fs, ist, 0.0, two_pi * cfg.motor.initial_setpoint, two_pi * cfg.motor.ramp_rate)
+        ist[k.I_STRK] = 0  # phase starts at 0: the first crossing is at t = 0
+        buf = np.zeros((1, k.N_RECORD))
+        k.resync(self._p, fs, ist, self._ya, self._yb, buf)
+
+    @property
+    def config(self) -> SimConfig:
+        """The configuration in force."""
+        return self._config
+
+    @property
+    def time(self) -> Fraction:
+        """Simulation time reached (s), exact."""
+        return self._time
+
+    @property
+    def in_contact(self) -> bool:
+        """Whether the hammer is in contact with the force sensor now."""
+        return bool(self._is[k.I_MODE] == k.CONTACT)
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """Counters: accepted steps, rejected steps, switches, impacts."""
+        return {
+            "steps": int(self._is[k.I_NSTEP]),
+            "rejected": int(self._is[k.I_NREJ]),
+            "switches": int(self._is[k.I_NEV]),
+            "impacts": int(self._is[k.I_NIMP]),
+        }
+
+    def state(self) -> tuple[float, float]:
+        """``(theta, theta_dot)`` at the current time (the current step's end)."""
+        if float(self._time) != self._fs[k.F_TB]:
+            th, om = k.dense_theta(self._ya, self._Q, self._fs[k.F_TB] - self._fs[k.F_TA],
+                                   (float(self._time) - self._fs[k.F_TA]) / (self._fs[k.F_TB] - self._fs[k.F_TA]))
+            return float(th), float(om)
+        return float(self._yb[0]), float(self._yb[1])
+
+    def motor_state(self, t: float | None = None) -> MotorState:
+        """Motor state at ``t`` (default: now). ``t`` must lie within the current motor segment."""
+        fs = self._fs
+        t = float(self._time) if t is None else t
+        phi = k.motor_phase(fs, t)
+        turns = math.floor(phi / (2.0 * math.pi))
+        w = k.motor_omega(fs, t)
+        ramp = abs(fs[k.F_MALPHA]) / (2.0 * math.pi) if t < fs[k.F_MTEND] else 0.0
+        return MotorState(
+            t=t,
+            frequency_setpoint=fs[k.F_MWSET] / (2.0 * math.pi),
+            frequency=w / (2.0 * math.pi),
+            ramp_rate=ramp,
+            phase=phi - turns * 2.0 * math.pi,
+            cycle_index=int(self._is[k.I_CYC]) + turns,
+            cart_position=self._config.rig.amplitude * math.sin(phi),
+        )
+
+    # ---- integration -----------------------------------------------------------------------------
+
+    def advance(self, t_stop: float | Fraction) -> ModelOutput:
+        """Integrate to ``t_stop`` (s) and return what happened in ``[time, t_stop)``.
+
+        Raises:
+            CommandError: If ``t_stop`` is before the current time.
+            IntegrationError: If the integrator cannot continue (the message says why).
+        """
+        t_stop = _as_fraction(t_stop)
+        if t_stop < self._time:
+            raise CommandError(f"cannot advance to t = {float(t_stop)} s: the model is already at {float(self._time)} s")
+        t_start = self._time
+        stops = np.array([samples_before(t_stop, r) for r in self._rates], dtype=np.int64)
+        first = self._ch_next.copy()
+        ch_out = np.empty((len(self._rates), int((stops - first).max()) if len(self._rates) else 0))
+        if self._want_truth:
+            tr_stop = np.array([samples_before(t_stop, self._truth_rate)], dtype=np.int64)
+        else:
+            tr_stop = self._tr_next.copy()
+        tr_first = int(self._tr_next[0])
+        tr_out = np.empty((k.N_TRUTH, int(tr_stop[0]) - tr_first))
+        impacts: list[Impact] = []
+        strobe: list[StroboPoint] = []
+        cycles = float(t_stop - t_start) * max(self._fs[k.F_MW0], self._fs[k.F_MWSET]) / (2 * math.pi)
+        imp_out = np.empty((64, k.N_RECORD))
+        st_out = np.empty((int(min(cycles, 1e5)) + 8 if self._want_strobe else 0, k.N_STROBE))
+        tr_base = np.array([tr_first], dtype=np.int64)
+        while True:
+            self._is[k.I_IMPOUT] = 0
+            self._is[k.I_STROUT] = 0
+            status = k.advance(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q, float(t_stop),
+                               self._ch_rate, self._ch_qty, self._ch_next, stops, first, ch_out,
+                               float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
+            impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
+            strobe.extend(StroboPoint(r[0], r[1], r[2], int(r[3])) for r in st_out[: self._is[k.I_STROUT]])
+            if status == k.ST_OK:
+                break
+            if status == k.ST_IMPACTS_FULL:
+                imp_out = np.empty((imp_out.shape[0] * 2, k.N_RECORD))
+                continue
+            if status == k.ST_STROBE_FULL:
+                continue
+            raise IntegrationError(f"at t = {self._fs[k.F_TB]:.9f} s: {_STATUS_MESSAGES[status]}")
+        self._time = t_stop
+        channels = {
+            name: (int(first[i]), ch_out[i, : int(stops[i] - first[i])].copy())
+            for i, name in enumerate(CHANNEL_NAMES[: len(self._rates)])
+        }
+        truth = (tr_first, tr_out) if self._want_truth else None
+        return ModelOutput(float(t_start), float(t_stop), channels, truth, impacts, strobe)
+
+    # ---- commands (act now) ----------------------------------------------------------------------
+
+    def _truncate(self) -> list[Impact]:
+        """End the current step at the current time; returns an impact completed exactly now, if any."""
+        buf = np.empty((2, k.N_RECORD))
+        self._is[k.I_IMPOUT] = 0
+        if not k.truncate(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q, float(self._time), buf):
+            raise IntegrationError(f"at t = {float(self._time):.9f} s: {_STATUS_MESSAGES[k.ST_ZENO]}")
+        return [Impact(*_record(r)) for r in buf[: self._is[k.I_IMPOUT]]]
+
+    def _resync(self) -> list[Impact]:
+        buf = np.empty((2, k.N_RECORD))
+        self._is[k.I_IMPOUT] = 0
+        k.resync(self._p, self._fs, self._is, self._ya, self._yb, buf)
+        return [Impact(*_record(r)) for r in buf[: self._is[k.I_IMPOUT]]]
+
+    def set_motor_frequency(self, frequency_hz: float, ramp_rate: float | None = None) -> list[Impact]:
+        """Set the motor setpoint now; the frequency ramps to it at ``ramp_rate`` (Hz/s).
+
+        Args:
+            frequency_hz: New setpoint (Hz), finite, >= 0 and <= ``motor.max_frequency``. 0 stops the cart.
+            ramp_rate: Hz/s, finite and > 0; None or 0 for the configured ``motor.ramp_rate``. ``inf`` is
+                refused: the motor cannot jump.
+
+        Returns:
+            Impacts that completed exactly at this instant (rare), so none is lost.
+
+        Raises:
+            CommandError: For a refused value; the model is unchanged.
+        """
+        motor = self._config.motor
+        if not isinstance(frequency_hz, (int, float)) or not math.isfinite(frequency_hz):
+            raise CommandError(f"frequency_hz = {frequency_hz!r} refused: must be a finite number")
+        if frequency_hz < 0.0:
+            raise CommandError(f"frequency_hz = {frequency_hz!r} refused: must be >= 0 Hz")
+        if frequency_hz > motor.max_frequency:
+            raise CommandError(f"frequency_hz = {frequency_hz!r} refused: above motor.max_frequency = "
+                               f"{motor.max_frequency:g} Hz")
+        if ramp_rate is None or ramp_rate == 0.0:
+            ramp_rate = motor.ramp_rate
+        if not isinstance(ramp_rate, (int, float)) or not math.isfinite(ramp_rate) or ramp_rate < 0.0:
+            raise CommandError(f"ramp_rate = {ramp_rate!r} refused: must be finite and >= 0 Hz/s (0 = default)")
+        done = self._truncate()
+        two_pi = 2.0 * math.pi
+        k.motor_command(self._fs, self._is, float(self._time), two_pi * frequency_hz, two_pi * ramp_rate)
+        return done
+
+    def perturb(self, velocity: float) -> list[Impact]:
+        """Add ``velocity`` (m/s, inertial, along the impact line) to the hammer now.
+
+        Reproduces the paper's "energy inserted into the system" experiment (Fig. 12 right).
+
+        Raises:
+            CommandError: For a non-finite value or one above 10 m/s in magnitude.
+        """
+        if not isinstance(velocity, (int, float)) or not math.isfinite(velocity):
+            raise CommandError(f"velocity = {velocity!r} refused: must be a finite number")
+        if abs(velocity) > 10.0:
+            raise CommandError(f"velocity = {velocity!r} refused: must be within +-10 m/s")
+        done = self._truncate()
+        theta = self._ya[0]
+        self._ya[1] += velocity / (self._config.rig.length * math.cos(theta))
+        return done + self._resync()
+
+    def reset_hammer(self) -> list[Impact]:
+        """Put the hammer back to its initial state now (the motor keeps running)."""
+        done = self._truncate()
+        self._ya[0] = self._config.initial_theta
+        self._ya[1] = self._config.initial_theta_dot
+        return done + self._resync()
+
+    def reconfigure(self, config: SimConfig) -> list[Impact]:
+        """Change the rig, motor limits and integrator settings now; the state (theta, theta_dot) is kept.
+
+        Channel and truth sample rates cannot change on a running model (create a new one).
+
+        Raises:
+            CommandError: If a sample rate differs.
+        """
+        old = self._config
+        if [c.sample_rate for c in config.channels] != [c.sample_rate for c in old.channels] or \
+                config.truth_rate != old.truth_rate:
+            raise CommandError("sample rates cannot change while the model runs; restart it with the new rates")
+        done = self._truncate()
+        self._config = config
+        self._p = _params_vector(config.rig, config)
+        return done + self._resync()
+
+
+def _record(row: np.ndarray) -> tuple:
+    r = row.tolist()
+    r[k.R_CYCLE] = int(r[k.R_CYCLE])
+    r[k.R_INDEX] = int(r[k.R_INDEX])
+    r[k.R_NCONTACT] = int(r[k.R_NCONTACT])
+    return tuple(r)
