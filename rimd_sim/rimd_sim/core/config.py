@@ -122,7 +122,7 @@ class MotorParams:
     max_frequency: float = 12.0
     ramp_rate: float = 2.0
     initial_frequency: float = 0.0
-    initial_setpoint: float = 0.0
+    initial_setpoint: float = 3.75
 
 
 @dataclass(frozen=True)
@@ -188,7 +188,7 @@ CHANNEL_UNITS = {
 _DEFAULT_CHANNELS = (
     ChannelConfig("cart_displacement", 2000.0, -0.010, 0.010, 2.0e-6, 0.3e-6, 0.0, 0.0, True, "cart_laser"),
     ChannelConfig("rimd_displacement", 2000.0, -0.050, 0.050, 10.0e-6, 1.5e-6, 0.0, 0.0, True, "rimd_laser"),
-    ChannelConfig("rimd_acceleration", 20000.0, -4903.0, 4903.0, 0.05, 0.0, 0.0, 1.0, True, "rimd_accelerometer"),
+    ChannelConfig("rimd_acceleration", 20000.0, -4903.0, 4903.0, 0.05, 0.0, 0.0, 0.5, True, "rimd_accelerometer"),
     ChannelConfig("impact_force", 20000.0, -444.8, 2224.0, 0.01, 0.0, 0.0, 0.0, True, "impact_force_sensor"),
 )
 
@@ -294,7 +294,14 @@ class ParameterSpec:
         """
         if self.kind == "float":
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(key, value, "must be a number")
+                hint = ""
+                if isinstance(value, str):
+                    try:
+                        float(value)
+                        hint = " (YAML read it as text: write exponents with a sign and a dot, e.g. 5.5e+6)"
+                    except ValueError:
+                        pass
+                raise ConfigError(key, value, "must be a number" + hint)
             value = float(value)
             if not math.isfinite(value):
                 raise ConfigError(key, value, "must be finite; " + self.rule)

@@ -61,6 +61,8 @@ N_PARAM = 18
 
 # ---- float state -----------------------------------------------------------------------------------
 F_TA, F_TB, F_H, F_HFREE, F_HCONT = range(5)
+# Motor segment: start time (s), phase at start (turns), frequency at start (Hz), its rate (Hz/s),
+# end of the ramp (s), setpoint (Hz). Phase in turns and frequency in Hz keep setpoints exact.
 F_MT0, F_MPHI0, F_MW0, F_MALPHA, F_MTEND, F_MWSET = range(5, 11)
 F_VIMP = 11
 F_RT0, F_RPEAK, F_RJ, F_RV, F_RPEN, F_RFREQ, F_RPHASE, F_RLAST = range(12, 20)
@@ -147,14 +149,14 @@ def law_force(delta, ddelta, p, vimp):
 
 @_jit
 def motor_phase(fs, t):
-    """Motor phase (rad, relative to the segment base; add ``I_CYC`` turns for the absolute phase)."""
+    """Motor phase in turns, relative to the segment base (add ``I_CYC`` for the absolute count)."""
     tau = t - fs[F_MT0]
     return fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau
 
 
 @_jit
-def motor_omega(fs, t):
-    """Motor angular frequency (rad/s)."""
+def motor_freq(fs, t):
+    """Motor frequency (Hz)."""
     return fs[F_MW0] + fs[F_MALPHA] * (t - fs[F_MT0])
 
 
@@ -162,9 +164,9 @@ def motor_omega(fs, t):
 def cart_kinematics(fs, p, t):
     """Cart position, velocity and acceleration ``x_c = A0 sin(phi)`` and its derivatives."""
     tau = t - fs[F_MT0]
-    alpha = fs[F_MALPHA]
-    w = fs[F_MW0] + alpha * tau
-    phi = fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha * tau * tau
+    alpha = TWO_PI * fs[F_MALPHA]
+    w = TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau)
+    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
     sp = math.sin(phi)
     cp = math.cos(phi)
     a0 = p[P_A0]
@@ -175,9 +177,9 @@ def cart_kinematics(fs, p, t):
 def cart_accel(fs, p, t):
     """Cart acceleration only (the forcing of the embarked pendulum)."""
     tau = t - fs[F_MT0]
-    alpha = fs[F_MALPHA]
-    w = fs[F_MW0] + alpha * tau
-    phi = fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha * tau * tau
+    alpha = TWO_PI * fs[F_MALPHA]
+    w = TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau)
+    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
     if alpha == 0.0:
         return -p[P_A0] * w * w * math.sin(phi)
     return p[P_A0] * (alpha * math.cos(phi) - w * w * math.sin(phi))
@@ -458,19 +460,19 @@ def detect_event(mode, ya, yb, h, Q, p, fs):
 
 @_jit
 def motor_rebase(fs, ist, t):
-    """Start a new motor segment at ``t`` with the phase wrapped to ``[0, 2 pi)`` (keeps it precise)."""
+    """Start a new motor segment at ``t`` with the phase wrapped to ``[0, 1)`` turn (keeps it precise)."""
     phi = motor_phase(fs, t)
-    w = motor_omega(fs, t)
-    turns = math.floor(phi / TWO_PI)
+    w = motor_freq(fs, t)
+    turns = math.floor(phi)
     ist[I_CYC] += int(turns)
-    fs[F_MPHI0] = phi - turns * TWO_PI
+    fs[F_MPHI0] = phi - turns
     fs[F_MW0] = w
     fs[F_MT0] = t
 
 
 @_jit
 def motor_command(fs, ist, t, w_set, rate):
-    """Set a new setpoint ``w_set`` (rad/s) at time ``t``, ramping at ``rate`` (rad/s^2, > 0)."""
+    """Set a new setpoint ``w_set`` (Hz) at time ``t``, ramping at ``rate`` (Hz/s, > 0)."""
     motor_rebase(fs, ist, t)
     w = fs[F_MW0]
     fs[F_MWSET] = w_set
@@ -500,9 +502,9 @@ def motor_finish_ramp(fs, ist, t):
 def sample_quantity(qty, t, th, om, mode, p, fs):
     """Noise-free value of a channel quantity at time ``t`` from the state ``(theta, theta_dot)``."""
     tau = t - fs[F_MT0]
-    alpha = fs[F_MALPHA]
-    w = fs[F_MW0] + alpha * tau
-    phi = fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha * tau * tau
+    alpha = TWO_PI * fs[F_MALPHA]
+    w = TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau)
+    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
     a0 = p[P_A0]
     if qty == Q_CART:
         return a0 * math.sin(phi)
@@ -568,7 +570,7 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
         force = 0.0
         if mode == CONTACT:
             force = max(law_force(d, dd, p, fs[F_VIMP]), 0.0)
-        phi = motor_phase(fs, tn)
+        phi = motor_phase(fs, tn)  # turns
         tr_out[T_THETA, k] = th
         tr_out[T_OMEGA, k] = om
         tr_out[T_XC, k] = xc
@@ -577,8 +579,8 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
         tr_out[T_A, k] = p[P_L] * (acc * c_ - om * om * s) + ac
         tr_out[T_DELTA, k] = d
         tr_out[T_F, k] = force
-        tr_out[T_PHASE, k] = phi - math.floor(phi / TWO_PI) * TWO_PI
-        tr_out[T_FREQ, k] = motor_omega(fs, tn) / TWO_PI
+        tr_out[T_PHASE, k] = TWO_PI * (phi - math.floor(phi))
+        tr_out[T_FREQ, k] = motor_freq(fs, tn)
         tr_out[T_CONTACT, k] = 1.0 if mode == CONTACT else 0.0
         n += 1
     tr_next[0] = n
@@ -586,7 +588,7 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
     if st_out.shape[0] > 0:
         while ist[I_STROUT] < st_out.shape[0]:
             k = ist[I_STRK] - ist[I_CYC]  # turns ahead of the segment base
-            target = k * TWO_PI - fs[F_MPHI0]
+            target = k - fs[F_MPHI0]  # turns to go
             w0 = fs[F_MW0]
             alpha = fs[F_MALPHA]
             if alpha == 0.0:
@@ -645,7 +647,7 @@ def open_record(fs, ist, p, t, y):
     """Start an impact record at ``t`` (contact begins with ``delta`` rising through 0)."""
     d, dd = penetration(y[0], y[1], p)
     phi = motor_phase(fs, t)
-    turns = math.floor(phi / TWO_PI)
+    turns = math.floor(phi)
     ist[I_REC] = 1
     ist[I_RSUB] = 1
     ist[I_RCYC] = ist[I_CYC] + int(turns)
@@ -656,8 +658,8 @@ def open_record(fs, ist, p, t, y):
     fs[F_RPEAK] = 0.0
     fs[F_RJ] = 0.0
     fs[F_RPEN] = max(d, 0.0)
-    fs[F_RFREQ] = motor_omega(fs, t) / TWO_PI
-    fs[F_RPHASE] = phi - turns * TWO_PI
+    fs[F_RFREQ] = motor_freq(fs, t)
+    fs[F_RPHASE] = TWO_PI * (phi - turns)
 
 
 @_jit
@@ -801,7 +803,7 @@ def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
         if fs[F_MTEND] <= t + 1e-12 * max(1.0, abs(t)):
             motor_finish_ramp(fs, ist, t)
             ist[I_NEEDF] = 1
-        if motor_phase(fs, t) > 2048.0 * TWO_PI:
+        if motor_phase(fs, t) > 2048.0:
             motor_rebase(fs, ist, t)
         mode = ist[I_MODE]
         if ist[I_NEEDF] == 1:

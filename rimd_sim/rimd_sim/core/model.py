@@ -219,14 +219,13 @@ class RigModel:
         fs[k.F_HCONT] = self._p[k.P_HCONT0]
         fs[k.F_VIMP] = self._p[k.P_VMIN]
         fs[k.F_ZT0] = -1.0
-        two_pi = 2.0 * math.pi
-        fs[k.F_MW0] = two_pi * cfg.motor.initial_frequency
+        fs[k.F_MW0] = cfg.motor.initial_frequency
         fs[k.F_MWSET] = fs[k.F_MW0]
         fs[k.F_MTEND] = np.inf
         ist[k.I_MODE] = k.FREE
         ist[k.I_NEEDF] = 1
         if cfg.motor.initial_setpoint != cfg.motor.initial_frequency:
-            k.motor_command(fs, ist, 0.0, two_pi * cfg.motor.initial_setpoint, two_pi * cfg.motor.ramp_rate)
+            k.motor_command(fs, ist, 0.0, cfg.motor.initial_setpoint, cfg.motor.ramp_rate)
         ist[k.I_STRK] = 0  # phase starts at 0: the first crossing is at t = 0
         buf = np.zeros((1, k.N_RECORD))
         k.resync(self._p, fs, ist, self._ya, self._yb, buf)
@@ -268,18 +267,16 @@ class RigModel:
         """Motor state at ``t`` (default: now). ``t`` must lie within the current motor segment."""
         fs = self._fs
         t = float(self._time) if t is None else t
-        phi = k.motor_phase(fs, t)
-        turns = math.floor(phi / (2.0 * math.pi))
-        w = k.motor_omega(fs, t)
-        ramp = abs(fs[k.F_MALPHA]) / (2.0 * math.pi) if t < fs[k.F_MTEND] else 0.0
+        phi = float(k.motor_phase(fs, t))
+        turns = math.floor(phi)
         return MotorState(
             t=t,
-            frequency_setpoint=fs[k.F_MWSET] / (2.0 * math.pi),
-            frequency=w / (2.0 * math.pi),
-            ramp_rate=ramp,
-            phase=phi - turns * 2.0 * math.pi,
+            frequency_setpoint=float(fs[k.F_MWSET]),
+            frequency=float(k.motor_freq(fs, t)),
+            ramp_rate=float(abs(fs[k.F_MALPHA])) if t < fs[k.F_MTEND] else 0.0,
+            phase=2.0 * math.pi * (phi - turns),
             cycle_index=int(self._is[k.I_CYC]) + turns,
-            cart_position=self._config.rig.amplitude * math.sin(phi),
+            cart_position=self._config.rig.amplitude * math.sin(2.0 * math.pi * phi),
         )
 
     # ---- integration -----------------------------------------------------------------------------
@@ -306,7 +303,7 @@ class RigModel:
         tr_out = np.empty((k.N_TRUTH, int(tr_stop[0]) - tr_first))
         impacts: list[Impact] = []
         strobe: list[StroboPoint] = []
-        cycles = float(t_stop - t_start) * max(self._fs[k.F_MW0], self._fs[k.F_MWSET]) / (2 * math.pi)
+        cycles = float(t_stop - t_start) * max(self._fs[k.F_MW0], self._fs[k.F_MWSET])
         imp_out = np.empty((64, k.N_RECORD))
         st_out = np.empty((int(min(cycles, 1e5)) + 8 if self._want_strobe else 0, k.N_STROBE))
         tr_base = np.array([tr_first], dtype=np.int64)
@@ -317,7 +314,7 @@ class RigModel:
                                self._ch_rate, self._ch_qty, self._ch_next, stops, first, ch_out,
                                float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
             impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
-            strobe.extend(StroboPoint(r[0], r[1], r[2], int(r[3])) for r in st_out[: self._is[k.I_STROUT]])
+            strobe.extend(StroboPoint(float(r[0]), float(r[1]), float(r[2]), int(r[3])) for r in st_out[: self._is[k.I_STROUT]])
             if status == k.ST_OK:
                 break
             if status == k.ST_IMPACTS_FULL:
@@ -377,8 +374,7 @@ class RigModel:
         if not isinstance(ramp_rate, (int, float)) or not math.isfinite(ramp_rate) or ramp_rate < 0.0:
             raise CommandError(f"ramp_rate = {ramp_rate!r} refused: must be finite and >= 0 Hz/s (0 = default)")
         done = self._truncate()
-        two_pi = 2.0 * math.pi
-        k.motor_command(self._fs, self._is, float(self._time), two_pi * frequency_hz, two_pi * ramp_rate)
+        k.motor_command(self._fs, self._is, float(self._time), float(frequency_hz), float(ramp_rate))
         return done
 
     def perturb(self, velocity: float) -> list[Impact]:

@@ -1,0 +1,99 @@
+"""Instrument models: what a DAQ channel reads given the noise-free physical quantity.
+
+Chain, applied to each block of samples in order (filter states carry over between blocks, so the
+result does not depend on how the stream is cut into blocks):
+
+1. bandwidth: a 2nd-order Butterworth low-pass at ``bandwidth`` Hz (the instrument's upper frequency
+   limit), only when it lies below 0.45 x the sample rate (above that it cannot be represented at the
+   channel's rate and has no effect);
+2. AC coupling: a 1st-order high-pass at ``highpass`` Hz (piezoelectric sensors' discharge time constant);
+3. additive white Gaussian noise of standard deviation ``noise_std`` (when noise is enabled), from a
+   per-channel stream seeded by ``(seed, channel index)``;
+4. quantisation to ``resolution``;
+5. saturation: the reading is clipped to ``[range_min, range_max]`` and the clipped samples are counted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from .config import CHANNEL_NAMES, ChannelConfig
+
+__all__ = ["Instrument", "Reading"]
+
+
+class Reading:
+    """One block of readings of a channel.
+
+    Attributes:
+        samples: The readings (SI).
+        saturated: How many samples were clipped at a range end.
+    """
+
+    __slots__ = ("samples", "saturated")
+
+    def __init__(self, samples: np.ndarray, saturated: int) -> None:
+        self.samples = samples
+        self.saturated = saturated
+
+
+class Instrument:
+    """A sensor on one channel.
+
+    Args:
+        channel: The channel's configuration.
+        noise: Whether to add noise.
+        seed: Seed of the random streams (the channel's own stream is derived from it).
+    """
+
+    def __init__(self, channel: ChannelConfig, *, noise: bool, seed: int) -> None:
+        stream = CHANNEL_NAMES.index(channel.name)
+        self._rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(stream,))))
+        self._channel = channel
+        self._noise = noise
+        self._design()
+
+    def _design(self) -> None:
+        ch = self._channel
+        sections = []
+        if 0.0 < ch.bandwidth < 0.45 * ch.sample_rate:
+            sections.append(signal.butter(2, ch.bandwidth, btype="lowpass", fs=ch.sample_rate, output="sos"))
+        if ch.highpass > 0.0:
+            sections.append(signal.butter(1, ch.highpass, btype="highpass", fs=ch.sample_rate, output="sos"))
+        self._sos = np.vstack(sections) if sections else None
+        self._zi = np.zeros((self._sos.shape[0], 2)) if self._sos is not None else None
+
+    @property
+    def channel(self) -> ChannelConfig:
+        """The channel's configuration."""
+        return self._channel
+
+    def reconfigure(self, channel: ChannelConfig, *, noise: bool) -> None:
+        """Change the instrument's parameters (the sample rate must stay the same); filter state restarts
+        only when the filter changes."""
+        if channel.sample_rate != self._channel.sample_rate:
+            raise ValueError("the sample rate of a running channel cannot change")
+        filters_changed = (channel.bandwidth, channel.highpass) != (self._channel.bandwidth, self._channel.highpass)
+        self._channel = channel
+        self._noise = noise
+        if filters_changed:
+            self._design()
+
+    def measure(self, values: np.ndarray) -> Reading:
+        """Turn a block of noise-free values into readings."""
+        ch = self._channel
+        x = np.asarray(values, dtype=np.float64)
+        if self._sos is not None and x.size:
+            x, self._zi = signal.sosfilt(self._sos, x, zi=self._zi)
+        else:
+            x = x.copy()
+        if self._noise and ch.noise_std > 0.0 and x.size:
+            x += ch.noise_std * self._rng.standard_normal(x.size)
+        if ch.resolution > 0.0:
+            np.round(x / ch.resolution, out=x)
+            x *= ch.resolution
+        saturated = int(np.count_nonzero((x < ch.range_min) | (x > ch.range_max)))
+        if saturated:
+            np.clip(x, ch.range_min, ch.range_max, out=x)
+        return Reading(x, saturated)

@@ -1,0 +1,241 @@
+"""The rig as a DAQ sees it: the model, its instruments and a schedule of commands in simulation time.
+
+:class:`RigSimulator` is what the simulator node drives. ``advance(t)`` returns, for ``[time, t)``, one
+block per channel (noisy, quantised, clipped readings on the channel's exact sample grid), the truth
+block, the impacts that completed, stroboscopic points and the log of commands applied. Commands are
+validated when they are scheduled (a refused command raises and changes nothing) and take effect at
+their stated simulation time, between two samples. Same configuration (seed included) and same command
+schedule give bit-identical output, however ``advance`` calls cut the time.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+from .config import CHANNEL_NAMES, SimConfig
+from .errors import CommandError, ConfigError
+from .model import Impact, MotorState, RigModel, StroboPoint
+from .sensors import Instrument
+
+__all__ = ["AppliedCommand", "ChannelBlock", "RigSimulator", "SimBlock"]
+
+#: Parameters that only concern the node's pacing: accepted at run time, ignored by the core.
+NODE_ONLY_PARAMETERS = {"real_time_factor", "block_rate"}
+
+
+@dataclass(frozen=True)
+class ChannelBlock:
+    """Readings of one channel over one block.
+
+    Attributes:
+        name: Channel name.
+        first_index: Index of ``samples[0]`` since the channel started.
+        sample_rate: Hz.
+        samples: Readings (SI).
+        saturated: Samples clipped at a range end.
+    """
+
+    name: str
+    first_index: int
+    sample_rate: float
+    samples: np.ndarray
+    saturated: int
+
+
+@dataclass(frozen=True)
+class AppliedCommand:
+    """A command as applied: when, what, and its outcome."""
+
+    time: Fraction
+    kind: str
+    detail: str
+
+
+@dataclass
+class SimBlock:
+    """Everything produced over ``[t_start, t_stop)`` of simulation time."""
+
+    t_start: Fraction
+    t_stop: Fraction
+    channels: dict[str, ChannelBlock]
+    truth: tuple[int, np.ndarray] | None
+    impacts: list[Impact]
+    strobe: list[StroboPoint]
+    motor: MotorState
+    commands: list[AppliedCommand] = field(default_factory=list)
+
+
+class RigSimulator:
+    """The rig model with instruments and scheduled commands.
+
+    Args:
+        config: Validated configuration.
+        truth: Produce the ground-truth stream.
+        strobe: Produce stroboscopic points.
+    """
+
+    def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False) -> None:
+        self._config = config
+        self._model = RigModel(config, channels=True, truth=truth, strobe=strobe)
+        self._instruments = {ch.name: Instrument(ch, noise=config.noise_enabled, seed=config.seed)
+                             for ch in config.channels}
+        self._queue: list[tuple[Fraction, int, str, Any]] = []
+        self._counter = itertools.count()
+
+    @property
+    def config(self) -> SimConfig:
+        """Configuration in force."""
+        return self._config
+
+    @property
+    def time(self) -> Fraction:
+        """Simulation time reached (s)."""
+        return self._model.time
+
+    @property
+    def model(self) -> RigModel:
+        """The underlying model."""
+        return self._model
+
+    # ---- scheduling ------------------------------------------------------------------------------
+
+    def _at(self, at: float | Fraction | None) -> Fraction:
+        when = self.time if at is None else Fraction(at)
+        if when < self.time:
+            raise CommandError(f"time {float(when)} s is in the past (simulation time is {float(self.time)} s)")
+        return when
+
+    def _push(self, at: Fraction, kind: str, arg: Any) -> Fraction:
+        heapq.heappush(self._queue, (at, next(self._counter), kind, arg))
+        return at
+
+    def set_motor_frequency(self, frequency_hz: float, ramp_rate: float = 0.0, *,
+                            at: float | Fraction | None = None) -> Fraction:
+        """Schedule a motor setpoint (see :meth:`RigModel.set_motor_frequency` for the rules).
+
+        Returns:
+            The simulation time at which it takes effect.
+
+        Raises:
+            CommandError: For a refused value or a time in the past; nothing is scheduled.
+        """
+        when = self._at(at)
+        max_f = self._config.motor.max_frequency
+        _check_frequency(frequency_hz, ramp_rate, max_f)
+        return self._push(when, "set_motor_frequency", (float(frequency_hz), float(ramp_rate)))
+
+    def perturb(self, velocity: float, *, at: float | Fraction | None = None) -> Fraction:
+        """Schedule a velocity kick of the hammer (m/s)."""
+        when = self._at(at)
+        if isinstance(velocity, bool) or not isinstance(velocity, (int, float)) or not np.isfinite(velocity) \
+                or abs(velocity) > 10.0:
+            raise CommandError(f"velocity = {velocity!r} refused: must be a finite number within +-10 m/s")
+        return self._push(when, "perturb", float(velocity))
+
+    def reset(self, *, at: float | Fraction | None = None) -> Fraction:
+        """Schedule a reset of the hammer to its initial state (the motor keeps running)."""
+        return self._push(self._at(at), "reset", None)
+
+    def set_parameters(self, params: Mapping[str, Any], *, at: float | Fraction | None = None) -> Fraction:
+        """Schedule a change of configuration parameters (flat ROS names).
+
+        Raises:
+            ConfigError: For an unknown key or a refused value (nothing is scheduled).
+            CommandError: For a sample-rate change or a time in the past.
+        """
+        when = self._at(at)
+        config = self._config.with_parameters(params)  # validates now
+        for key in params:
+            if key.endswith(".sample_rate"):
+                raise CommandError(f"parameter '{key}' cannot change while the rig runs; restart with the new rate")
+            if key == "seed":
+                raise CommandError("parameter 'seed' cannot change while the rig runs; restart with the new seed")
+        del config
+        return self._push(when, "set_parameters", dict(params))
+
+    def pending_commands(self) -> int:
+        """Number of commands scheduled but not applied yet."""
+        return len(self._queue)
+
+    # ---- running ---------------------------------------------------------------------------------
+
+    def _apply(self, kind: str, arg: Any) -> tuple[list[Impact], str]:
+        model = self._model
+        if kind == "set_motor_frequency":
+            f, rate = arg
+            done = model.set_motor_frequency(f, rate)
+            return done, f"setpoint {f:g} Hz, ramp {rate or self._config.motor.ramp_rate:g} Hz/s"
+        if kind == "perturb":
+            return model.perturb(arg), f"hammer velocity {arg:+g} m/s"
+        if kind == "reset":
+            return model.reset_hammer(), "hammer reset to its initial state"
+        config = self._config.with_parameters(arg)
+        done = model.reconfigure(config)
+        for ch in config.channels:
+            self._instruments[ch.name].reconfigure(ch, noise=config.noise_enabled)
+        self._config = config
+        return done, ", ".join(f"{k}={v!r}" for k, v in arg.items())
+
+    def advance(self, t_stop: float | Fraction) -> SimBlock:
+        """Simulate to ``t_stop`` (s), applying due commands, and return the block of data.
+
+        Raises:
+            CommandError: If ``t_stop`` is in the past.
+            IntegrationError: If the model cannot continue.
+        """
+        t_stop = Fraction(t_stop)
+        t_start = self.time
+        if t_stop < t_start:
+            raise CommandError(f"cannot advance to {float(t_stop)} s: already at {float(t_start)} s")
+        parts = []
+        impacts: list[Impact] = []
+        applied: list[AppliedCommand] = []
+        while self._queue and self._queue[0][0] < t_stop:
+            when, _, kind, arg = heapq.heappop(self._queue)
+            parts.append(self._model.advance(when))
+            try:
+                done, detail = self._apply(kind, arg)
+            except (CommandError, ConfigError) as exc:  # validated when scheduled; state may have moved on
+                applied.append(AppliedCommand(when, kind, f"refused at application: {exc}"))
+                continue
+            impacts.extend(done)
+            applied.append(AppliedCommand(when, kind, detail))
+        parts.append(self._model.advance(t_stop))
+        channels = {}
+        for name in CHANNEL_NAMES:
+            first = parts[0].channels[name][0]
+            raw = np.concatenate([p.channels[name][1] for p in parts]) if len(parts) > 1 else parts[0].channels[name][1]
+            reading = self._instruments[name].measure(raw)
+            rate = self._config.channel(name).sample_rate
+            channels[name] = ChannelBlock(name, first, rate, reading.samples, reading.saturated)
+        truth = None
+        if parts[0].truth is not None:
+            truth = (parts[0].truth[0], np.concatenate([p.truth[1] for p in parts], axis=1)
+                     if len(parts) > 1 else parts[0].truth[1])
+        all_impacts = []
+        strobe = []
+        for p in parts:
+            all_impacts.extend(p.impacts)
+            strobe.extend(p.strobe)
+        all_impacts.extend(impacts)
+        all_impacts.sort(key=lambda i: i.index)
+        return SimBlock(t_start, t_stop, channels, truth, all_impacts, strobe, self._model.motor_state(), applied)
+
+
+def _check_frequency(frequency_hz: Any, ramp_rate: Any, max_frequency: float) -> None:
+    for name, value in (("frequency_hz", frequency_hz), ("ramp_rate", ramp_rate)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise CommandError(f"{name} = {value!r} refused: must be a number")
+        if not np.isfinite(value):
+            raise CommandError(f"{name} = {value!r} refused: must be finite")
+        if value < 0:
+            raise CommandError(f"{name} = {value!r} refused: must be >= 0")
+    if frequency_hz > max_frequency:
+        raise CommandError(f"frequency_hz = {frequency_hz!r} refused: above motor.max_frequency = {max_frequency:g} Hz")
