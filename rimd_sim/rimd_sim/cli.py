@@ -1,0 +1,135 @@
+"""The ``rimd`` command: one console command with subcommands (verbs).
+
+Each verb is a module with ``add_arguments(parser)`` and ``main(args) -> int``, in the manner of the
+``ros2bag`` verbs, listed in :data:`VERBS`. A verb whose issue has not landed yet is listed with that issue
+and answers, on stderr, that it is not implemented, with exit status 2; it never prints fake output.
+
+Rules for verb modules: keep the module import light (import rclpy, numpy and friends inside ``main``),
+so that ``rimd --help`` stays fast and works even where a heavy dependency is broken; report a failure by
+raising :class:`CommandError` (one clear line, exit status 1).
+
+Exit status: 0 success, 1 failure (:class:`CommandError`), 2 usage error or not implemented yet,
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from rimd_sim import __version__
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+class CommandError(Exception):
+    """A verb failed for a reason the user can act on; the message is printed as one line."""
+
+
+@dataclass(frozen=True)
+class Verb:
+    """One subcommand of ``rimd``.
+
+    Attributes:
+        name: The subcommand, as typed (``rimd <name>``).
+        summary: One line for ``rimd --help``.
+        module: Import path of the module providing ``add_arguments`` and ``main``; None while the issue
+            that implements the verb has not landed.
+        issue: Number of the issue that implements the verb (when ``module`` is None).
+        issue_title: Title of that issue.
+    """
+
+    name: str
+    summary: str
+    module: str | None = None
+    issue: int | None = None
+    issue_title: str = ""
+
+
+_BRING_UP = (5, "Recorder, replay and bring-up")
+_SIMULATOR = (4, "Simulator node")
+_RERUN = (6, "Rerun bridge")
+_ANALYSIS = (7, "Experiments and analysis")
+
+VERBS: tuple[Verb, ...] = (
+    Verb("rig", "bring up the rig: simulator, recorder and Rerun bridge from config", None, *_BRING_UP),
+    Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
+         None, *_ANALYSIS),
+    Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
+         None, *_ANALYSIS),
+    Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
+         None, *_ANALYSIS),
+    Verb("bifurcation", "bifurcation diagram of the impact force versus motor frequency", None, *_ANALYSIS),
+    Verb("peterka", "Peterka diagram: impact regimes in the (frequency, gap) plane", None, *_ANALYSIS),
+    Verb("poincare", "Poincare sections of the simulated or recorded motion", None, *_ANALYSIS),
+    Verb("basins", "basins of attraction of coexisting motions", None, *_ANALYSIS),
+    Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer", None, *_RERUN),
+    Verb("node", "run one node of the rig (NAME), with --ros-args", None, *_SIMULATOR),
+    Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),
+)
+
+
+def not_implemented_message(verb: Verb) -> str:
+    """Return the line a verb whose issue has not landed prints on stderr."""
+    return f"rimd {verb.name}: not implemented yet (issue {verb.issue}: {verb.issue_title})"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser of ``rimd`` with one sub-parser per verb."""
+    parser = argparse.ArgumentParser(
+        prog="rimd",
+        description="Digital twin of the RIMD vibro-impact test rig (ROS 2 Jazzy).",
+    )
+    parser.add_argument("--version", action="version", version=f"rimd {__version__}")
+    subparsers = parser.add_subparsers(dest="verb", metavar="<command>", title="commands")
+    for verb in VERBS:
+        if verb.module is None:
+            sub = subparsers.add_parser(
+                verb.name,
+                help=f"{verb.summary} [not implemented yet: issue {verb.issue}]",
+                description=f"{verb.summary}. {not_implemented_message(verb)}",
+            )
+            sub.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+            sub.set_defaults(_main=_not_implemented_main(verb))
+        else:
+            module = importlib.import_module(verb.module)
+            sub = subparsers.add_parser(verb.name, help=verb.summary, description=verb.summary)
+            module.add_arguments(sub)
+            sub.set_defaults(_main=module.main)
+    return parser
+
+
+def _not_implemented_main(verb: Verb):
+    def main(args: argparse.Namespace) -> int:
+        del args
+        print(not_implemented_message(verb), file=sys.stderr)
+        return EXIT_USAGE
+
+    return main
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``rimd`` with ``argv`` (default ``sys.argv[1:]``) and return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.verb is None:
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    try:
+        return int(args._main(args) or EXIT_OK)
+    except CommandError as error:
+        print(f"rimd {args.verb}: {error}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print(f"rimd {args.verb}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

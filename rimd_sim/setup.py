@@ -1,0 +1,60 @@
+"""Packaging of rimd_sim: an ament_python ROS 2 package (colcon build) with the `rimd` command.
+
+Executables (console scripts) are installed to ``lib/rimd_sim/`` (see setup.cfg) so that a full ROS 2
+install can ``ros2 run rimd_sim <name>`` them; ``env.sh`` also puts that directory on ``PATH`` for the
+``rimd`` command. A node added later only needs a line in ``NODE_EXECUTABLES`` below, for example
+``"rimd_simulator = rimd_sim.nodes.simulator:main"``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = "rimd_sim"
+HERE = Path(__file__).resolve().parent
+
+
+def _read_version() -> str:
+    """Read ``__version__`` from the package without importing it (no ROS needed at build time)."""
+    for line in (HERE / PACKAGE_NAME / "__init__.py").read_text(encoding="utf-8").splitlines():
+        if line.startswith("__version__"):
+            return line.split("=", 1)[1].strip().strip("\"'")
+    raise RuntimeError("rimd_sim/__init__.py defines no __version__")
+
+
+def _config_files() -> list[str]:
+    """List the ROS parameter YAML files of config/, relative to this file.
+
+    ``rimd_sim/config`` is a relative symlink to the repository's ``config/`` directory, so the files are
+    installed to ``share/rimd_sim/config`` while they live at the repository root.
+    """
+    return sorted(str(path.relative_to(HERE)) for path in (HERE / "config").glob("*.yaml"))
+
+
+# ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
+NODE_EXECUTABLES: list[str] = []
+
+setup(
+    name=PACKAGE_NAME,
+    version=_read_version(),
+    packages=find_packages(exclude=["test", "tests"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
+        ("share/" + PACKAGE_NAME, ["package.xml"]),
+        ("share/" + PACKAGE_NAME + "/config", _config_files()),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="RIMD twin maintainers",
+    maintainer_email="maintainers@users.noreply.github.com",
+    description="Digital twin of the RIMD vibro-impact test rig (physics core, ROS 2 nodes, rimd command).",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "rimd = rimd_sim.cli:main",
+            *NODE_EXECUTABLES,
+        ],
+    },
+)
