@@ -1,0 +1,36 @@
+# The two commands of the README: `make run` (the rig) and `make test` (the whole test suite).
+# Both first create or refresh the venv and the colcon workspace (scripts/setup.sh; seconds when nothing
+# changed). VENV selects the venv (default .venv): `VENV=/tmp/venv make test`.
+SHELL := /bin/bash
+.SHELLFLAGS := -o pipefail -c
+.DEFAULT_GOAL := help
+
+VENV ?= $(CURDIR)/.venv
+export VENV
+
+PYTEST_ARGS ?=
+
+.PHONY: help setup run test lint clean
+
+help:
+	@echo "make run    set up, build and run the rig (rimd rig)"
+	@echo "make test   set up, build and run the whole test suite (pytest tests)"
+	@echo "make setup  only create/refresh the venv ($(VENV)) and build ros_ws"
+	@echo "make lint   ruff check"
+	@echo "make clean  remove ros_ws build/install/log and the set-up stamps (keeps the venv)"
+
+setup:
+	@bash scripts/setup.sh
+
+run: setup
+	@source ./env.sh && rimd rig
+
+# scripts/run_tests.sh turns pytest's exit 5 (no test collected) into a failure.
+test: setup
+	@bash scripts/run_tests.sh $(PYTEST_ARGS)
+
+lint: setup
+	@source ./env.sh && ruff check .
+
+clean:
+	rm -rf ros_ws/build ros_ws/install ros_ws/log .stamps

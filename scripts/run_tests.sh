@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Run the whole test suite in the project environment: `scripts/run_tests.sh [PYTEST ARGS...]`.
+# Called by `make test` after the set-up. pytest's exit status 5 (no test collected) is turned into a
+# failure, so a suite that silently ran nothing never passes.
+set -o pipefail  # no -u: colcon's setup.sh reads unset variables
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)"
+cd "$ROOT" || exit 1
+# shellcheck disable=SC1091
+source "$ROOT/env.sh" || { echo "run_tests: could not source env.sh; run 'make setup' first" >&2; exit 1; }
+# No path given: pytest runs its testpaths (pyproject.toml: tests), i.e. `pytest tests`.
+python -m pytest "$@"
+rc=$?
+if [ "$rc" -eq 5 ]; then
+    echo "run_tests: pytest collected no test (exit status 5): counted as a failure" >&2
+    exit 1
+fi
+exit "$rc"

