@@ -1,0 +1,109 @@
+"""The ``rimd`` command: verbs listed in --help, honest "not implemented yet" answers, ``rimd info``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from rimd_sim import cli
+
+SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka", "poincare", "basins",
+              "rerun", "node", "info")
+NOT_IMPLEMENTED = {
+    "rig": (5, "Recorder, replay and bring-up"),
+    "node": (4, "Simulator node"),
+    "rerun": (6, "Rerun bridge"),
+    "analyze": (7, "Experiments and analysis"),
+    "experiment": (7, "Experiments and analysis"),
+    "sweep": (7, "Experiments and analysis"),
+    "bifurcation": (7, "Experiments and analysis"),
+    "peterka": (7, "Experiments and analysis"),
+    "poincare": (7, "Experiments and analysis"),
+    "basins": (7, "Experiments and analysis"),
+}
+
+
+def _rimd(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
+    executable = shutil.which("rimd")
+    assert executable is not None, "rimd is not on PATH: source env.sh (make test does)"
+    return subprocess.run([executable, *args], capture_output=True, text=True, timeout=timeout,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_rimd_on_path_is_the_ros2_run_executable():
+    executable = Path(shutil.which("rimd") or "")
+    assert executable.parent.parts[-2:] == ("lib", "rimd_sim"), executable
+
+
+def test_help_lists_every_subcommand():
+    result = _rimd("--help")
+    assert result.returncode == 0, result.stderr
+    listed = {line.split()[0] for line in result.stdout.splitlines()
+              if line.startswith("    ") and line.split()}
+    assert set(SPEC_VERBS) <= listed, f"missing: {set(SPEC_VERBS) - listed}"
+
+
+def test_verb_table_matches_spec():
+    assert tuple(verb.name for verb in cli.VERBS) == SPEC_VERBS
+    for verb in cli.VERBS:
+        if verb.name in NOT_IMPLEMENTED:
+            assert verb.module is None
+            assert (verb.issue, verb.issue_title) == NOT_IMPLEMENTED[verb.name]
+
+
+@pytest.mark.parametrize("name", sorted(NOT_IMPLEMENTED))
+def test_not_implemented_verb_says_so_and_exits_2(name, capsys):
+    issue, title = NOT_IMPLEMENTED[name]
+    status = cli.main([name, "some-argument", "--some-option"])
+    captured = capsys.readouterr()
+    assert status == 2
+    assert captured.out == "", "no fake output"
+    assert captured.err.strip() == f"rimd {name}: not implemented yet (issue {issue}: {title})"
+
+
+def test_not_implemented_through_the_console_script():
+    result = _rimd("analyze", "REC.mcap")
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert result.stderr.strip() == "rimd analyze: not implemented yet (issue 7: Experiments and analysis)"
+
+
+def test_no_subcommand_is_a_usage_error(capsys):
+    assert cli.main([]) == 2
+    assert "usage: rimd" in capsys.readouterr().err
+
+
+def test_unknown_subcommand_is_a_usage_error():
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["fly"])
+    assert exit_info.value.code == 2
+
+
+def test_info_reports_version_and_source_tree(repo_root):
+    result = _rimd("info", "--json")
+    assert result.returncode == 0, result.stderr
+    facts = json.loads(result.stdout)
+    assert facts["rimd_sim_version"] == cli.__version__
+    assert Path(facts["rimd_sim_location"]).resolve().is_relative_to(repo_root / "rimd_sim" / "rimd_sim")
+    assert Path(facts["config_dir"]) == repo_root / "config"
+    assert facts["ros_jazzy_rclpy"] is not None
+    assert facts["rimd_msgs_location"] is not None
+
+
+def test_info_plain_text():
+    result = _rimd("info")
+    assert result.returncode == 0, result.stderr
+    assert "rimd_sim_version: " in result.stdout
+
+
+def test_command_error_prints_one_line_and_exits_1(monkeypatch, capsys):
+    def failing_main(args):
+        raise cli.CommandError("gap must be >= 0 m, got -1")
+
+    monkeypatch.setattr("rimd_sim.verbs.info.main", failing_main)
+    assert cli.main(["info"]) == 1
+    assert capsys.readouterr().err == "rimd info: gap must be >= 0 m, got -1\n"
