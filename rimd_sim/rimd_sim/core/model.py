@@ -24,7 +24,7 @@ from .config import CHANNEL_NAMES, RigParams, SimConfig
 from .contact import CONTACT_LAWS
 from .errors import CommandError, IntegrationError
 
-__all__ = ["Impact", "ModelOutput", "MotorState", "RigModel", "StroboPoint", "samples_before"]
+__all__ = ["Impact", "ModelOutput", "MotorState", "RigModel", "StroboPoint", "as_time", "samples_before"]
 
 #: Channel name -> quantity computed by the kernel.
 CHANNEL_QUANTITY = {
@@ -123,8 +123,14 @@ def samples_before(t: Fraction, rate: Fraction) -> int:
     return math.ceil(t * rate)
 
 
-def _as_fraction(x: float | int | Fraction) -> Fraction:
-    return x if isinstance(x, Fraction) else Fraction(x)
+def as_time(x: float | int | Fraction) -> Fraction:
+    """A time in seconds as an exact fraction; a float is read as the decimal it prints as (0.1 is 1/10,
+    not the binary 0.1000000000000000055...), so sample counts are what a user expects."""
+    if isinstance(x, Fraction):
+        return x
+    if isinstance(x, float):
+        return Fraction(repr(x))
+    return Fraction(x)
 
 
 def _params_vector(rig: RigParams, config: SimConfig) -> np.ndarray:
@@ -288,7 +294,7 @@ class RigModel:
             CommandError: If ``t_stop`` is before the current time.
             IntegrationError: If the integrator cannot continue (the message says why).
         """
-        t_stop = _as_fraction(t_stop)
+        t_stop = as_time(t_stop)
         if t_stop < self._time:
             raise CommandError(f"cannot advance to t = {float(t_stop)} s: the model is already at {float(self._time)} s")
         t_start = self._time

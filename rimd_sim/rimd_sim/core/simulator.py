@@ -21,7 +21,7 @@ import numpy as np
 
 from .config import CHANNEL_NAMES, SimConfig
 from .errors import CommandError, ConfigError
-from .model import Impact, MotorState, RigModel, StroboPoint
+from .model import Impact, MotorState, RigModel, StroboPoint, as_time
 from .sensors import Instrument
 
 __all__ = ["AppliedCommand", "ChannelBlock", "RigSimulator", "SimBlock"]
@@ -107,7 +107,7 @@ class RigSimulator:
     # ---- scheduling ------------------------------------------------------------------------------
 
     def _at(self, at: float | Fraction | None) -> Fraction:
-        when = self.time if at is None else Fraction(at)
+        when = self.time if at is None else as_time(at)
         if when < self.time:
             raise CommandError(f"time {float(when)} s is in the past (simulation time is {float(self.time)} s)")
         return when
@@ -190,7 +190,7 @@ class RigSimulator:
             CommandError: If ``t_stop`` is in the past.
             IntegrationError: If the model cannot continue.
         """
-        t_stop = Fraction(t_stop)
+        t_stop = as_time(t_stop)
         t_start = self.time
         if t_stop < t_start:
             raise CommandError(f"cannot advance to {float(t_stop)} s: already at {float(t_start)} s")

@@ -1,0 +1,120 @@
+"""Configuration: the presets load, defaults agree with config/rimd.yaml, and bad values are refused with
+the key, the value and the rule."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from rimd_sim.core import ConfigError, SimConfig, load_config
+from rimd_sim.core.config import PARAMETERS, find_config_file, read_ros_parameters
+
+
+def test_default_yaml_equals_code_defaults():
+    """config/rimd.yaml restates the code defaults: one source of truth, documented in YAML."""
+    assert load_config(find_config_file("rimd.yaml")) == SimConfig()
+
+
+def test_paper_model_preset_differs_only_in_mass_and_damping():
+    paper = load_config(find_config_file("paper_model.yaml")).to_parameters()
+    default = SimConfig().to_parameters()
+    assert {k for k in default if default[k] != paper[k]} == {"mass", "damping_ratio"}
+    assert paper["mass"] == 1.0 and paper["damping_ratio"] == 0.0
+
+
+def test_derived_length_from_natural_frequency():
+    """l = g / (2 pi 1.82)^2 = 0.0750 m (SPEC section 1)."""
+    assert SimConfig().rig.length == pytest.approx(0.07502, abs=1e-5)
+
+
+BAD_VALUES = [
+    ("mass", -0.15, "> 0"),
+    ("mass", 0.0, "> 0"),
+    ("gap", float("nan"), "finite"),
+    ("gap", -1e-3, ">= 0"),
+    ("gap", 0.04, "half the pendulum length"),
+    ("amplitude", float("inf"), "finite"),
+    ("natural_frequency", 0.0, "> 0"),
+    ("damping_ratio", -0.1, ">= 0"),
+    ("contact.model", "rubber", "one of"),
+    ("contact.model", 3, "string"),
+    ("contact.stiffness", -5.5e6, "> 0"),
+    ("contact.stiffness", "5.5e6", "write exponents with a sign"),
+    ("contact.damping", -1.0, ">= 0"),
+    ("contact.exponent", 0.5, ">= 1"),
+    ("contact.restitution", 1.5, "<= 1"),
+    ("contact.restitution", 0.0, "> 0"),
+    ("motor.max_frequency", 0.0, "> 0"),
+    ("motor.ramp_rate", -2.0, "> 0"),
+    ("motor.initial_setpoint", 50.0, "motor.max_frequency"),
+    ("integrator.rtol", 0.1, "<= 1e-3"),
+    ("channels.impact_force.sample_rate", 0.0, "> 0"),
+    ("channels.rimd_acceleration.sample_rate", -20000.0, "> 0"),
+    ("channels.cart_displacement.range_max", -0.02, "range_min"),
+    ("channels.rimd_acceleration.highpass", 15000.0, "0.45 x sample_rate"),
+    ("channels.cart_displacement.noise_std", -1e-6, ">= 0"),
+    ("noise.enabled", "yes", "true or false"),
+    ("seed", -1, ">= 0"),
+    ("seed", 1.5, "integer"),
+    ("real_time_factor", -1.0, ">= 0"),
+    ("block_rate", 0.0, "> 0"),
+    ("truth.sample_rate", 0.0, "> 0"),
+    ("no_such_parameter", 1.0, "unknown parameter"),
+]
+
+
+@pytest.mark.parametrize(("key", "value", "rule"), BAD_VALUES, ids=[f"{k}={v!r}" for k, v, _ in BAD_VALUES])
+def test_bad_value_refused_with_key_value_and_rule(key, value, rule):
+    with pytest.raises(ConfigError) as info:
+        SimConfig().with_parameters({key: value})
+    message = str(info.value)
+    assert key in message or (key == "channels.cart_displacement.range_max" and "range_max" in message)
+    assert rule in message
+    if isinstance(value, float) and math.isnan(value):
+        assert "nan" in message
+    else:
+        assert repr(value) in message or str(value) in message
+
+
+def test_bad_value_in_yaml_file_names_key(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("rimd_simulator:\n  ros__parameters:\n    contact:\n      model: rubber\n")
+    with pytest.raises(ConfigError, match="contact.model"):
+        load_config(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("rimd_simulator: [1, 2", "not valid YAML"),
+        ("other_node:\n  ros__parameters:\n    gap: 0.0\n", "no 'rimd_simulator: ros__parameters:' section"),
+        ("- 1\n- 2\n", "must be a mapping"),
+    ],
+)
+def test_malformed_files_refused(tmp_path, text, message):
+    path = tmp_path / "f.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def test_missing_file_refused(tmp_path):
+    with pytest.raises(ConfigError, match="cannot be read"):
+        load_config(tmp_path / "absent.yaml")
+
+
+def test_wildcard_section_is_merged(tmp_path):
+    path = tmp_path / "w.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    seed: 5\nrimd_simulator:\n  ros__parameters:\n    gap: 0.001\n")
+    assert read_ros_parameters(path) == {"seed": 5, "gap": 0.001}
+    cfg = load_config(path)
+    assert cfg.seed == 5 and cfg.rig.gap == 0.001
+
+
+def test_every_parameter_round_trips():
+    """Each declared parameter reads back what was set (what a node's descriptor table relies on)."""
+    cfg = SimConfig()
+    for key, spec in PARAMETERS.items():
+        value = spec.get(cfg)
+        assert cfg.with_parameters({key: value}).to_parameters()[key] == value, key
