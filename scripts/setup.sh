@@ -144,7 +144,8 @@ step_build() {
     local stamp_key venv_key digest
     venv_key="$(printf '%s' "$VENV" | sha256sum | cut -c1-12)"
     stamp_key="$STAMPS/build-$venv_key.sha256"
-    digest="$(printf 'venv=%s\nrequirements=%s\nconfig=%s\n' "$VENV" "$(cat "$VENV/.rimd-requirements.sha256")" \
+    digest="$(printf 'venv=%s\nrequirements=%s\nconfig=%s\n' "$VENV" \
+        "$(cat "$VENV/.rimd-requirements.sha256" 2>/dev/null)" \
         "$config_names" | hash_inputs "${inputs[@]}")"
     if [ -f "$stamp_key" ] && [ "$(cat "$stamp_key")" = "$digest" ] && [ -f "$WS/install/setup.sh" ] \
         && [ "$(cat "$WS/install/.rimd-venv" 2>/dev/null)" = "$VENV" ]; then

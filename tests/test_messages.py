@@ -81,7 +81,7 @@ def test_default_values_are_empty():
 
 
 def test_field_checks_are_opt_in_on_jazzy():
-    """Jazzy's generated classes check field values only with check_fields=True or ROS_PYTHON_CHECK_FIELDS=1."""
+    """Jazzy's message classes check values only with check_fields=True or ROS_PYTHON_CHECK_FIELDS=1."""
     with pytest.raises(AssertionError, match="unsigned integer"):
         SampleBlock(check_fields=True, first_index=-1)
     with pytest.raises(AssertionError, match="'unit' field must be of type 'str'"):

@@ -48,15 +48,19 @@ class ManagedProcess:
         self.args = list(args)
         self.log_path = log_path
         self._log = open(log_path, "wb")  # closed in stop()
-        self._popen = subprocess.Popen(
-            self.args,
-            env=dict(env),
-            cwd=cwd,
-            stdin=subprocess.DEVNULL,
-            stdout=self._log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+        try:
+            self._popen = subprocess.Popen(
+                self.args,
+                env=dict(env),
+                cwd=cwd,
+                stdin=subprocess.DEVNULL,
+                stdout=self._log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+        except OSError:
+            self._log.close()
+            raise
         self.pid = self._popen.pid
         self._stopped = False
 
