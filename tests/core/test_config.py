@@ -1,5 +1,6 @@
 """Configuration: the presets load, defaults agree with config/rimd.yaml, and bad values are refused with
-the key, the value and the rule."""
+the key, the value and the rule.
+"""
 
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ def test_paper_model_preset_differs_only_in_mass_and_damping():
 
 
 def test_derived_length_from_natural_frequency():
-    """l = g / (2 pi 1.82)^2 = 0.0750 m (SPEC section 1)."""
+    """L = g / (2 pi 1.82)^2 = 0.0750 m (SPEC section 1)."""
     assert SimConfig().rig.length == pytest.approx(0.07502, abs=1e-5)
 
 

@@ -31,7 +31,8 @@ def cart_at_rest(**params) -> SimConfig:
 def test_linear_resonance_at_natural_frequency():
     """Large gap, small amplitude: the relative-displacement frequency response is the base-excited linear
     oscillator's, X/A0 = r^2 / sqrt((1 - r^2)^2 + (2 zeta r)^2), peaking at 1.82 / sqrt(1 - 2 zeta^2) Hz
-    (paper: resonance without impact at 1.82 Hz)."""
+    (paper: resonance without impact at 1.82 Hz).
+    """
     zeta = 0.02
     freqs = np.round(np.arange(1.70, 1.951, 0.01), 4)
     amp = []
@@ -57,7 +58,8 @@ def test_linear_resonance_at_natural_frequency():
 
 def _linear_oscillator_exit(mass: float, k: float, c: float, v: float) -> tuple[float, float]:
     """Contact duration and restitution of m x'' + c x' + k x = 0, x(0) = 0, x'(0) = v, when the contact
-    ends as the force k x + c x' (= -m x'') vanishes (Filippov rule), not when x returns to 0."""
+    ends as the force k x + c x' (= -m x'') vanishes (Filippov rule), not when x returns to 0.
+    """
     wn = math.sqrt(k / mass)
     zeta = c / (2 * math.sqrt(k * mass))
     wd = wn * math.sqrt(1 - zeta**2)
@@ -72,7 +74,8 @@ def test_spring_dashpot_restitution_matches_closed_form(mass):
     """Cart at rest, gap 0: the hammer swings into the stop; during the ~0.4 ms contact the pendulum is a
     linear oscillator in delta (theta ~ 1e-4 rad, gravity negligible), so the duration and the coefficient
     of restitution e = J / (m v) - 1 follow the closed form with the Filippov end of contact (force = 0).
-    Masses cover contact damping ratios 0.66 (peak force at first contact), 0.26 and 0.11."""
+    Masses cover contact damping ratios 0.66 (peak force at first contact), 0.26 and 0.11.
+    """
     cfg = cart_at_rest(mass=mass, damping_ratio=0.0, **{"initial.theta": -0.02})
     model = RigModel(cfg, channels=False, truth=False)
     impact = model.advance(1.0).impacts[0]
@@ -92,7 +95,8 @@ def test_spring_dashpot_restitution_matches_closed_form(mass):
 def test_energy_conserved_through_100_impacts():
     """Cart at rest, zeta = 0, c = 0: the system is conservative. E = m l^2 w^2 / 2 + m g l (1 - cos theta)
     + U(theta), with U the potential of the contact moment k delta l (paper Eq. 3 form). DOPRI5 is 5th
-    order; with rtol 1e-10 the relative energy drift over 100 impacts must stay below 1e-4."""
+    order; with rtol 1e-10 the relative energy drift over 100 impacts must stay below 1e-4.
+    """
     cfg = cart_at_rest(damping_ratio=0.0, **{"contact.damping": 0.0, "initial.theta": -0.05,
                                               "integrator.rtol": 1e-10, "integrator.atol": 1e-12,
                                               "truth.sample_rate": 20000.0})
@@ -112,7 +116,8 @@ def test_energy_conserved_through_100_impacts():
 @pytest.mark.parametrize("law", sorted(CONTACT_LAWS))
 def test_every_contact_law_gives_a_bounded_rebound(law):
     """Each law of the paper's Eq. 1 produces one impact with positive peak force and impulse, and a
-    rebound no faster than the approach (no energy created); Hertz (no damping) is elastic."""
+    rebound no faster than the approach (no energy created); Hertz (no damping) is elastic.
+    """
     params = {"contact.model": law, "initial.theta": -0.02, "damping_ratio": 0.0}
     if law != "spring_dashpot":
         params.update({"contact.stiffness": 1e9, "contact.damping": 0.5 if law == "hunt_crossley" else 0.0})
@@ -143,7 +148,8 @@ REFERENCE_POINTS = [  # (gap m, frequency Hz, expected impacts per cycle)
 @pytest.mark.parametrize(("gap", "freq", "per_cycle"), REFERENCE_POINTS)
 def test_agrees_with_independent_solve_ivp(gap, freq, per_cycle):
     """The steady peak force and impacts per cycle agree within 1 % with an independent scipy solve_ivp
-    event-driven integration (tests/core/reference.py) from rest, read over the last 20 cycles of 16 s."""
+    event-driven integration (tests/core/reference.py) from rest, read over the last 20 cycles of 16 s.
+    """
     t0 = 16.0 - 20.0 / freq
     ref = reference.simulate(frequency=freq, gap=gap, duration=16.0)
     ref_peak, ref_rate = reference.steady_peak(ref, freq, t0, 16.0)
@@ -162,7 +168,8 @@ def test_agrees_with_independent_solve_ivp(gap, freq, per_cycle):
 
 def test_table1_gap0_peaks():
     """Defaults at gap 0 reproduce the paper's peak forces within 10 % (82.4 N at 3.75 Hz, 120 N at
-    7.25 Hz); the tuned defaults give 79 N and 126 N (SPEC section 3)."""
+    7.25 Hz); the tuned defaults give 79 N and 126 N (SPEC section 3).
+    """
     for freq, paper, tuned in ((3.75, 82.4, 79.0), (7.25, 120.0, 126.0)):
         impacts = RigModel(at_frequency(freq), channels=False, truth=False).advance(20.0).impacts
         peak = max(i.peak_force for i in impacts if i.t_start > 15.0)
@@ -174,7 +181,8 @@ def test_gap0_long_dwell_is_handled_without_chattering():
     """Between about 5.2 and 6.5 Hz at gap 0 the hammer can stay pressed on the stop for a good part of
     the cycle (stiff, damped contact; with the defaults at 5.5-5.75 Hz, dwells of ~25 ms). The integration
     must neither chatter (the Zeno guard would raise) nor stall: bounded steps and switches per simulated
-    second."""
+    second.
+    """
     longest = 0.0
     for freq in (5.25, 5.5, 5.75, 6.0, 6.25):
         model = RigModel(at_frequency(freq), channels=False, truth=False)
@@ -189,7 +197,8 @@ def test_gap0_long_dwell_is_handled_without_chattering():
 
 def test_period_doubling_near_4_85_hz_at_gap0_paper_model():
     """The paper's model (m = 1 kg, no structural damping) shows a period-1 motion with alternating impact
-    magnitudes from about 4.80-4.85 Hz (SPEC section 8; the experiment: near 4.75 Hz), and not at 4.75 Hz."""
+    magnitudes from about 4.80-4.85 Hz (SPEC section 8; the experiment: near 4.75 Hz), and not at 4.75 Hz.
+    """
     from rimd_sim.core.config import find_config_file, load_config
 
     paper = load_config(find_config_file("paper_model.yaml"))

@@ -47,7 +47,8 @@ def scheduled(seed: int = 7) -> RigSimulator:
 def test_same_seed_and_schedule_give_bit_identical_data_however_time_is_cut():
     """Hypothesis: the integrator never shortens a step to land on a block boundary and the instruments
     carry their filter and noise state, so blocks of 10 ms, blocks of 1/7 s and one call give the same
-    bytes."""
+    bytes.
+    """
     a = run_blocks(scheduled(), Fraction(3), Fraction(1, 100))
     b = run_blocks(scheduled(), Fraction(3), Fraction(1, 7))
     c = run_blocks(scheduled(), Fraction(3), Fraction(3))
@@ -80,7 +81,8 @@ def test_sample_grid_is_exact_and_contiguous():
 
 def test_odd_rate_grid_has_no_drift():
     """A rate that does not divide the block (3 kHz at 7 blocks/s) still gives floor-free exact counts:
-    sample n is at n / rate, the number of samples before t is ceil(t * rate)."""
+    sample n is at n / rate, the number of samples before t is ceil(t * rate).
+    """
     cfg = SimConfig().with_parameters({"channels.cart_displacement.sample_rate": 3001.0})
     sim = RigSimulator(cfg)
     chans, firsts, _, _ = run_blocks(sim, Fraction(5), Fraction(1, 7))
@@ -91,7 +93,8 @@ def test_odd_rate_grid_has_no_drift():
 
 def test_truth_matches_cart_kinematics_and_phase_is_continuous_through_a_ramp():
     """The cart follows x_c = A0 sin(phase): no jump when the setpoint changes (phase continuous), the
-    frequency ramps at the commanded rate and sits on the setpoint afterwards; 0 Hz stops the cart."""
+    frequency ramps at the commanded rate and sits on the setpoint afterwards; 0 Hz stops the cart.
+    """
     cfg = SimConfig().with_parameters({"motor.initial_frequency": 3.0, "motor.initial_setpoint": 3.0,
                                        "truth.sample_rate": 10000.0})
     sim = RigSimulator(cfg)
@@ -114,7 +117,8 @@ def test_truth_matches_cart_kinematics_and_phase_is_continuous_through_a_ramp():
 
 def test_perturbation_acts_at_its_stated_time():
     """Two identical runs, one with a velocity kick at t = 1.5 s: the truth is identical before 1.5 s and
-    differs right after; the kick is logged with its time."""
+    differs right after; the kick is logged with its time.
+    """
     cfg = SimConfig().with_parameters({"gap": 2.4e-3, "motor.initial_frequency": 5.25,
                                        "motor.initial_setpoint": 5.25, "noise.enabled": False})
     a, b = RigSimulator(cfg), RigSimulator(cfg)

@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
-from .config import CHANNEL_NAMES, ChannelConfig, ContactParams, IntegratorParams, MotorParams, RigParams, SimConfig, load_config
+from .config import (
+    CHANNEL_NAMES,
+    ChannelConfig,
+    ContactParams,
+    IntegratorParams,
+    MotorParams,
+    RigParams,
+    SimConfig,
+    load_config,
+)
 from .contact import CONTACT_LAWS, ContactLaw, contact_force
 from .errors import CommandError, ConfigError, IntegrationError, RimdError
 from .model import TRUTH_FIELDS, Impact, ModelOutput, MotorState, RigModel, StroboPoint

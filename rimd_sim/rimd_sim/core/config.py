@@ -136,9 +136,9 @@ class IntegratorParams:
         event_tolerance: Tolerance (s) of the switch-time root finding on the dense output.
     """
 
-    rtol: float = 1e-8
-    atol: float = 1e-10
-    max_step: float = 5e-3
+    rtol: float = 1e-7
+    atol: float = 1e-9
+    max_step: float = 1e-2
     event_tolerance: float = 1e-12
 
 

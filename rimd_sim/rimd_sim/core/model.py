@@ -125,7 +125,8 @@ def samples_before(t: Fraction, rate: Fraction) -> int:
 
 def as_time(x: float | int | Fraction) -> Fraction:
     """A time in seconds as an exact fraction; a float is read as the decimal it prints as (0.1 is 1/10,
-    not the binary 0.1000000000000000055...), so sample counts are what a user expects."""
+    not the binary 0.1000000000000000055...), so sample counts are what a user expects.
+    """
     if isinstance(x, Fraction):
         return x
     if isinstance(x, float):

@@ -71,7 +71,8 @@ class Instrument:
 
     def reconfigure(self, channel: ChannelConfig, *, noise: bool) -> None:
         """Change the instrument's parameters (the sample rate must stay the same); filter state restarts
-        only when the filter changes."""
+        only when the filter changes.
+        """
         if channel.sample_rate != self._channel.sample_rate:
             raise ValueError("the sample rate of a running channel cannot change")
         filters_changed = (channel.bandwidth, channel.highpass) != (self._channel.bandwidth, self._channel.highpass)
