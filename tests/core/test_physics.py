@@ -223,3 +223,36 @@ def test_no_period_doubling_below_the_window_paper_model():
                        channels=False, truth=False).advance(40.0).impacts
     peaks = np.array([i.peak_force for i in impacts if i.t_start > 30.0])
     assert np.ptp(peaks) < 1e-3 * peaks.mean()
+
+
+def test_grazing_release_at_gap_2_4mm_does_not_chatter():
+    """Regression: at gap 2.4 mm and 3.5 Hz a release leaves delta a rounding error above 0 when the
+    impact closes; the integrator must not switch again and again on that state (it once raised the
+    chattering guard at t = 0.517 s)."""
+    model = RigModel(at_frequency(3.5, gap=2.4e-3), channels=False, truth=False)
+    impacts = model.advance(150 / 3.5).impacts
+    assert impacts and model.stats["switches"] < 3 * len(impacts) + 10
+
+
+TABLE1 = {0.0: (3.75, 7.25), 1.0e-3: (3.00, 6.50), 2.4e-3: (2.50, 5.25)}  # band B at 1 mm: paper 6.25
+
+
+@pytest.mark.parametrize("gap", sorted(TABLE1))
+def test_table1_impact_resonances_from_rest(gap):
+    """Paper Table 1 with the default parameters, each frequency of the 0.25 Hz grid started from rest,
+    steady state read over the last 50 of 150 cycles: band A = frequency of the largest peak force among
+    one-impact-per-cycle motions, band B among one-impact-per-two-cycles motions. The defaults reproduce
+    five of the six resonances exactly; band B at 1.0 mm comes out at 6.50 Hz instead of 6.25 Hz
+    (SPEC section 3), which this test pins."""
+    rows = []
+    for f in np.arange(2.0, 9.51, 0.25):
+        f = float(f)
+        duration = 150 / f
+        impacts = RigModel(at_frequency(f, gap=gap), channels=False, truth=False).advance(duration).impacts
+        last = [i for i in impacts if i.t_start >= duration - 50 / f]
+        rows.append((f, max((i.peak_force for i in last), default=0.0), len(last) / 50))
+    band_a = max((r for r in rows if abs(r[2] - 1.0) < 0.03), key=lambda r: r[1])
+    band_b = max((r for r in rows if abs(r[2] - 0.5) < 0.03), key=lambda r: r[1])
+    assert (band_a[0], band_b[0]) == TABLE1[gap]
+    if gap == 0.0:
+        assert band_a[1] == pytest.approx(82.4, rel=0.10) and band_b[1] == pytest.approx(120.0, rel=0.10)

@@ -429,18 +429,28 @@ def hermite_peak(d0, d1, s0, s1):
 
 
 @_jit
-def detect_event(mode, ya, yb, h, Q, p, fs):
-    """Earliest switch inside the step ``[0, 1]``: returns ``(fraction, event code)`` or ``(2, EV_NONE)``."""
+def detect_event(mode, rec, ya, yb, h, Q, p, fs):
+    """Earliest switch inside the step ``[0, 1]``: returns ``(fraction, event code)`` or ``(2, EV_NONE)``.
+
+    ``rec`` tells whether an impact is open. In FREE mode it selects what to watch: with no impact open,
+    ``delta`` rising through 0 (a state a rounding error beyond the surface counts as on it); with an
+    impact open (released by a vanishing force while ``delta > 0``), re-contact and ``delta`` returning
+    below 0. Choosing by the record rather than by the sign of ``delta`` keeps a state that lies a
+    rounding error off the surface from switching again and again.
+    """
     best = 2.0
     code = EV_NONE
     da, dda = penetration(ya[0], ya[1], p)
     db, ddb = penetration(yb[0], yb[1], p)
     if mode == FREE:
-        if da <= 0.0:
+        if rec == 0:
             if db > 0.0:
-                best = find_root(0, ya, Q, h, 0.0, da, 1.0, db, p, fs)
+                if da < 0.0:
+                    best = find_root(0, ya, Q, h, 0.0, da, 1.0, db, p, fs)
+                else:  # starts on the surface and moves in
+                    best = min(1.0, p[P_EVTOL] / h)
                 code = EV_ENTER
-            elif dda > 0.0 and ddb < 0.0:
+            elif da < 0.0 and dda > 0.0 and ddb < 0.0:
                 xm = hermite_peak(da, db, dda * h, ddb * h)
                 if xm > 0.0:
                     gm = event_value(0, ya, Q, h, xm, p, fs)
@@ -449,6 +459,8 @@ def detect_event(mode, ya, yb, h, Q, p, fs):
                         code = EV_ENTER
         else:
             # Separated by a vanishing force while still beyond the stop position.
+            if da <= 0.0:  # already back at the surface (rounding): the impact is over
+                return min(1.0, p[P_EVTOL] / h), EV_CLOSE
             if db <= 0.0:
                 best = find_root(0, ya, Q, h, 0.0, da, 1.0, db, p, fs)
                 code = EV_CLOSE
@@ -904,7 +916,7 @@ def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
             h *= max(0.2, 0.9 * err ** -0.2)
         ist[I_NSTEP] += 1
         dense_coeffs(K, P, Q)
-        x, code = detect_event(mode, ya, ynew, h, Q, p, fs)
+        x, code = detect_event(mode, ist[I_REC], ya, ynew, h, Q, p, fs)
         if code != EV_NONE and x < 1.0:
             # Recompute the step exactly up to the switch.
             h_full = h

@@ -129,9 +129,11 @@ def as_time(x: float | int | Fraction) -> Fraction:
     """
     if isinstance(x, Fraction):
         return x
-    if isinstance(x, float):
-        return Fraction(repr(x))
-    return Fraction(x)
+    if isinstance(x, float):  # numpy floats included
+        if not math.isfinite(x):
+            raise CommandError(f"time {x!r} refused: must be finite")
+        return Fraction(repr(float(x)))
+    return Fraction(int(x))
 
 
 def _params_vector(rig: RigParams, config: SimConfig) -> np.ndarray:
