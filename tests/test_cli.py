@@ -16,14 +16,14 @@ SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka",
 NOT_IMPLEMENTED = {
     "rig": (5, "Recorder, replay and bring-up"),
     "node": (4, "Simulator node"),
-    "rerun": (6, "Rerun bridge"),
-    "analyze": (7, "Experiments and analysis"),
-    "experiment": (7, "Experiments and analysis"),
-    "sweep": (7, "Experiments and analysis"),
-    "bifurcation": (7, "Experiments and analysis"),
-    "peterka": (7, "Experiments and analysis"),
-    "poincare": (7, "Experiments and analysis"),
-    "basins": (7, "Experiments and analysis"),
+    "rerun": (6, "Rerun"),
+    "analyze": (7, "Analysis and experiments"),
+    "experiment": (7, "Analysis and experiments"),
+    "sweep": (7, "Analysis and experiments"),
+    "bifurcation": (7, "Analysis and experiments"),
+    "peterka": (7, "Analysis and experiments"),
+    "poincare": (7, "Analysis and experiments"),
+    "basins": (7, "Analysis and experiments"),
 }
 
 
@@ -69,7 +69,7 @@ def test_not_implemented_through_the_console_script():
     result = _rimd("analyze", "REC.mcap")
     assert result.returncode == 2
     assert result.stdout == ""
-    assert result.stderr.strip() == "rimd analyze: not implemented yet (issue 7: Experiments and analysis)"
+    assert result.stderr.strip() == "rimd analyze: not implemented yet (issue 7: Analysis and experiments)"
 
 
 def test_no_subcommand_is_a_usage_error(capsys):

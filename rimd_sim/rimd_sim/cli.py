@@ -54,8 +54,8 @@ class Verb:
 
 _BRING_UP = (5, "Recorder, replay and bring-up")
 _SIMULATOR = (4, "Simulator node")
-_RERUN = (6, "Rerun bridge")
-_ANALYSIS = (7, "Experiments and analysis")
+_RERUN = (6, "Rerun")
+_ANALYSIS = (7, "Analysis and experiments")
 
 VERBS: tuple[Verb, ...] = (
     Verb("rig", "bring up the rig: simulator, recorder and Rerun bridge from config", None, *_BRING_UP),
