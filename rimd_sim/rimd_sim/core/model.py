@@ -118,9 +118,10 @@ class ModelOutput:
 
 def samples_before(t: Fraction, rate: Fraction) -> int:
     """Number of samples ``n >= 0`` with ``n / rate < t`` (exact rational arithmetic)."""
-    if t <= 0:
+    num = t.numerator * rate.numerator
+    if num <= 0:
         return 0
-    return math.ceil(t * rate)
+    return -((-num) // (t.denominator * rate.denominator))
 
 
 def as_time(x: float | int | Fraction) -> Fraction:
