@@ -34,7 +34,9 @@ def _config_files() -> list[str]:
 
 
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
-NODE_EXECUTABLES: list[str] = []
+NODE_EXECUTABLES: list[str] = [
+    "rimd_simulator = rimd_sim.nodes.simulator:main",
+]
 
 setup(
     name=PACKAGE_NAME,

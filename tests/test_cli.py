@@ -15,7 +15,6 @@ SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka",
               "rerun", "node", "info")
 NOT_IMPLEMENTED = {
     "rig": (5, "Recorder, replay and bring-up"),
-    "node": (4, "Simulator node"),
     "rerun": (6, "Rerun"),
     "analyze": (7, "Analysis and experiments"),
     "experiment": (7, "Analysis and experiments"),

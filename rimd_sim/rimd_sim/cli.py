@@ -70,7 +70,7 @@ VERBS: tuple[Verb, ...] = (
     Verb("poincare", "Poincare sections of the simulated or recorded motion", None, *_ANALYSIS),
     Verb("basins", "basins of attraction of coexisting motions", None, *_ANALYSIS),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer", None, *_RERUN),
-    Verb("node", "run one node of the rig (NAME), with --ros-args", None, *_SIMULATOR),
+    Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),
 )
 

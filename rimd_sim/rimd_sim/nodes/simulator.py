@@ -1,0 +1,449 @@
+"""Node ``rimd_simulator``: the rig on DDS, behaving like hardware for DAQ software (SPEC sections 4-5).
+
+A thin adapter over :class:`rimd_sim.core.simulator.RigSimulator`:
+
+* the constructor declares every parameter of :data:`rimd_sim.core.config.PARAMETERS` with a descriptor
+  (description, rule, range), builds the validated configuration, creates publishers and services;
+* a pacing thread advances the core block by block in simulation time and publishes each block when it
+  is due (``real_time_factor`` > 0: at ``t0 + t_sim / factor`` of the wall clock) or at once
+  (``real_time_factor`` 0, with ``/clock``). The core advances by its own exact clock: a late thread only
+  delays the data, never changes it; lateness and overruns go to ``/diagnostics``;
+* services and parameter changes run on the executor; each is validated at once (a refusal answers
+  ``success = false`` with the reason and changes nothing) and takes effect at the next block boundary in
+  simulation time, which the response and the log state.
+
+Time base: at ``real_time_factor`` 1 the stamps are wall-clock (sample ``n`` at ``t0 + n / rate`` with
+``t0`` the wall time of the start, whole milliseconds); otherwise the simulation time itself (``t0 = 0``)
+and ``/clock`` is published so that subscribers with ``use_sim_time`` see a consistent world.
+"""
+
+from __future__ import annotations
+
+import array
+import math
+import sys
+import threading
+import time
+from collections import deque
+from fractions import Fraction
+from typing import Any
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rimd_msgs.msg import ImpactEvent, MotorState, RigState, SampleBlock
+from rimd_msgs.srv import Perturb, SetMotorFrequency
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
+
+from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
+from rimd_sim.core.config import PARAMETERS
+from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
+
+__all__ = ["SimulatorNode", "main"]
+
+NODE_NAME = "rimd_simulator"
+DEFAULT_NAMESPACE = "rig"
+
+#: Channel -> topic, relative to the node's namespace (``/rig`` by default).
+CHANNEL_TOPICS = {
+    "cart_displacement": "cart/displacement",
+    "rimd_displacement": "rimd/displacement",
+    "rimd_acceleration": "rimd/acceleration",
+    "impact_force": "impact/force",
+}
+
+_ROS_TYPES = {"float": 3, "int": 2, "bool": 1, "str": 4}  # rcl_interfaces ParameterType values
+
+
+def stamp_ns(t0_ns: int, t: Fraction) -> int:
+    """ROS time in integer nanoseconds of simulation time ``t`` (exact, rounded to the nearest ns)."""
+    return t0_ns + round(t * 1_000_000_000)
+
+
+def to_time(ns: int) -> Time:
+    """``builtin_interfaces/Time`` from integer nanoseconds."""
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _descriptor(name: str) -> ParameterDescriptor:
+    spec = PARAMETERS[name]
+    desc = ParameterDescriptor(
+        name=name,
+        type=_ROS_TYPES[spec.kind],
+        description=spec.description,
+        additional_constraints=spec.rule,
+        # Floats accept integers written in YAML (``gap: 0``); the core checks type and rule itself.
+        dynamic_typing=spec.kind == "float",
+    )
+    if spec.kind == "float" and spec.low is not None and spec.high is not None:
+        desc.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high),
+                                                        step=0.0)]
+    elif spec.kind == "int" and spec.low is not None and spec.high is not None:
+        desc.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=0)]
+    return desc
+
+
+class SimulatorNode(Node):
+    """The simulator node. See the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        kwargs.setdefault("namespace", DEFAULT_NAMESPACE)
+        super().__init__(NODE_NAME, **kwargs)
+        defaults = SimConfig().to_parameters()
+        for name in PARAMETERS:
+            self.declare_parameter(name, defaults[name], _descriptor(name))
+        values = {name: self.get_parameter(name).value for name in PARAMETERS}
+        self._config = SimConfig.from_parameters(values)  # ConfigError: caught in main()
+        self._lock = threading.Lock()
+        self._sim = RigSimulator(self._config)
+        self._block = 0  # blocks published
+        self._rtf = self._config.real_time_factor
+        self._block_rate = Fraction(repr(self._config.block_rate))
+        self._t0_ns = (time.time_ns() // 1_000_000) * 1_000_000 if self._rtf == 1.0 else 0
+        self._wall_ref = time.monotonic()
+        self._sim_ref = Fraction(0)
+        self._paused = False
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._lateness: deque[float] = deque(maxlen=1000)
+        self._overruns = 0
+        self._published = 0
+        self._impacts = 0
+        self._log_commands: deque[str] = deque(maxlen=20)
+        self._last_error = ""
+
+        depth = max(10, math.ceil(self._config.block_rate) + 10)  # at least one second of blocks
+        self._rates = {ch.name: Fraction(repr(ch.sample_rate)) for ch in self._config.channels}
+        self._pubs = {}
+        for ch in self._config.channels:
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=depth,
+                reliability=ReliabilityPolicy.RELIABLE if ch.reliable else ReliabilityPolicy.BEST_EFFORT,
+            )
+            self._pubs[ch.name] = self.create_publisher(SampleBlock, CHANNEL_TOPICS[ch.name], qos)
+        reliable = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+        events_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self._pub_events = self.create_publisher(ImpactEvent, "impact/events", events_qos)
+        self._pub_motor = self.create_publisher(MotorState, "motor/state", reliable)
+        self._pub_truth = self.create_publisher(RigState, "truth", reliable)
+        # Reliable: compatible with the best-effort subscription of ROS time sources and with reliable ones.
+        self._pub_clock = self.create_publisher(Clock, "/clock", QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+        self.create_service(SetMotorFrequency, "set_motor_frequency", self._on_set_motor_frequency)
+        self.create_service(Perturb, "perturb", self._on_perturb)
+        self.create_service(Trigger, "reset", self._on_reset)
+        self.create_service(Trigger, "pause", self._on_pause)
+        self.create_service(Trigger, "resume", self._on_resume)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.create_timer(1.0, self._publish_diagnostics)
+
+        self._thread = threading.Thread(target=self._run, name="rimd-pacing", daemon=True)
+        self.get_logger().info(
+            f"rig ready: gap {self._config.rig.gap * 1e3:g} mm, contact {self._config.rig.contact.model}, "
+            f"motor setpoint {self._config.motor.initial_setpoint:g} Hz, real_time_factor {self._rtf:g}, "
+            f"{self._config.block_rate:g} blocks/s")
+
+    # ---- life cycle --------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start publishing."""
+        self._wall_ref = time.monotonic()
+        self._thread.start()
+
+    def shutdown(self) -> None:
+        """Stop the pacing thread (idempotent)."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+
+    # ---- pacing ------------------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                if self._paused:
+                    self._wake.wait(0.1)
+                    self._wake.clear()
+                    continue
+                t_end = Fraction(self._block + 1) / self._block_rate
+                if self._rtf > 0:
+                    due = self._wall_ref + float(t_end - self._sim_ref) / self._rtf
+                    delay = due - time.monotonic()
+                    if delay > 0:
+                        self._wake.wait(delay)
+                        self._wake.clear()
+                        continue
+                    late = -delay
+                    self._lateness.append(late)
+                    if late > 1.0 / float(self._block_rate):
+                        self._overruns += 1
+                with self._lock:
+                    block = self._sim.advance(t_end)
+                self._block += 1
+                if not self.context.ok():
+                    return
+                self._publish(block)
+        except IntegrationError as exc:  # the model cannot continue: say why, keep the services alive
+            self._last_error = str(exc)
+            self.get_logger().error(f"simulation stopped: {exc}")
+        except Exception:  # noqa: BLE001 - only at shutdown: the context went away while publishing
+            if self.context.ok():
+                raise
+
+    def _publish(self, block: SimBlock) -> None:
+        t0 = self._t0_ns
+        for name in CHANNEL_NAMES:
+            ch = block.channels[name]
+            cfg = self._config.channel(name)
+            msg = SampleBlock()
+            msg.header.stamp = to_time(stamp_ns(t0, Fraction(ch.first_index) / self._rates[name]))
+            msg.header.frame_id = cfg.frame_id
+            msg.first_index = ch.first_index
+            msg.sample_rate = ch.sample_rate
+            samples = array.array("d")
+            samples.frombytes(ch.samples.tobytes())
+            msg.samples = samples
+            msg.unit = cfg.unit
+            msg.range_min = cfg.range_min
+            msg.range_max = cfg.range_max
+            msg.saturated_count = ch.saturated
+            self._pubs[name].publish(msg)
+        if block.truth is not None:
+            self._pub_truth.publish(self._truth_message(block))
+        for imp in block.impacts:
+            ev = ImpactEvent()
+            ev.header.stamp = to_time(t0 + round(imp.t_start * 1e9))
+            ev.header.frame_id = "impact_force_sensor"
+            ev.duration = imp.duration
+            ev.peak_force = imp.peak_force
+            ev.impulse = imp.impulse
+            ev.impact_velocity = imp.impact_velocity
+            ev.max_penetration = imp.max_penetration
+            ev.excitation_frequency = imp.excitation_frequency
+            ev.excitation_phase = imp.excitation_phase
+            ev.cycle_index = imp.cycle_index
+            ev.index = imp.index
+            self._pub_events.publish(ev)
+            self._impacts += 1
+        m = block.motor
+        ms = MotorState()
+        ms.header.stamp = to_time(stamp_ns(t0, block.t_stop))
+        ms.header.frame_id = "motor"
+        ms.frequency_setpoint = m.frequency_setpoint
+        ms.frequency = m.frequency
+        ms.phase = m.phase
+        ms.cycle_index = max(m.cycle_index, 0)
+        ms.ramp_rate = m.ramp_rate
+        ms.cart_position = m.cart_position
+        self._pub_motor.publish(ms)
+        if self._rtf != 1.0:
+            self._pub_clock.publish(Clock(clock=to_time(stamp_ns(t0, block.t_stop))))
+        for cmd in block.commands:
+            line = f"{cmd.kind} at t = {float(cmd.time):.6f} s: {cmd.detail}"
+            self._log_commands.append(line)
+            self.get_logger().info(line)
+        self._published += 1
+
+    def _truth_message(self, block: SimBlock) -> RigState:
+        first, rows = block.truth
+        rate = self._config.truth_rate
+        msg = RigState()
+        msg.header.stamp = to_time(stamp_ns(self._t0_ns, Fraction(first) / Fraction(repr(rate))))
+        msg.header.frame_id = "truth"
+        msg.first_index = first
+        msg.sample_rate = rate
+        for i, field in enumerate(("theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity",
+                                   "rimd_acceleration", "penetration", "contact_force", "motor_phase",
+                                   "motor_frequency")):
+            a = array.array("d")
+            a.frombytes(rows[i].tobytes())
+            setattr(msg, field, a)
+        msg.in_contact = [bool(v) for v in rows[10]]
+        return msg
+
+    def _publish_diagnostics(self) -> None:
+        lat = sorted(self._lateness)
+        p50 = lat[len(lat) // 2] if lat else 0.0
+        p99 = lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else 0.0
+        sim_t = float(self._sim.time)
+        wall = time.monotonic() - self._wall_ref
+        status = DiagnosticStatus()
+        status.name = f"{self.get_name()}: pacing"
+        status.hardware_id = "rimd_virtual_rig"
+        status.level = DiagnosticStatus.OK
+        status.message = "running"
+        if self._paused:
+            status.message = "paused"
+        if self._overruns:
+            status.level = DiagnosticStatus.WARN
+            status.message += f", {self._overruns} overruns (blocks later than one block period)"
+        if self._last_error:
+            status.level = DiagnosticStatus.ERROR
+            status.message = f"stopped: {self._last_error}"
+        values = {
+            "simulation_time_s": f"{sim_t:.6f}",
+            "real_time_factor_target": f"{self._rtf:g}",
+            "real_time_factor_achieved": f"{(sim_t - float(self._sim_ref)) / wall:.3f}" if wall > 0 else "0",
+            "blocks_published": str(self._published),
+            "impacts_published": str(self._impacts),
+            "lateness_p50_ms": f"{p50 * 1e3:.3f}",
+            "lateness_p99_ms": f"{p99 * 1e3:.3f}",
+            "overruns": str(self._overruns),
+            "dropped_blocks": "0",
+            "paused": str(self._paused).lower(),
+        }
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [status]
+        self._pub_diag.publish(arr)
+
+    # ---- services ----------------------------------------------------------------------------------
+
+    def _effective(self) -> Time:
+        return to_time(stamp_ns(self._t0_ns, self._sim.time))
+
+    def _on_set_motor_frequency(self, request, response):
+        with self._lock:
+            try:
+                when = self._sim.set_motor_frequency(request.frequency_hz, request.ramp_rate)
+            except CommandError as exc:
+                response.success = False
+                response.message = str(exc)
+                response.frequency_hz = self._current_setpoint()
+                self.get_logger().warning(f"set_motor_frequency refused: {exc}")
+                return response
+            rate = request.ramp_rate or self._config.motor.ramp_rate
+            response.success = True
+            response.message = (f"setpoint {request.frequency_hz:g} Hz at {rate:g} Hz/s from t = {float(when):.6f} s "
+                                "(simulation time)")
+            response.frequency_hz = float(request.frequency_hz)
+            response.effective_stamp = to_time(stamp_ns(self._t0_ns, when))
+        self._wake.set()
+        return response
+
+    def _current_setpoint(self) -> float:
+        return float(self._sim.model.motor_state().frequency_setpoint)
+
+    def _on_perturb(self, request, response):
+        with self._lock:
+            try:
+                when = self._sim.perturb(request.velocity)
+            except CommandError as exc:
+                response.success = False
+                response.message = str(exc)
+                return response
+            response.success = True
+            response.message = f"hammer velocity {request.velocity:+g} m/s at t = {float(when):.6f} s"
+            response.effective_stamp = to_time(stamp_ns(self._t0_ns, when))
+        return response
+
+    def _on_reset(self, request, response):
+        with self._lock:
+            when = self._sim.reset()
+        response.success = True
+        response.message = f"hammer reset to its initial state at t = {float(when):.6f} s (motor unchanged)"
+        return response
+
+    def _on_pause(self, request, response):
+        with self._lock:
+            if self._paused:
+                response.success = False
+                response.message = f"already paused at t = {float(self._sim.time):.6f} s"
+                return response
+            self._paused = True
+        response.success = True
+        response.message = f"paused at t = {float(self._sim.time):.6f} s (simulation time frozen)"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_resume(self, request, response):
+        with self._lock:
+            if not self._paused:
+                response.success = False
+                response.message = "not paused"
+                return response
+            self._sim_ref = self._sim.time
+            self._wall_ref = time.monotonic()
+            self._paused = False
+        self._wake.set()
+        response.success = True
+        response.message = f"resumed at t = {float(self._sim.time):.6f} s"
+        self.get_logger().info(response.message)
+        return response
+
+    # ---- parameters --------------------------------------------------------------------------------
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        changes = {}
+        for p in params:
+            if p.name not in PARAMETERS:
+                return SetParametersResult(successful=False, reason=f"unknown parameter '{p.name}'")
+            changes[p.name] = p.value
+        with self._lock:
+            try:
+                config = self._config.with_parameters(changes)
+                if config.real_time_factor != self._rtf and 1.0 in (config.real_time_factor, self._rtf):
+                    raise ConfigError("real_time_factor", config.real_time_factor,
+                                      "cannot switch to or from 1 while running (the time base would change)")
+                core = {k: v for k, v in changes.items() if k not in NODE_ONLY_PARAMETERS}
+                if core:
+                    when = self._sim.set_parameters(core)
+                    self.get_logger().info(f"parameters {core} take effect at t = {float(when):.6f} s")
+            except (ConfigError, CommandError) as exc:
+                self.get_logger().warning(f"parameter change refused: {exc}")
+                return SetParametersResult(successful=False, reason=str(exc))
+            if "real_time_factor" in changes or "block_rate" in changes:
+                self._retime(config)
+            self._config = config
+        self._wake.set()
+        return SetParametersResult(successful=True)
+
+    def _retime(self, config: SimConfig) -> None:
+        """Apply a new pacing from the current block boundary on."""
+        t = self._sim.time
+        new_rate = Fraction(repr(config.block_rate))
+        # Blocks continue from the current time: the block counter is re-based on the new rate.
+        self._block_rate = new_rate
+        self._block = math.floor(t * new_rate)
+        self._rtf = config.real_time_factor
+        self._sim_ref = t
+        self._wall_ref = time.monotonic()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of the ``rimd_simulator`` executable (also ``rimd node simulator``)."""
+    rclpy.init(args=args)
+    node = None
+    executor = MultiThreadedExecutor(num_threads=2)
+    try:
+        try:
+            node = SimulatorNode()
+        except (ConfigError, rclpy.exceptions.ParameterException) as exc:
+            print(f"rimd_simulator: configuration refused: {exc}", file=sys.stderr)
+            return 2
+        executor.add_node(node)
+        node.start()
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        executor.shutdown()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
