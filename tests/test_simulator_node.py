@@ -15,12 +15,12 @@ import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 
 from harness.ros import call_service, spin_until
 from rimd_msgs.msg import ImpactEvent, MotorState, SampleBlock
 from rimd_msgs.srv import SetMotorFrequency
 from rimd_sim.core import RigModel, SimConfig
-from rosgraph_msgs.msg import Clock
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 

@@ -360,7 +360,8 @@ PARAMETERS: dict[str, ParameterSpec] = {
     "gap": _nonneg("gap between hammer at rest and force sensor (m)", lambda c: c.rig.gap, 0.05),
     "mass": _positive("hammer mass (kg)", lambda c: c.rig.mass, 1000.0),
     "amplitude": _nonneg("cart displacement amplitude A0 (m)", lambda c: c.rig.amplitude, 0.05),
-    "natural_frequency": _positive("pendulum natural frequency without impact (Hz)", lambda c: c.rig.natural_frequency, 1000.0),
+    "natural_frequency": _positive(
+        "pendulum natural frequency without impact (Hz)", lambda c: c.rig.natural_frequency, 1000.0),
     "damping_ratio": _nonneg("structural damping ratio zeta", lambda c: c.rig.damping_ratio, 2.0),
     "gravity": _positive("gravitational acceleration (m/s^2)", lambda c: c.rig.gravity, 100.0),
     "contact.model": ParameterSpec(
@@ -372,7 +373,8 @@ PARAMETERS: dict[str, ParameterSpec] = {
         choices=tuple(CONTACT_LAWS),
     ),
     "contact.stiffness": _positive("contact stiffness k (N/m^n)", lambda c: c.rig.contact.stiffness),
-    "contact.damping": _nonneg("contact damping c (N s/m, N s/m^(n+1) for Hunt-Crossley)", lambda c: c.rig.contact.damping),
+    "contact.damping": _nonneg(
+        "contact damping c (N s/m, N s/m^(n+1) for Hunt-Crossley)", lambda c: c.rig.contact.damping),
     "contact.exponent": ParameterSpec(
         "float", "must be >= 1 and <= 3", "exponent n of the Hertz-type laws", lambda v: 1.0 <= v <= 3.0,
         lambda c: c.rig.contact.exponent, 1.0, 3.0,
@@ -470,7 +472,8 @@ def _build(v: Mapping[str, Any]) -> SimConfig:
         if not ch.range_min < ch.range_max:
             raise ConfigError(p + "range_max", ch.range_max, f"must be > {p}range_min = {ch.range_min:g}")
         if ch.highpass > 0 and ch.highpass >= 0.45 * ch.sample_rate:
-            raise ConfigError(p + "highpass", ch.highpass, f"must be < 0.45 x sample_rate = {0.45 * ch.sample_rate:g} Hz")
+            raise ConfigError(p + "highpass", ch.highpass,
+                              f"must be < 0.45 x sample_rate = {0.45 * ch.sample_rate:g} Hz")
         if ch.highpass > 0 and 0 < ch.bandwidth <= ch.highpass:
             raise ConfigError(p + "bandwidth", ch.bandwidth, f"must be > {p}highpass = {ch.highpass:g} Hz")
         channels.append(ch)

@@ -131,8 +131,10 @@ _P = np.array([
 
 @_jit_inline
 def sincos(x):
-    """``(sin x, cos x)``; for ``|x| < 0.25`` (the pendulum's range) by Taylor polynomials of degree 11 and
-    12, accurate to about one ulp and several times faster than the library calls.
+    """``(sin x, cos x)``, fast for the pendulum's small angles.
+
+    For ``|x| < 0.25`` by Taylor polynomials of degree 11 and 12, accurate to about one ulp and several
+    times faster than the library calls.
     """
     if abs(x) < 0.25:
         x2 = x * x
@@ -532,8 +534,10 @@ def motor_finish_ramp(fs, ist, t):
 
 @_jit_inline
 def sample_quantity(qty, th, om, mode, p, fs, w, alpha, sp, cp):
-    """Noise-free value of a channel quantity from the state ``(theta, theta_dot)`` and the motor's
-    angular frequency ``w``, angular acceleration ``alpha`` and ``sin``/``cos`` of its phase.
+    """Noise-free value of a channel quantity.
+
+    From the state ``(theta, theta_dot)`` and the motor's angular frequency ``w``, angular acceleration
+    ``alpha`` and ``sin``/``cos`` of its phase.
     """
     a0 = p[P_A0]
     if qty == Q_CART:
@@ -782,8 +786,9 @@ def _force_and_delta(fs, p, ya, Q, h, x):
 
 @_jit
 def _refine_max(fs, p, ya, Q, h, which):
-    """Maximum of the force (``which`` 0) or penetration (1) inside the step: 9 samples, then a parabola
-    through the largest and its neighbours.
+    """Maximum of the force (``which`` 0) or penetration (1) inside the step.
+
+    Nine samples, then a parabola through the largest and its neighbours.
     """
     best = -np.inf
     best_i = 0
@@ -842,7 +847,8 @@ def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
     """Integrate until the current step reaches ``t_stop`` and every requested sample is emitted.
 
     Channel ``c`` gets samples ``ch_next[c] .. ch_stop[c] - 1`` (sample ``n`` at ``n / ch_rate[c]``),
-    sample ``n`` written to column ``n - ch_base[c]`` of ``ch_out[c]``; likewise the truth block. Completed impacts are written to
+    sample ``n`` written to column ``n - ch_base[c]`` of ``ch_out[c]``; likewise the truth block.
+    Completed impacts are written to
     ``imp_out`` and stroboscopic points to ``st_out`` (counts in ``ist[I_IMPOUT]``, ``ist[I_STROUT]``;
     the caller resets them). Returns a status code; on ``ST_IMPACTS_FULL`` / ``ST_STROBE_FULL`` the caller
     drains the buffers and calls again with the same stop.

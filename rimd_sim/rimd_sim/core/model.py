@@ -125,8 +125,10 @@ def samples_before(t: Fraction, rate: Fraction) -> int:
 
 
 def as_time(x: float | int | Fraction) -> Fraction:
-    """A time in seconds as an exact fraction; a float is read as the decimal it prints as (0.1 is 1/10,
-    not the binary 0.1000000000000000055...), so sample counts are what a user expects.
+    """A time in seconds as an exact fraction.
+
+    A float is read as the decimal it prints as (0.1 is 1/10, not the binary 0.1000000000000000055...), so
+    sample counts are what a user expects.
     """
     if isinstance(x, Fraction):
         return x
@@ -300,7 +302,8 @@ class RigModel:
         """
         t_stop = as_time(t_stop)
         if t_stop < self._time:
-            raise CommandError(f"cannot advance to t = {float(t_stop)} s: the model is already at {float(self._time)} s")
+            raise CommandError(
+                f"cannot advance to t = {float(t_stop)} s: the model is already at {float(self._time)} s")
         t_start = self._time
         stops = np.array([samples_before(t_stop, r) for r in self._rates], dtype=np.int64)
         first = self._ch_next.copy()
@@ -324,7 +327,8 @@ class RigModel:
                                self._ch_rate, self._ch_qty, self._ch_next, stops, first, ch_out,
                                float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
             impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
-            strobe.extend(StroboPoint(float(r[0]), float(r[1]), float(r[2]), int(r[3])) for r in st_out[: self._is[k.I_STROUT]])
+            strobe.extend(StroboPoint(float(r[0]), float(r[1]), float(r[2]), int(r[3]))
+                          for r in st_out[: self._is[k.I_STROUT]])
             if status == k.ST_OK:
                 break
             if status == k.ST_IMPACTS_FULL:

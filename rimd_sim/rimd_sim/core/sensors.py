@@ -26,8 +26,10 @@ __all__ = ["Instrument", "Reading"]
 
 @njit(cache=True, nogil=True)
 def _sos_filter(sos, x, zi):  # pragma: no cover - compiled
-    """In-place cascade of biquads (direct form II transposed), state ``zi`` carried between calls; the same
-    recursion as ``scipy.signal.sosfilt`` without its per-call overhead."""
+    """In-place cascade of biquads (direct form II transposed), state ``zi`` carried between calls.
+
+    The same recursion as ``scipy.signal.sosfilt`` without its per-call overhead.
+    """
     for s in range(sos.shape[0]):
         b0, b1, b2, a0, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 3], sos[s, 4], sos[s, 5]
         z0 = zi[s, 0]
@@ -89,8 +91,9 @@ class Instrument:
         return self._channel
 
     def reconfigure(self, channel: ChannelConfig, *, noise: bool) -> None:
-        """Change the instrument's parameters (the sample rate must stay the same); filter state restarts
-        only when the filter changes.
+        """Change the instrument's parameters; the sample rate must stay the same.
+
+        The filter state restarts only when the filter changes.
         """
         if channel.sample_rate != self._channel.sample_rate:
             raise ValueError("the sample rate of a running channel cannot change")

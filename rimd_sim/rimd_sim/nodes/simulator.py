@@ -35,11 +35,11 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rimd_msgs.msg import ImpactEvent, MotorState, RigState, SampleBlock
-from rimd_msgs.srv import Perturb, SetMotorFrequency
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
+from rimd_msgs.msg import ImpactEvent, MotorState, RigState, SampleBlock
+from rimd_msgs.srv import Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
 from rimd_sim.core.config import PARAMETERS
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
