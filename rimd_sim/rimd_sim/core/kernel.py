@@ -182,13 +182,18 @@ def motor_freq(fs, t):
     return fs[F_MW0] + fs[F_MALPHA] * (t - fs[F_MT0])
 
 
+@_jit_inline
+def motor_angles(fs, t):
+    """Motor phase (rad, from the segment base), angular frequency (rad/s) and angular acceleration."""
+    tau = t - fs[F_MT0]
+    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
+    return phi, TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau), TWO_PI * fs[F_MALPHA]
+
+
 @_jit
 def cart_kinematics(fs, p, t):
     """Cart position, velocity and acceleration ``x_c = A0 sin(phi)`` and its derivatives."""
-    tau = t - fs[F_MT0]
-    alpha = TWO_PI * fs[F_MALPHA]
-    w = TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau)
-    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
+    phi, w, alpha = motor_angles(fs, t)
     sp = math.sin(phi)
     cp = math.cos(phi)
     a0 = p[P_A0]
@@ -198,10 +203,7 @@ def cart_kinematics(fs, p, t):
 @_jit_inline
 def cart_accel(fs, p, t):
     """Cart acceleration only (the forcing of the embarked pendulum)."""
-    tau = t - fs[F_MT0]
-    alpha = TWO_PI * fs[F_MALPHA]
-    w = TWO_PI * (fs[F_MW0] + fs[F_MALPHA] * tau)
-    phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * fs[F_MALPHA] * tau * tau)
+    phi, w, alpha = motor_angles(fs, t)
     if alpha == 0.0:
         return -p[P_A0] * w * w * math.sin(phi)
     return p[P_A0] * (alpha * math.cos(phi) - w * w * math.sin(phi))
