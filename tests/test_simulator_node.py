@@ -123,3 +123,97 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     count = len(motor)
     assert spin_until(ros_executor, lambda: len(motor) > count + 3, timeout=10)
     assert rig.stop() == 0, rig.tail()
+
+
+def test_ten_seconds_at_real_time_exact_counts_and_stamps(ros_processes, ros_executor):
+    """At real_time_factor 1 over 10 s of wall time: each channel's sample count is within one block of
+    rate x time, first_index is contiguous, and every stamp is t0 + first_index / rate exactly with one
+    t0 (a whole millisecond of wall time) for all channels."""
+    import time
+
+    import rclpy
+
+    rig = ros_processes.start_node("rimd_simulator")
+    rig.wait_for_output(r"rig ready", timeout=30)
+    node = rclpy.create_node("probe_rt", context=ros_executor.context)
+    ros_executor.add_node(node)
+    qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+    heard: dict[str, list[tuple[float, SampleBlock]]] = {topic: [] for topic in RATES}
+    for topic in RATES:
+        node.create_subscription(SampleBlock, "/rig/" + topic,
+                                 lambda msg, t=topic: heard[t].append((time.monotonic(), msg)), qos)
+    assert spin_until(ros_executor, lambda: all(heard.values()), timeout=20)
+    warm = time.monotonic()
+    spin_until(ros_executor, lambda: time.monotonic() - warm >= 12.0, timeout=13.0)  # 2 s warm-up + 10 s
+    blocks = {}
+    for topic, received in heard.items():
+        window = [(t, b) for t, b in received if t >= warm + 2.0]
+        blocks[topic] = [b for _, b in window]
+        elapsed = window[-1][0] - window[0][0]
+        rate = RATES[topic]
+        # Samples published between the first and the last block heard: rate x elapsed, within one block.
+        count = blocks[topic][-1].first_index - blocks[topic][0].first_index
+        assert elapsed > 9.5
+        assert abs(count - rate * elapsed) <= rate / 100, (topic, count, rate * elapsed)
+    t0s = set()
+    for topic, received in blocks.items():
+        rate = RATES[topic]
+        for prev, blk in zip(received, received[1:], strict=False):
+            assert blk.first_index == prev.first_index + len(prev.samples), topic
+        for blk in received:
+            offset = blk.first_index * 1_000_000_000 // int(rate)
+            t0s.add(_ns(blk.header.stamp) - offset)
+    assert len(t0s) == 1 and next(iter(t0s)) % 1_000_000 == 0, t0s
+    assert rig.stop() == 0, rig.tail()
+
+
+def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
+    """Pause freezes the stream (no new blocks), resume continues it without a gap in first_index; a
+    perturbation makes the hammer's inertial velocity jump by the requested amount at the stated time;
+    reset puts the hammer back to rest. Each command is logged with its simulation time."""
+    from std_srvs.srv import Trigger
+
+    from rimd_msgs.msg import RigState
+    from rimd_msgs.srv import Perturb
+
+    rig, node = fast_rig
+    qos = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
+    force: list[SampleBlock] = []
+    truth: list[RigState] = []
+    node.create_subscription(SampleBlock, "/rig/impact/force", force.append, qos)
+    node.create_subscription(RigState, "/rig/truth", truth.append, qos)
+    trig = {name: node.create_client(Trigger, f"/rig/{name}") for name in ("pause", "resume", "reset")}
+    perturb = node.create_client(Perturb, "/rig/perturb")
+    assert spin_until(ros_executor, lambda: len(force) > 50, timeout=30)
+
+    assert call_service(ros_executor, node, trig["pause"], Trigger.Request(), timeout=10).success
+    spin_until(ros_executor, lambda: False, timeout=0.5)  # let in-flight blocks arrive
+    frozen = len(force)
+    spin_until(ros_executor, lambda: False, timeout=1.0)
+    assert len(force) == frozen, "blocks kept coming while paused"
+    again = call_service(ros_executor, node, trig["pause"], Trigger.Request(), timeout=10)
+    assert not again.success and "already paused" in again.message
+    assert call_service(ros_executor, node, trig["resume"], Trigger.Request(), timeout=10).success
+    assert spin_until(ros_executor, lambda: len(force) > frozen + 20, timeout=10)
+    for prev, blk in zip(force, force[1:], strict=False):
+        assert blk.first_index == prev.first_index + len(prev.samples)
+
+    response = call_service(ros_executor, node, perturb, Perturb.Request(velocity=0.2), timeout=10)
+    assert response.success, response.message
+    when = _ns(response.effective_stamp)
+    assert spin_until(ros_executor, lambda: _ns(truth[-1].header.stamp) > when + 50_000_000, timeout=10)
+    samples = [(_ns(t.header.stamp) + i * 1_000_000, v) for t in truth for i, v in enumerate(t.rimd_velocity)]
+    after = next(i for i, (ts, _) in enumerate(samples) if ts >= when)
+    assert samples[after][0] == when  # the kick lands exactly on a truth sample (block boundary)
+    assert samples[after][1] - samples[after - 1][1] == pytest.approx(0.2, abs=0.01)
+    assert f"perturb at t = {when / 1e9:.6f} s" in rig.output() or spin_until(
+        ros_executor, lambda: f"perturb at t = {when / 1e9:.6f} s" in rig.output(), timeout=5)
+
+    reset = call_service(ros_executor, node, trig["reset"], Trigger.Request(), timeout=10)
+    assert reset.success and "reset" in reset.message
+    t_reset = float(reset.message.split("t = ")[1].split(" s")[0])
+    target = round(t_reset * 1e9)
+    assert spin_until(ros_executor, lambda: _ns(truth[-1].header.stamp) > target, timeout=10)
+    at_reset = next(t for t in truth if _ns(t.header.stamp) == target)
+    assert at_reset.theta[0] == 0.0 and at_reset.theta_dot[0] == 0.0
+    assert rig.stop() == 0, rig.tail()
