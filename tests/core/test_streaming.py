@@ -251,3 +251,34 @@ def test_instrument_filter_equals_scipy_sosfilt_across_blocks():
     for part in parts:
         _sos_filter(sos, part, zi)
     np.testing.assert_allclose(np.concatenate(parts), expected, rtol=0, atol=1e-12)
+
+
+def test_advance_blocks_equals_block_by_block():
+    """One pass over many blocks (the node's fast mode) gives bit for bit the blocks of per-block calls:
+    samples, saturation counts, truth, impacts, Poincare points, motor state at each boundary (through a
+    ramp end) and the commands applied."""
+    def make() -> RigSimulator:
+        cfg = SimConfig().with_parameters({"seed": 3, "channels.rimd_displacement.range_max": 2e-3,
+                                           "channels.rimd_displacement.range_min": -2e-3})
+        sim = RigSimulator(cfg, strobe=True)
+        sim.set_motor_frequency(7.25, 4.0, at=Fraction(1, 2))
+        sim.perturb(0.05, at=Fraction(13, 10))
+        return sim
+
+    bounds = [Fraction(i, 100) for i in range(1, 301)]
+    a, b = make(), make()
+    one = [a.advance(t) for t in bounds]
+    many = b.advance_blocks(bounds[:7]) + b.advance_blocks(bounds[7:150]) + b.advance_blocks(bounds[150:])
+    assert len(one) == len(many) == 300
+    for x, y in zip(one, many, strict=True):
+        assert (x.t_start, x.t_stop) == (y.t_start, y.t_stop)
+        for name in x.channels:
+            cx, cy = x.channels[name], y.channels[name]
+            assert cx.first_index == cy.first_index and cx.saturated == cy.saturated, name
+            assert np.array_equal(cx.samples, cy.samples), name
+        assert x.truth[0] == y.truth[0] and np.array_equal(x.truth[1], y.truth[1])
+        assert x.impacts == y.impacts and x.strobe == y.strobe
+        assert x.motor == y.motor, (x.t_stop, x.motor, y.motor)
+        assert [(c.time, c.kind) for c in x.commands] == [(c.time, c.kind) for c in y.commands]
+    assert sum(x.channels["rimd_displacement"].saturated for x in one) > 0
+    assert sum(len(x.impacts) for x in one) > 5

@@ -215,6 +215,7 @@ class RigModel:
         self._truth_rate = Fraction(config.truth_rate)
         self._tr_next = np.zeros(1, dtype=np.int64)
         self._no_impacts = np.zeros((0, k.N_RECORD))
+        self._seg_prev: tuple[np.ndarray, int] | None = None
         self._init_state()
 
     # ---- state -----------------------------------------------------------------------------------
@@ -276,9 +277,19 @@ class RigModel:
         return float(self._yb[0]), float(self._yb[1])
 
     def motor_state(self, t: float | None = None) -> MotorState:
-        """Motor state at ``t`` (default: now). ``t`` must lie within the current motor segment."""
+        """Motor state at ``t`` (default: now).
+
+        ``t`` may lie anywhere in the span of the last :meth:`advance` call: the motor segment in force when
+        that call started is kept, and within one call the segment changes at most once without a command
+        (the end of a ramp).
+        """
         fs = self._fs
+        cycles = int(self._is[k.I_CYC])
         t = float(self._time) if t is None else t
+        if t < fs[k.F_MT0] and self._seg_prev is not None:
+            fs = fs.copy()
+            fs[k.F_MT0:k.F_MWSET + 1] = self._seg_prev[0]
+            cycles = self._seg_prev[1]
         phi = float(k.motor_phase(fs, t))
         turns = math.floor(phi)
         return MotorState(
@@ -287,7 +298,7 @@ class RigModel:
             frequency=float(k.motor_freq(fs, t)),
             ramp_rate=float(abs(fs[k.F_MALPHA])) if t < fs[k.F_MTEND] else 0.0,
             phase=2.0 * math.pi * (phi - turns),
-            cycle_index=int(self._is[k.I_CYC]) + turns,
+            cycle_index=cycles + turns,
             cart_position=self._config.rig.amplitude * math.sin(2.0 * math.pi * phi),
         )
 
@@ -305,6 +316,7 @@ class RigModel:
             raise CommandError(
                 f"cannot advance to t = {float(t_stop)} s: the model is already at {float(self._time)} s")
         t_start = self._time
+        self._seg_prev = (self._fs[k.F_MT0:k.F_MWSET + 1].copy(), int(self._is[k.I_CYC]))
         stops = np.array([samples_before(t_stop, r) for r in self._rates], dtype=np.int64)
         first = self._ch_next.copy()
         ch_out = np.empty((len(self._rates), int((stops - first).max()) if len(self._rates) else 0))

@@ -103,11 +103,21 @@ class Instrument:
         if filters_changed:
             self._design()
 
+    def measure_each(self, values: np.ndarray, ranges: list[tuple[int, int]]) -> list[tuple[tuple[int, int],
+                                                                                              np.ndarray, int]]:
+        """Measure a stretch once and cut it into blocks: ``[((lo, hi), readings, saturated), ...]``."""
+        x, clipped = self._measure(values)
+        return [((lo, hi), x[lo:hi], int(np.count_nonzero(clipped[lo:hi])) if clipped is not None else 0)
+                for lo, hi in ranges]
+
     def measure(self, values: np.ndarray) -> Reading:
         """Turn a block of noise-free values into readings."""
+        x, clipped = self._measure(values)
+        return Reading(x, int(np.count_nonzero(clipped)) if clipped is not None else 0)
+
+    def _measure(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         ch = self._channel
-        x = np.asarray(values, dtype=np.float64)
-        x = x.copy()
+        x = np.array(values, dtype=np.float64)
         if self._sos is not None and x.size:
             _sos_filter(self._sos, x, self._zi)
         if self._noise and ch.noise_std > 0.0 and x.size:
@@ -115,7 +125,8 @@ class Instrument:
         if ch.resolution > 0.0:
             np.round(x / ch.resolution, out=x)
             x *= ch.resolution
-        saturated = int(np.count_nonzero((x < ch.range_min) | (x > ch.range_max)))
-        if saturated:
-            np.clip(x, ch.range_min, ch.range_max, out=x)
-        return Reading(x, saturated)
+        clipped = (x < ch.range_min) | (x > ch.range_max)
+        if not clipped.any():
+            return x, None
+        np.clip(x, ch.range_min, ch.range_max, out=x)
+        return x, clipped

@@ -57,6 +57,10 @@ CHANNEL_TOPICS = {
     "impact_force": "impact/force",
 }
 
+#: RigState array fields, in the order of the core's truth rows (the 11th row, in_contact, is bool[]).
+TRUTH_ARRAY_FIELDS = ("theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity", "rimd_acceleration",
+                      "penetration", "contact_force", "motor_phase", "motor_frequency")
+
 _ROS_TYPES = {"float": 3, "int": 2, "bool": 1, "str": 4}  # rcl_interfaces ParameterType values
 
 
@@ -119,6 +123,15 @@ class SimulatorNode(Node):
 
         depth = max(10, math.ceil(self._config.block_rate) + 10)  # at least one second of blocks
         self._rates = {ch.name: Fraction(repr(ch.sample_rate)) for ch in self._config.channels}
+        self._truth_rate = Fraction(repr(self._config.truth_rate))
+        self._msgs = {ch.name: SampleBlock() for ch in self._config.channels}
+        self._refresh_static_fields()
+        self._truth_msg = RigState()
+        self._truth_msg.header.frame_id = "truth"
+        self._truth_msg.sample_rate = self._config.truth_rate
+        self._motor_msg = MotorState()
+        self._motor_msg.header.frame_id = "motor"
+        self._clock_msg = Clock()
         self._pubs = {}
         for ch in self._config.channels:
             qos = QoSProfile(
@@ -173,6 +186,19 @@ class SimulatorNode(Node):
                     self._wake.wait(0.1)
                     self._wake.clear()
                     continue
+                if self._rtf == 0:
+                    # As fast as possible: one core pass per 0.1 s of simulation time, published block by
+                    # block (advance_blocks gives the same data as block-by-block calls).
+                    count = max(1, round(float(self._block_rate) / 10))
+                    bounds = [Fraction(self._block + i + 1) / self._block_rate for i in range(count)]
+                    with self._lock:
+                        blocks = self._sim.advance_blocks(bounds)
+                    self._block += count
+                    for block in blocks:
+                        if not self.context.ok():
+                            return
+                        self._publish(block)
+                    continue
                 t_end = Fraction(self._block + 1) / self._block_rate
                 if self._rtf > 0:
                     due = self._wall_ref + float(t_end - self._sim_ref) / self._rtf
@@ -198,22 +224,32 @@ class SimulatorNode(Node):
             if self.context.ok():
                 raise
 
+    def _refresh_static_fields(self) -> None:
+        """Set the fields of the reused channel messages that only change with the configuration."""
+        for ch in self._config.channels:
+            msg = self._msgs[ch.name]
+            msg.header.frame_id = ch.frame_id
+            msg.sample_rate = ch.sample_rate
+            msg.unit = ch.unit
+            msg.range_min = ch.range_min
+            msg.range_max = ch.range_max
+
+    def _sample_stamp(self, n: int, rate: Fraction) -> Time:
+        """Stamp of sample ``n`` of a channel at ``rate``: ``t0 + n / rate`` in exact integer nanoseconds."""
+        num = n * 1_000_000_000 * rate.denominator
+        return to_time(self._t0_ns + (2 * num + rate.numerator) // (2 * rate.numerator))
+
     def _publish(self, block: SimBlock) -> None:
+        # Messages are reused (publish serialises at once); only the fields that change are set.
         t0 = self._t0_ns
         for name in CHANNEL_NAMES:
             ch = block.channels[name]
-            cfg = self._config.channel(name)
-            msg = SampleBlock()
-            msg.header.stamp = to_time(stamp_ns(t0, Fraction(ch.first_index) / self._rates[name]))
-            msg.header.frame_id = cfg.frame_id
+            msg = self._msgs[name]
+            msg.header.stamp = self._sample_stamp(ch.first_index, self._rates[name])
             msg.first_index = ch.first_index
-            msg.sample_rate = ch.sample_rate
             samples = array.array("d")
             samples.frombytes(ch.samples.tobytes())
             msg.samples = samples
-            msg.unit = cfg.unit
-            msg.range_min = cfg.range_min
-            msg.range_max = cfg.range_max
             msg.saturated_count = ch.saturated
             self._pubs[name].publish(msg)
         if block.truth is not None:
@@ -234,9 +270,9 @@ class SimulatorNode(Node):
             self._pub_events.publish(ev)
             self._impacts += 1
         m = block.motor
-        ms = MotorState()
-        ms.header.stamp = to_time(stamp_ns(t0, block.t_stop))
-        ms.header.frame_id = "motor"
+        ms = self._motor_msg
+        end = stamp_ns(t0, block.t_stop)
+        ms.header.stamp = to_time(end)
         ms.frequency_setpoint = m.frequency_setpoint
         ms.frequency = m.frequency
         ms.phase = m.phase
@@ -245,7 +281,8 @@ class SimulatorNode(Node):
         ms.cart_position = m.cart_position
         self._pub_motor.publish(ms)
         if self._rtf != 1.0:
-            self._pub_clock.publish(Clock(clock=to_time(stamp_ns(t0, block.t_stop))))
+            self._clock_msg.clock = to_time(end)
+            self._pub_clock.publish(self._clock_msg)
         for cmd in block.commands:
             line = f"{cmd.kind} at t = {float(cmd.time):.6f} s: {cmd.detail}"
             self._log_commands.append(line)
@@ -254,19 +291,14 @@ class SimulatorNode(Node):
 
     def _truth_message(self, block: SimBlock) -> RigState:
         first, rows = block.truth
-        rate = self._config.truth_rate
-        msg = RigState()
-        msg.header.stamp = to_time(stamp_ns(self._t0_ns, Fraction(first) / Fraction(repr(rate))))
-        msg.header.frame_id = "truth"
+        msg = self._truth_msg
+        msg.header.stamp = self._sample_stamp(first, self._truth_rate)
         msg.first_index = first
-        msg.sample_rate = rate
-        for i, field in enumerate(("theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity",
-                                   "rimd_acceleration", "penetration", "contact_force", "motor_phase",
-                                   "motor_frequency")):
+        for i, field in enumerate(TRUTH_ARRAY_FIELDS):
             a = array.array("d")
             a.frombytes(rows[i].tobytes())
             setattr(msg, field, a)
-        msg.in_contact = [bool(v) for v in rows[10]]
+        msg.in_contact = (rows[10] != 0.0).tolist()
         return msg
 
     def _publish_diagnostics(self) -> None:
@@ -404,6 +436,7 @@ class SimulatorNode(Node):
             if "real_time_factor" in changes or "block_rate" in changes:
                 self._retime(config)
             self._config = config
+            self._refresh_static_fields()
         self._wake.set()
         return SetParametersResult(successful=True)
 
