@@ -58,7 +58,8 @@ _RERUN = (6, "Rerun")
 _ANALYSIS = (7, "Analysis and experiments")
 
 VERBS: tuple[Verb, ...] = (
-    Verb("rig", "bring up the rig: simulator, recorder and Rerun bridge from config", None, *_BRING_UP),
+    Verb("rig", "bring up the rig from config (today the simulator; recorder and Rerun bridge: issues 5, 6)",
+         "rimd_sim.verbs.rig"),
     Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
          None, *_ANALYSIS),
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",

@@ -580,7 +580,7 @@ def find_config_file(name: str = "rimd.yaml") -> Path:
     candidates.append(Path(sys.prefix) / "share" / "rimd_sim" / "config" / name)
     for candidate in candidates:
         if candidate.is_file():
-            return candidate
+            return candidate.resolve()
     raise ConfigError("config file", name, "not found in " + ", ".join(str(c.parent) for c in candidates[:3]))
 
 

@@ -104,6 +104,8 @@ class SimulatorNode(Node):
         values = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._config = SimConfig.from_parameters(values)  # ConfigError: caught in main()
         self._lock = threading.Lock()
+        # Load the compiled kernels now (a throwaway pass), so the first published block is not late.
+        RigSimulator(self._config).advance_blocks([Fraction(1, 100)])
         self._sim = RigSimulator(self._config)
         self._block = 0  # blocks published
         self._rtf = self._config.real_time_factor
