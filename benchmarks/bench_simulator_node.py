@@ -64,7 +64,8 @@ def real_time(node: Node, seconds: float) -> None:
         print(f"real time, default rates: simulator CPU median {statistics.median(samples):.1f} % of one core "
               f"(target <= 15 %), lateness p50 {diag.get('lateness_p50_ms')} ms, "
               f"p99 {diag.get('lateness_p99_ms')} ms "
-              f"(target <= 5 ms), overruns {diag.get('overruns')}, achieved factor {diag.get('real_time_factor_achieved')}")
+              f"(target <= 5 ms), overruns {diag.get('overruns')}, "
+              f"achieved factor {diag.get('real_time_factor_achieved')}")
     finally:
         stop(proc)
 
