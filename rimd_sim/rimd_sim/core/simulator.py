@@ -191,42 +191,9 @@ class RigSimulator:
             IntegrationError: If the model cannot continue.
         """
         t_stop = as_time(t_stop)
-        t_start = self.time
-        if t_stop < t_start:
-            raise CommandError(f"cannot advance to {float(t_stop)} s: already at {float(t_start)} s")
-        parts = []
-        impacts: list[Impact] = []
-        applied: list[AppliedCommand] = []
-        while self._queue and self._queue[0][0] < t_stop:
-            when, _, kind, arg = heapq.heappop(self._queue)
-            parts.append(self._model.advance(when))
-            try:
-                done, detail = self._apply(kind, arg)
-            except (CommandError, ConfigError) as exc:  # validated when scheduled; state may have moved on
-                applied.append(AppliedCommand(when, kind, f"refused at application: {exc}"))
-                continue
-            impacts.extend(done)
-            applied.append(AppliedCommand(when, kind, detail))
-        parts.append(self._model.advance(t_stop))
-        channels = {}
-        for name in CHANNEL_NAMES:
-            first = parts[0].channels[name][0]
-            raw = np.concatenate([p.channels[name][1] for p in parts]) if len(parts) > 1 else parts[0].channels[name][1]
-            reading = self._instruments[name].measure(raw)
-            rate = self._config.channel(name).sample_rate
-            channels[name] = ChannelBlock(name, first, rate, reading.samples, reading.saturated)
-        truth = None
-        if parts[0].truth is not None:
-            truth = (parts[0].truth[0], np.concatenate([p.truth[1] for p in parts], axis=1)
-                     if len(parts) > 1 else parts[0].truth[1])
-        all_impacts = []
-        strobe = []
-        for p in parts:
-            all_impacts.extend(p.impacts)
-            strobe.extend(p.strobe)
-        all_impacts.extend(impacts)
-        all_impacts.sort(key=lambda i: i.index)
-        return SimBlock(t_start, t_stop, channels, truth, all_impacts, strobe, self._model.motor_state(), applied)
+        if t_stop < self.time:
+            raise CommandError(f"cannot advance to {float(t_stop)} s: already at {float(self.time)} s")
+        return self.advance_blocks([t_stop])[0]
 
     def advance_blocks(self, boundaries: Sequence[float | Fraction]) -> list[SimBlock]:
         """Simulate to the last of ``boundaries`` in one pass and return one block per interval.
