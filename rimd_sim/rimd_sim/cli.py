@@ -65,7 +65,7 @@ VERBS: tuple[Verb, ...] = (
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
          None, *_ANALYSIS),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
-         None, *_ANALYSIS),
+         "rimd_sim.verbs.sweep"),
     Verb("bifurcation", "bifurcation diagram of the impact force versus motor frequency", None, *_ANALYSIS),
     Verb("peterka", "Peterka diagram: impact regimes in the (frequency, gap) plane", None, *_ANALYSIS),
     Verb("poincare", "Poincare sections of the simulated or recorded motion", None, *_ANALYSIS),

@@ -1,0 +1,171 @@
+"""Stepped frequency sweeps of the model: steady peak impact force and impacts per cycle versus frequency.
+
+The paper's protocol (section 2.1, Table 1) steps the motor frequency on a 0.25 Hz grid and reads the
+steady impact force at each step. Three directions:
+
+* ``rest``: every frequency starts from rest (the hammer at rest, the motor at that frequency from
+  t = 0), as in Table 1. Points are independent, so they run in a process pool on all cores.
+* ``up`` / ``down``: one continuous run; at each step the motor ramps to the next frequency (at
+  ``ramp_rate``) and the motion continues from the previous state, so hysteresis and coexisting
+  attractors show (the paper's Fig. 12 right). Sequential by nature.
+
+At each point the model runs ``cycles`` excitation cycles (after the ramp) and the steady state is read
+over the last ``measure_cycles``: the largest peak force and the number of impacts per cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+import numpy as np
+
+from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.errors import ConfigError
+
+__all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
+
+Direction = Literal["up", "down", "rest"]
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """Steady state at one frequency.
+
+    Attributes:
+        frequency_hz: Motor frequency (Hz).
+        frequency_ratio: Omega / omega_n.
+        peak_force_n: Largest peak impact force over the measured cycles (N); 0 without impact.
+        force_ratio: ``peak_force_n / (m g)``.
+        impacts_per_cycle: Impacts per excitation cycle over the measured cycles.
+        simulated_seconds: Simulated time spent on this point (s).
+    """
+
+    frequency_hz: float
+    frequency_ratio: float
+    peak_force_n: float
+    force_ratio: float
+    impacts_per_cycle: float
+    simulated_seconds: float
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """A sweep and its bands (see :func:`band_peak`)."""
+
+    gap_mm: float
+    direction: str
+    points: tuple[SweepPoint, ...]
+    band_a: SweepPoint | None
+    band_b: SweepPoint | None
+    simulated_seconds: float
+    wall_seconds: float
+    workers: int
+
+    def summary(self) -> dict:
+        """The ``summary.json`` content (SPEC section 7)."""
+        def band(p: SweepPoint | None) -> dict | None:
+            return None if p is None else {"frequency_hz": p.frequency_hz, "peak_force_n": p.peak_force_n,
+                                           "force_ratio": p.force_ratio}
+        return {"gap_mm": self.gap_mm, "direction": self.direction, "band_a": band(self.band_a),
+                "band_b": band(self.band_b), "points": len(self.points),
+                "simulated_seconds": self.simulated_seconds, "wall_seconds": self.wall_seconds,
+                "workers": self.workers}
+
+
+def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, tolerance: float = 0.03) -> SweepPoint | None:
+    """Point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B)."""
+    sel = [p for p in points if abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
+    return max(sel, key=lambda p: p.peak_force_n, default=None)
+
+
+def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[float, float]:
+    t_from = t_end - measure_cycles / f
+    last = [i for i in impacts if i.t_start >= t_from]
+    return max((i.peak_force for i in last), default=0.0), len(last) / measure_cycles
+
+
+def _point(cfg: SimConfig, f: float, peak: float, rate: float, seconds: float) -> SweepPoint:
+    rig = cfg.rig
+    return SweepPoint(f, f / rig.natural_frequency, peak, peak / (rig.mass * rig.gravity), rate, seconds)
+
+
+def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
+    base, f, cycles, measure_cycles = args
+    cfg = base.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
+    duration = cycles / f
+    impacts = RigModel(cfg, channels=False, truth=False).advance(duration).impacts
+    return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration)
+
+
+def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: Direction = "rest", *,
+          cycles: int = 150, measure_cycles: int = 50, ramp_rate: float = 2.0, workers: int | None = None,
+          progress=None) -> SweepResult:
+    """Run a stepped sweep.
+
+    Args:
+        config: Rig configuration (gap, mass, contact, ...); its motor settings are replaced per point.
+        frequencies: Motor frequencies (Hz), in sweep order for ``up``/``down``.
+        direction: ``rest``, ``up`` or ``down``.
+        cycles: Excitation cycles simulated per point (after the ramp).
+        measure_cycles: Last cycles over which the steady state is read.
+        ramp_rate: Ramp between steps of an ``up``/``down`` sweep (Hz/s).
+        workers: Processes for ``rest`` sweeps (default: all cores).
+        progress: Optional callable ``progress(done, total)``.
+
+    Raises:
+        ConfigError: For a bad direction, frequency or cycle count.
+    """
+    freqs = [float(f) for f in frequencies]
+    if direction not in ("up", "down", "rest"):
+        raise ConfigError("direction", direction, "must be up, down or rest")
+    if not freqs or any(not (0 < f <= config.motor.max_frequency) for f in freqs):
+        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {config.motor.max_frequency} Hz")
+    if not 0 < measure_cycles <= cycles:
+        raise ConfigError("measure_cycles", measure_cycles, f"must be > 0 and <= cycles = {cycles}")
+    start = time.perf_counter()
+    points: list[SweepPoint] = []
+    n_workers = 1
+    if direction == "rest":
+        n_workers = max(1, min(workers or os.cpu_count() or 1, len(freqs)))
+        jobs = [(config, f, cycles, measure_cycles) for f in freqs]
+        if n_workers == 1:
+            for i, job in enumerate(jobs):
+                points.append(_from_rest(job))
+                if progress:
+                    progress(i + 1, len(jobs))
+        else:
+            with ProcessPoolExecutor(n_workers) as pool:
+                for i, p in enumerate(pool.map(_from_rest, jobs, chunksize=max(1, len(jobs) // (4 * n_workers)))):
+                    points.append(p)
+                    if progress:
+                        progress(i + 1, len(jobs))
+    else:
+        order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
+        cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
+        model = RigModel(cfg, channels=False, truth=False)
+        for i, f in enumerate(order):
+            t0 = model.time
+            if i:
+                model.set_motor_frequency(f, ramp_rate)
+            ramp = abs(f - order[i - 1]) / ramp_rate if i else 0.0
+            out = model.advance(t0 + ramp + cycles / f)
+            t_end = float(model.time)
+            points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0)))
+            if progress:
+                progress(i + 1, len(order))
+        points.sort(key=lambda p: p.frequency_hz)
+    pts = tuple(points)
+    return SweepResult(
+        gap_mm=config.rig.gap * 1e3, direction=direction, points=pts, band_a=band_peak(pts, 1.0),
+        band_b=band_peak(pts, 0.5), simulated_seconds=math.fsum(p.simulated_seconds for p in pts),
+        wall_seconds=time.perf_counter() - start, workers=n_workers)
+
+
+def points_table(result: SweepResult) -> list[dict]:
+    """Rows for a CSV file."""
+    return [asdict(p) for p in result.points]

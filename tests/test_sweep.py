@@ -1,0 +1,54 @@
+"""``rimd sweep`` and the sweep analysis (part of issue 7)."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+
+from rimd_sim import cli
+from rimd_sim.analysis.sweep import sweep
+from rimd_sim.core import SimConfig
+
+
+def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
+    out = tmp_path / "sw"
+    status = cli.main(["sweep", "--gap-mm", "0", "--f-min", "3.5", "--f-max", "4.0", "--f-step", "0.25",
+                       "--direction", "rest", "--out", str(out)])
+    assert status == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["gap_mm"] == 0.0
+    assert summary["band_a"]["frequency_hz"] == 3.75
+    assert abs(summary["band_a"]["peak_force_n"] - 79.2) < 0.5
+    assert summary["band_b"] is None
+    assert summary["simulated_seconds"] > 0 and summary["wall_seconds"] > 0
+    rows = list(csv.DictReader(open(out / "sweep.csv")))
+    assert [float(r["frequency_hz"]) for r in rows] == [3.5, 3.75, 4.0]
+    assert (out / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "band A 3.75 Hz" in capsys.readouterr().out
+
+
+def test_rimd_sweep_refuses_bad_ranges(tmp_path, capsys):
+    assert cli.main(["sweep", "--f-step", "0", "--out", str(tmp_path)]) == 2
+    assert "--f-step > 0" in capsys.readouterr().err
+    assert cli.main(["sweep", "--f-max", "50", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "parameter 'frequencies'" in err and "<= 12.0 Hz" in err  # the motor's configured maximum
+
+
+def test_coexisting_attractors_at_gap_2_4mm():
+    """Paper Fig. 12 (right), SPEC section 8: at gap 2.4 mm an upward sweep falls off band A onto the
+    non-impacting motion and stays there through band B's frequency, while a start from rest reaches band B
+    (5.25 Hz, one impact every two cycles)."""
+    cfg = SimConfig().with_parameters({"gap": 2.4e-3})
+    freqs = np.arange(2.0, 5.51, 0.25)
+    up = sweep(cfg, freqs, "up")
+    rest = sweep(cfg, freqs, "rest", workers=1)
+    up_at = {p.frequency_hz: p for p in up.points}
+    rest_at = {p.frequency_hz: p for p in rest.points}
+    assert up_at[2.5].impacts_per_cycle == 1.0
+    assert all(up_at[f].impacts_per_cycle == 0.0 for f in (3.0, 4.0, 5.0, 5.25))
+    assert up.band_b is None
+    assert rest.band_b is not None and rest.band_b.frequency_hz == 5.25
+    assert rest_at[5.25].impacts_per_cycle == 0.5
