@@ -21,7 +21,6 @@ and the structural damping ratio 0.08, chosen so that the model reproduces Table
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -582,8 +581,3 @@ def find_config_file(name: str = "rimd.yaml") -> Path:
         if candidate.is_file():
             return candidate.resolve()
     raise ConfigError("config file", name, "not found in " + ", ".join(str(c.parent) for c in candidates[:3]))
-
-
-def replace(config: SimConfig, **changes: Any) -> SimConfig:
-    """``dataclasses.replace`` re-exported for symmetry with :meth:`SimConfig.with_parameters`."""
-    return dataclasses.replace(config, **changes)

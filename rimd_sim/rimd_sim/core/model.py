@@ -214,7 +214,6 @@ class RigModel:
         self._ch_next = np.zeros(len(self._rates), dtype=np.int64)
         self._truth_rate = Fraction(config.truth_rate)
         self._tr_next = np.zeros(1, dtype=np.int64)
-        self._no_impacts = np.zeros((0, k.N_RECORD))
         self._seg_prev: tuple[np.ndarray, int] | None = None
         self._init_state()
 
@@ -267,14 +266,6 @@ class RigModel:
             "switches": int(self._is[k.I_NEV]),
             "impacts": int(self._is[k.I_NIMP]),
         }
-
-    def state(self) -> tuple[float, float]:
-        """``(theta, theta_dot)`` at the current time (the current step's end)."""
-        if float(self._time) != self._fs[k.F_TB]:
-            th, om = k.dense_theta(self._ya, self._Q, self._fs[k.F_TB] - self._fs[k.F_TA],
-                                   (float(self._time) - self._fs[k.F_TA]) / (self._fs[k.F_TB] - self._fs[k.F_TA]))
-            return float(th), float(om)
-        return float(self._yb[0]), float(self._yb[1])
 
     def motor_state(self, t: float | None = None) -> MotorState:
         """Motor state at ``t`` (default: now).

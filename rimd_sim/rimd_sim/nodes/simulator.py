@@ -120,7 +120,6 @@ class SimulatorNode(Node):
         self._overruns = 0
         self._published = 0
         self._impacts = 0
-        self._log_commands: deque[str] = deque(maxlen=20)
         self._last_error = ""
 
         depth = max(10, math.ceil(self._config.block_rate) + 10)  # at least one second of blocks
@@ -287,7 +286,6 @@ class SimulatorNode(Node):
             self._pub_clock.publish(self._clock_msg)
         for cmd in block.commands:
             line = f"{cmd.kind} at t = {float(cmd.time):.6f} s: {cmd.detail}"
-            self._log_commands.append(line)
             self.get_logger().info(line)
         self._published += 1
 
@@ -341,9 +339,6 @@ class SimulatorNode(Node):
         self._pub_diag.publish(arr)
 
     # ---- services ----------------------------------------------------------------------------------
-
-    def _effective(self) -> Time:
-        return to_time(stamp_ns(self._t0_ns, self._sim.time))
 
     def _on_set_motor_frequency(self, request, response):
         with self._lock:
