@@ -8,6 +8,8 @@ import importlib
 #: Node name -> module with ``main(args)``. The recorder, replay and Rerun bridge join with their issues.
 NODES = {
     "simulator": "rimd_sim.nodes.simulator",
+    "recorder": "rimd_sim.nodes.recorder",
+    "replay": "rimd_sim.nodes.replay",
 }
 
 
