@@ -9,89 +9,15 @@ bytes the test subscriber received.
 from __future__ import annotations
 
 import signal
-import time
-from pathlib import Path
 
 import pytest
 
 from harness.bags import read_with_mcap_ros2, read_with_rosbags
-from harness.ros import call_service, spin_until
+from harness.rig import BLOCK_TOPICS, RIG_TOPICS, record_rig, run_for, start_rig, trigger
 from rimd_sim.recording.cdr import block_span
 from rimd_sim.recording.reader import open_recording
 
 pytestmark = pytest.mark.ros
-
-RIG_TOPICS = {
-    "/rig/cart/displacement": "SampleBlock",
-    "/rig/rimd/displacement": "SampleBlock",
-    "/rig/rimd/acceleration": "SampleBlock",
-    "/rig/impact/force": "SampleBlock",
-    "/rig/truth": "RigState",
-    "/rig/motor/state": "MotorState",
-    "/rig/impact/events": "ImpactEvent",
-}
-BLOCK_TOPICS = [t for t, kind in RIG_TOPICS.items() if kind in ("SampleBlock", "RigState")]
-
-
-class RawCollector:
-    """A node in the test process holding the serialized bytes of every message of the rig topics."""
-
-    def __init__(self, executor, topics=RIG_TOPICS, remap=None):  # noqa: ANN001
-        from rclpy.node import Node
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-        import rimd_msgs.msg
-
-        self.node = Node("test_collector", context=executor.context)
-        executor.add_node(self.node)
-        self.messages: dict[str, list[bytes]] = {t: [] for t in topics}
-        self.times: dict[str, list[float]] = {t: [] for t in topics}
-        qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
-        for topic, kind in topics.items():
-            def callback(data, topic=topic):  # noqa: ANN001
-                self.messages[topic].append(data)
-                self.times[topic].append(time.monotonic())
-            name = (remap or {}).get(topic, topic)
-            self.node.create_subscription(getattr(rimd_msgs.msg, kind), name, callback, qos, raw=True)
-
-
-def _start_rig(ros_processes, out: Path, *recorder_args: str, paused: bool = True):  # noqa: ANN001
-    recorder = ros_processes.start_node("rimd_recorder", "--ros-args", "-p", f"output_dir:={out}",
-                                        "-p", "flush_interval:=0.5", *recorder_args)
-    recorder.wait_for_output(r"recording .* into", timeout=30)
-    simulator = ros_processes.start_node(
-        "rimd_simulator", "--ros-args", "-p", "motor.initial_setpoint:=3.75", "-p", f"start_paused:={paused}")
-    simulator.wait_for_output(r"rig ready", timeout=60)
-    recorder.wait_for_output(r"recording /rig/truth", timeout=30)
-    recorder.wait_for_output(r"recording /rig/impact/events", timeout=30)
-    return recorder, simulator
-
-
-def _trigger(executor, node, service: str, timeout: float = 10.0):  # noqa: ANN001
-    from std_srvs.srv import Trigger
-
-    client = node.create_client(Trigger, service)
-    return call_service(executor, node, client, Trigger.Request(), timeout)
-
-
-def _run_for(executor, seconds: float) -> None:  # noqa: ANN001
-    deadline = time.monotonic() + seconds
-    spin_until(executor, lambda: time.monotonic() >= deadline, seconds + 1)
-
-
-def _record(ros_processes, ros_executor, out: Path, seconds: float, *recorder_args: str):  # noqa: ANN001
-    """Run the rig for ``seconds`` with recorder and collector; pause the rig; return both processes."""
-    recorder, simulator = _start_rig(ros_processes, out, *recorder_args)
-    collector = RawCollector(ros_executor)
-    for topic in RIG_TOPICS:  # the collector is matched with every publisher before the rig starts
-        spin_until(ros_executor, lambda t=topic: collector.node.count_publishers(t) > 0, 10)
-    _run_for(ros_executor, 0.5)
-    assert _trigger(ros_executor, collector.node, "/rig/resume").success
-    _run_for(ros_executor, seconds)
-    assert _trigger(ros_executor, collector.node, "/rig/pause").success
-    _run_for(ros_executor, 1.0)  # everything published reaches both sides
-    return recorder, simulator, collector
-
 
 def _check_contiguous_from_zero(blocks: list[bytes]) -> int:
     expected = 0
@@ -104,7 +30,7 @@ def _check_contiguous_from_zero(blocks: list[bytes]) -> int:
 
 def test_records_10_s_of_the_rig_completely(ros_processes, ros_executor, tmp_path):
     out = tmp_path / "rec"
-    recorder, _, collector = _record(ros_processes, ros_executor, out, 10.0)
+    recorder, _, collector = record_rig(ros_processes, ros_executor, out, 10.0)
     recorder.send_signal(signal.SIGINT)
     assert recorder.wait(30) == 0
     assert "no loss" in recorder.output() and "LOSS" not in recorder.output()
@@ -157,7 +83,7 @@ def test_records_10_s_of_the_rig_completely(ros_processes, ros_executor, tmp_pat
 def test_stopped_by_a_signal(ros_processes, ros_executor, tmp_path, how):
     out = tmp_path / "rec"
     chunk = 64 * 1024
-    recorder, _, collector = _record(ros_processes, ros_executor, out, 3.0,
+    recorder, _, collector = record_rig(ros_processes, ros_executor, out, 3.0,
                                      "-p", f"chunk_size:={chunk}", "-p", "flush_interval:=100.0")
     recorder.send_signal(getattr(signal, how))
     recorder.wait(30)
@@ -184,7 +110,7 @@ def test_stopped_by_a_signal(ros_processes, ros_executor, tmp_path, how):
 
 def test_split_by_duration_is_seamless(ros_processes, ros_executor, tmp_path):
     out = tmp_path / "rec"
-    recorder, _, collector = _record(ros_processes, ros_executor, out, 5.0, "-p", "max_duration:=1.5")
+    recorder, _, collector = record_rig(ros_processes, ros_executor, out, 5.0, "-p", "max_duration:=1.5")
     recorder.send_signal(signal.SIGINT)
     assert recorder.wait(30) == 0
     recording = open_recording(out)
@@ -212,27 +138,27 @@ def test_services_and_refusals(ros_processes, ros_executor, tmp_path):
     assert "Traceback" not in bad.output()
 
     out = tmp_path / "rec"
-    recorder, _ = _start_rig(ros_processes, out, "-p", "start_paused:=true", paused=False)
+    recorder, _ = start_rig(ros_processes, out, "-p", "start_paused:=true", paused=False)
     from rclpy.node import Node
 
     node = Node("test_client", context=ros_executor.context)
     ros_executor.add_node(node)
-    _run_for(ros_executor, 1.0)
+    run_for(ros_executor, 1.0)
     assert not list(out.glob("*.mcap"))                       # paused: nothing recorded
-    assert _trigger(ros_executor, node, "/rimd_recorder/resume").success
-    _run_for(ros_executor, 1.0)
-    response = _trigger(ros_executor, node, "/rimd_recorder/split")
+    assert trigger(ros_executor, node, "/rimd_recorder/resume").success
+    run_for(ros_executor, 1.0)
+    response = trigger(ros_executor, node, "/rimd_recorder/split")
     assert response.success and "finished" in response.message
-    _run_for(ros_executor, 1.0)
-    response = _trigger(ros_executor, node, "/rimd_recorder/stop")
+    run_for(ros_executor, 1.0)
+    response = trigger(ros_executor, node, "/rimd_recorder/stop")
     assert response.success
-    assert not _trigger(ros_executor, node, "/rimd_recorder/stop").success    # already stopped
+    assert not trigger(ros_executor, node, "/rimd_recorder/stop").success    # already stopped
     files = sorted(out.glob("*.mcap"))
     assert len(files) == 2
-    _run_for(ros_executor, 0.5)
+    run_for(ros_executor, 0.5)
     assert len(list(out.glob("*.mcap"))) == 2                 # stopped: no new file
-    assert _trigger(ros_executor, node, "/rimd_recorder/start").success
-    _run_for(ros_executor, 1.0)
+    assert trigger(ros_executor, node, "/rimd_recorder/start").success
+    run_for(ros_executor, 1.0)
     recorder.send_signal(signal.SIGINT)
     assert recorder.wait(30) == 0
     recording = open_recording(out)

@@ -27,6 +27,7 @@ from typing import Any
 import rclpy
 import yaml
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -125,7 +126,7 @@ class ReplayNode(Node):
         selected = {name: topic for name, topic in self._recording.topics.items()
                     if any(x.fullmatch(name) for x in patterns) and not (p["clock"] and name == "/clock")}
         unknown = {}
-        self._publishers: dict[str, Any] = {}
+        self._pubs: dict[str, Any] = {}
         for name, topic in sorted(selected.items()):
             try:
                 msg_type = _message_class(topic.type_name)
@@ -133,14 +134,14 @@ class ReplayNode(Node):
                 unknown[name] = topic.type_name or "(no schema)"
                 continue
             qos = _qos(topic.offered_qos_profiles)
-            self._publishers[name] = self.create_publisher(msg_type, remap.get(name, name), qos)
+            self._pubs[name] = self.create_publisher(msg_type, remap.get(name, name), qos)
         if unknown:
             listing = ", ".join(f"{t} ({name})" for name, t in unknown.items())
             if not p["skip_unknown"]:
                 raise ReplayError(f"the recording has message types not installed here: {listing}; install their "
                                   "packages, leave the topics out with -p topics:=..., or set skip_unknown:=true")
             log.warning(f"not replaying topics of unknown types: {listing}")
-        if not self._publishers:
+        if not self._pubs:
             raise ReplayError(f"nothing to replay: no topic of {p['file']} matches {p['topics']}")
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p["clock"] else None
         self._paused = threading.Event()
@@ -152,7 +153,7 @@ class ReplayNode(Node):
         self.create_service(Trigger, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/resume", self._on_resume)
         self._thread = threading.Thread(target=self._run, name="rimd_replay", daemon=True)
-        log.info(f"replaying {len(self._publishers)} topics of {p['file']} ({self._recording.message_count} "
+        log.info(f"replaying {len(self._pubs)} topics of {p['file']} ({self._recording.message_count} "
                  f"messages) at {p['rate']:g}x" + (", looping" if p["loop"] else ""))
 
     def start(self) -> None:
@@ -166,11 +167,16 @@ class ReplayNode(Node):
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
 
+    def wait_for_acknowledgements(self, timeout: float = 2.0) -> None:
+        """Give reliable subscribers the time to acknowledge the last messages before the node goes away."""
+        for pub in self._pubs.values():
+            pub.wait_for_all_acked(Duration(seconds=timeout))
+
     def _wait_for_subscribers(self) -> None:
         wanted = self._p["wait_for_subscribers"]
         deadline = time.monotonic() + 10.0
         while wanted > 0 and time.monotonic() < deadline and not self._stop.is_set():
-            if all(pub.get_subscription_count() >= wanted for pub in self._publishers.values()):
+            if all(pub.get_subscription_count() >= wanted for pub in self._pubs.values()):
                 return
             time.sleep(0.02)
 
@@ -192,7 +198,7 @@ class ReplayNode(Node):
                 first_ns = None
                 start = time.monotonic()
                 last_clock = None
-                for msg in self._recording.messages(self._publishers):
+                for msg in self._recording.messages(self._pubs):
                     if first_ns is None:
                         first_ns = msg.log_time
                     if msg.log_time - first_ns < offset_ns:
@@ -211,7 +217,7 @@ class ReplayNode(Node):
                         clock.clock.sec, clock.clock.nanosec = divmod(msg.log_time, 1_000_000_000)
                         self._clock_pub.publish(clock)
                         last_clock = msg.log_time
-                    self._publishers[msg.topic].publish(msg.data)
+                    self._pubs[msg.topic].publish(msg.data)
                     self.published += 1
                 if not self._p["loop"]:
                     break
@@ -248,6 +254,7 @@ def main(args: list[str] | None = None) -> int:
         node.start()
         while rclpy.ok() and not node.finished.is_set():
             executor.spin_once(timeout_sec=0.1)
+        node.wait_for_acknowledgements()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
