@@ -58,7 +58,7 @@ _RERUN = (6, "Rerun")
 _ANALYSIS = (7, "Analysis and experiments")
 
 VERBS: tuple[Verb, ...] = (
-    Verb("rig", "bring up the rig from config (today the simulator; recorder and Rerun bridge: issues 5, 6)",
+    Verb("rig", "bring up the rig from config: recorder and simulator (Rerun bridge: issue 6)",
          "rimd_sim.verbs.rig"),
     Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
          None, *_ANALYSIS),
