@@ -128,7 +128,11 @@ class SimulatorNode(Node):
         self._impacts = 0
         self._last_error = ""
 
-        depth = max(10, math.ceil(self._config.block_rate) + 10)  # at least one second of blocks
+        # History of each publisher: one second of blocks at real time. Faster than real time, 20 s of simulation
+        # time (at 20x that is still one second of wall time for a reliable subscriber, such as the recorder,
+        # to fall behind without losing a block; memory: about 3 MB per 20 kHz channel).
+        seconds = 1 if self._rtf == 1.0 else 20
+        depth = max(10, math.ceil(self._config.block_rate * seconds) + 10)
         self._rates = {ch.name: Fraction(repr(ch.sample_rate)) for ch in self._config.channels}
         self._truth_rate = Fraction(repr(self._config.truth_rate))
         self._msgs = {ch.name: SampleBlock() for ch in self._config.channels}
