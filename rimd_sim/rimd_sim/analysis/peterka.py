@@ -129,8 +129,8 @@ def _check_cycles(transient: int, measure: int) -> None:
         raise ConfigError("cycles", (transient, measure), "need transient_cycles >= 0 and measure_cycles >= 6")
 
 
-def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int = 80, measure_cycles: int = 36,
-            continued_transient_cycles: int = 40, workers: int | None = None, progress=None) -> PeterkaResult:
+def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int = 60, measure_cycles: int = 36,
+            continued_transient_cycles: int = 30, workers: int | None = None, progress=None) -> PeterkaResult:
     """Classify every (gap, frequency) cell from three starts (module docstring).
 
     Args:

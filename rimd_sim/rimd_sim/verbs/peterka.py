@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--f-min", type=float, default=1.82, help="lowest frequency (Hz), default 1.82")
     parser.add_argument("--f-max", type=float, default=9.1, help="highest frequency (Hz), default 9.1")
     parser.add_argument("--freqs", type=int, default=61, help="frequency values, default 61")
-    parser.add_argument("--transient-cycles", type=int, default=80, help="cycles dropped first, default 80")
+    parser.add_argument("--transient-cycles", type=int, default=60, help="cycles dropped first, default 60")
     parser.add_argument("--measure-cycles", type=int, default=36, help="cycles classified, default 36")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
