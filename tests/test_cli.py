@@ -17,10 +17,6 @@ NOT_IMPLEMENTED = {
     "rerun": (6, "Rerun"),
     "analyze": (7, "Analysis and experiments"),
     "experiment": (7, "Analysis and experiments"),
-    "bifurcation": (7, "Analysis and experiments"),
-    "peterka": (7, "Analysis and experiments"),
-    "poincare": (7, "Analysis and experiments"),
-    "basins": (7, "Analysis and experiments"),
 }
 
 
