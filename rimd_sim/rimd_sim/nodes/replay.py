@@ -177,6 +177,9 @@ class ReplayNode(Node):
         deadline = time.monotonic() + 10.0
         while wanted > 0 and time.monotonic() < deadline and not self._stop.is_set():
             if all(pub.get_subscription_count() >= wanted for pub in self._pubs.values()):
+                # The publisher side has matched; give the subscribers' side the moment it needs to match
+                # too, or a reliable volatile subscriber can still miss the first messages.
+                time.sleep(0.3)
                 return
             time.sleep(0.02)
 
@@ -194,13 +197,13 @@ class ReplayNode(Node):
             self._wait_for_subscribers()
             rate, offset_ns = self._p["rate"], round(self._p["start_offset"] * 1e9)
             clock_period_ns = 1e9 / self._p["clock_frequency"]
+            # Times count from the recording's first message (all topics), as rosbag2 play does.
+            first = next(iter(self._recording.messages()), None)
+            first_ns = first.log_time if first is not None else 0
             while not self._stop.is_set():
-                first_ns = None
                 start = time.monotonic()
                 last_clock = None
                 for msg in self._recording.messages(self._pubs):
-                    if first_ns is None:
-                        first_ns = msg.log_time
                     if msg.log_time - first_ns < offset_ns:
                         continue
                     if self._paused.is_set():
