@@ -15,8 +15,6 @@ SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka",
               "rerun", "node", "info")
 NOT_IMPLEMENTED = {
     "rerun": (6, "Rerun"),
-    "analyze": (7, "Analysis and experiments"),
-    "experiment": (7, "Analysis and experiments"),
 }
 
 
@@ -59,10 +57,10 @@ def test_not_implemented_verb_says_so_and_exits_2(name, capsys):
 
 
 def test_not_implemented_through_the_console_script():
-    result = _rimd("analyze", "REC.mcap")
+    result = _rimd("rerun", "REC.mcap")
     assert result.returncode == 2
     assert result.stdout == ""
-    assert result.stderr.strip() == "rimd analyze: not implemented yet (issue 7: Analysis and experiments)"
+    assert result.stderr.strip() == "rimd rerun: not implemented yet (issue 6: Rerun)"
 
 
 def test_no_subcommand_is_a_usage_error(capsys):

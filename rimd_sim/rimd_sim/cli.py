@@ -55,15 +55,14 @@ class Verb:
 _BRING_UP = (5, "Recorder, replay and bring-up")
 _SIMULATOR = (4, "Simulator node")
 _RERUN = (6, "Rerun")
-_ANALYSIS = (7, "Analysis and experiments")
 
 VERBS: tuple[Verb, ...] = (
     Verb("rig", "bring up the rig from config: recorder and simulator (Rerun bridge: issue 6)",
          "rimd_sim.verbs.rig"),
     Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
-         None, *_ANALYSIS),
+         "rimd_sim.verbs.experiment"),
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
-         None, *_ANALYSIS),
+         "rimd_sim.verbs.analyze"),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
          "rimd_sim.verbs.sweep"),
     Verb("bifurcation", "bifurcation diagram: stroboscopic l sin(theta)/A0 versus frequency ratio, up and down",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib
@@ -177,5 +178,80 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
         ax.set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+# ---- recorded analyses (rimd analyze) ---------------------------------------------------------------------
+
+def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
+    """Steady peak force per dwell step versus motor frequency, from the events and from the force channel."""
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    for label, marker in (("events", "o"), ("channel", "x")):
+        pts = [(r["frequency_hz"], r[f"peak_force_{label}_n"], r[f"impacts_per_cycle_{label}"]) for r in rows
+               if r[f"peak_force_{label}_n"] is not None]
+        if pts:
+            f, peak, rate = zip(*pts, strict=True)
+            ax.plot(f, peak, marker, ms=6, label=f"from /rig/impact/{'events' if label == 'events' else 'force'}")
+            ax2.plot(f, rate, marker, ms=6)
+    ax.set_ylabel("steady peak force F_i (N)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    ax2.set_ylabel("impacts / cycle")
+    ax2.set_xlabel("motor frequency setpoint (Hz)")
+    ax2.grid(alpha=0.3)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "") -> Path:
+    """Peak force of every impact over time (events and force-channel detections), steps shaded."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for s in steps:
+        if s.steady_from is not None:
+            ax.axvspan(s.steady_from, s.end, color="#dddddd", alpha=0.5, lw=0)
+            ax.text(s.steady_from, 0, f"{s.setpoint:g} Hz", fontsize=7, va="bottom")
+    ax.plot(events_t, events_peak, "o", ms=4, mfc="none", label="/rig/impact/events peak_force")
+    ax.plot(det_t, det_peak, "x", ms=4, label="detected in /rig/impact/force")
+    ax.set_xlabel("time (s, simulation)")
+    ax.set_ylabel("peak force (N)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") -> Path:
+    """One panel per step: phase plane (relative displacement vs velocity, mm and mm/s) and Poincare points.
+
+    Each panel dict: ``label``, ``x``, ``v`` (curve, m and m/s), ``px``, ``pv`` (Poincare points).
+    """
+    n = max(1, len(panels))
+    cols = min(4, n)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3.6 * rows), squeeze=False)
+    for ax, panel in zip(axes.flat, panels, strict=False):
+        ax.plot(np.asarray(panel["x"]) * 1e3, np.asarray(panel["v"]) * 1e3, "b-", lw=0.5)
+        ax.plot(np.asarray(panel["px"]) * 1e3, np.asarray(panel["pv"]) * 1e3, "ro", ms=4, label="motor phase 0")
+        ax.set_title(panel["label"], fontsize=9)
+        ax.set_xlabel("x_rimd - x_cart (mm)", fontsize=8)
+        ax.set_ylabel("velocity (mm/s)", fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.axis("off")
+    if panels:
+        axes.flat[0].legend(fontsize=7, loc="upper left")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
