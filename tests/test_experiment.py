@@ -64,19 +64,19 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     report = []
     for row, point in zip(rows, ref.points, strict=True):
         events, channel = float(row["peak_force_events_n"]), float(row["peak_force_channel_n"])
-        report.append((point.frequency_hz, point.peak_force_n, events, channel))
+        raw = float(row["peak_force_channel_largest_sample_n"])
+        report.append((point.frequency_hz, point.peak_force_n, events, channel, raw))
         assert float(row["steady_seconds"]) >= dwell - settle - 1.0
         assert abs(float(row["impacts_per_cycle_events"]) - point.impacts_per_cycle) < 0.1
-    print("f, sweep up, events, channel:", report)
-    for f, expected, events, channel in report:
+    print("f, sweep up, events, channel (fit), channel (largest sample):", report)
+    for f, expected, events, channel, raw in report:
         assert abs(events / expected - 1) <= 0.02, (f, expected, events)
-        # The target for the force channel alone is 5 %; it is NOT met (README, "rimd analyze"): the
-        # spring-dashpot force is largest at contact start (it jumps to c v0) and falls by up to 18 % within one
-        # 50 us sample, so the largest sample of a 0.37 ms contact is low by 0-18 %, and at 4 Hz (5000 samples
-        # per impact period) every impact of a step is sampled at the same phase, so the step maximum does not
-        # average it out (measured: 2-9 % low in one run, 18 % low at 4 Hz in another). Asserted here is what
-        # sampling allows: never above the true peak (plus noise), at most one sample's fall (20 %) below.
-        assert expected * 0.80 <= channel <= expected + 0.1, (f, expected, channel)
+        # Force channel alone, within 5 % (the target): the spring-dashpot force is largest at contact
+        # start (it jumps to c v0) and falls by up to 18 % within one 50 us sample, so the largest sample of a
+        # 0.37 ms contact is 0-18 % low (at 4 Hz every impact of a step is sampled at the same phase); the
+        # analysis fits the law's pulse to each impact's samples and reads its peak at the onset.
+        assert abs(channel / expected - 1) <= 0.05, (f, expected, channel)
+        assert expected * 0.80 <= raw <= expected + 0.1, (f, expected, raw)   # the raw reading: what sampling allows
     # The cross-check of the detection against the recorded events.
     impacts = summary["impacts"]
     assert impacts["events"] > 4 * 10 and impacts["matches"] >= impacts["events"] - impacts["not_covered"] - 1
@@ -120,7 +120,12 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     assert 0 < cut_summary["impacts"]["events"] < impacts["events"]
     cut_rows = {float(r["frequency_hz"]): r for r in _steps(tmp_path / "cut_out")}
     assert len(cut_rows) < len(freqs) + 1   # the later steps are lost with the tail
-    assert cut_rows[3.0]["peak_force_events_n"] == rows[0]["peak_force_events_n"]   # the valid part: same result
+    cut3, full3 = cut_rows[3.0], rows[0]
+    if cut3["end_s"] == full3["end_s"]:   # the step is whole in the valid part: the same result
+        assert cut3["peak_force_events_n"] == full3["peak_force_events_n"]
+    else:                                 # the cut fell inside the step: a shorter window, never a larger peak
+        assert float(cut3["end_s"]) < float(full3["end_s"])
+        assert float(cut3["peak_force_events_n"]) <= float(full3["peak_force_events_n"])
 
 
 def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, ros_executor, tmp_path):

@@ -25,6 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "setpoint (default 2.0)")
     parser.add_argument("--threshold", type=float, default=2.0,
                         help="force threshold (N) above which a run of force samples is one impact (default 2.0)")
+    parser.add_argument("--peak", choices=("onset-fit", "sample"), default="onset-fit",
+                        help="peak of each sampled impact: 'onset-fit' fits the spring-dashpot contact pulse "
+                             "(when the recording's rig parameters give that law) and reads its peak; 'sample' "
+                             "takes the largest sample (the paper's raw reading). Default onset-fit")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -37,7 +41,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.recording.reader import RecordingError
 
     try:
-        summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold, log=_log)
+        summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold,
+                          peak=args.peak, log=_log)
     except RecordingError as exc:
         raise CommandError(str(exc)) from None
     for line in format_steps(summary["steps"]):
@@ -70,7 +75,8 @@ def format_steps(rows: list[dict]) -> list[str]:
     return lines
 
 
-def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float = 2.0, log=None) -> dict:  # noqa: ANN001
+def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float = 2.0,  # noqa: ANN001
+            peak: str = "onset-fit", log=None) -> dict:
     """Analyse ``recording`` into ``out``; return the summary (also written as ``summary.json``).
 
     Raises:
@@ -99,8 +105,13 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
 
     force = data.channels.get(rec.FORCE)
     empty = np.empty(0)
-    detected = rec.detect_impacts(force, threshold) if force is not None else {
-        k: empty for k in ("start", "peak_time", "peak_force", "duration", "impulse", "complete")}
+    pulse = rec.pulse_model(data.recording.metadata) if peak == "onset-fit" else None
+    if peak == "onset-fit":
+        log("peaks: fitted spring-dashpot pulse at contact onset" if pulse is not None else
+            "peaks: largest sample (the recording's contact law is not spring_dashpot or its parameters are missing)")
+    detected = rec.detect_impacts(force, threshold, pulse) if force is not None else {
+        k: empty for k in ("start", "peak_time", "peak_force", "peak_force_sample", "fitted", "duration", "impulse",
+                           "complete")}
     events = data.events
     match = rec.match_impacts(detected, events, force, threshold)
     steps = rec.segment_steps(data.motor, settle)
@@ -109,7 +120,8 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
 
     write_csv(out / "impacts_detected.csv", [
         {"start_s": detected["start"][i], "peak_time_s": detected["peak_time"][i],
-         "peak_force_n": detected["peak_force"][i], "duration_above_threshold_s": detected["duration"][i],
+         "peak_force_n": detected["peak_force"][i], "peak_force_largest_sample_n": detected["peak_force_sample"][i],
+         "peak_fitted": bool(detected["fitted"][i]), "duration_above_threshold_s": detected["duration"][i],
          "impulse_ns": detected["impulse"][i], "complete": bool(detected["complete"][i]),
          "event_index": _event_index(events, match["detected_match"][i]),
          "event_peak_force_n": _at(events, "peak_force", match["detected_match"][i])}
@@ -162,8 +174,12 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
         "messages": data.counts,
         "settle_s": settle,
         "threshold_n": threshold,
-        "detection": ("runs of force samples >= threshold; peak = largest sample of the run; "
-                      "matched to an event when the peak lies in [contact start, contact end] +- 2 samples"),
+        "detection": ("runs of force samples >= threshold; peak = "
+                      + ("the fitted spring-dashpot pulse's peak (largest sample when the fit fails)"
+                         if pulse is not None else "largest sample of the run")
+                      + "; matched to an event when the peak lies in [contact start, contact end] +- 2 samples"),
+        "peak_estimator": "onset-fit" if pulse is not None else "sample",
+        "peaks_fitted": int(detected["fitted"].sum()) if detected["fitted"].size else 0,
         "impacts": {"events": int(events["time"].size), "detected": int(detected["peak_time"].size),
                     **{k: v for k, v in match.items() if k not in ("event_match", "detected_match", "covered")}},
         "steps": rows,
