@@ -14,7 +14,6 @@ from rimd_sim import cli
 SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka", "poincare", "basins",
               "rerun", "node", "info")
 NOT_IMPLEMENTED = {
-    "rerun": (6, "Rerun"),
     "analyze": (7, "Analysis and experiments"),
     "experiment": (7, "Analysis and experiments"),
     "bifurcation": (7, "Analysis and experiments"),

@@ -54,7 +54,6 @@ class Verb:
 
 _BRING_UP = (5, "Recorder, replay and bring-up")
 _SIMULATOR = (4, "Simulator node")
-_RERUN = (6, "Rerun")
 _ANALYSIS = (7, "Analysis and experiments")
 
 VERBS: tuple[Verb, ...] = (
@@ -70,7 +69,7 @@ VERBS: tuple[Verb, ...] = (
     Verb("peterka", "Peterka diagram: impact regimes in the (frequency, gap) plane", None, *_ANALYSIS),
     Verb("poincare", "Poincare sections of the simulated or recorded motion", None, *_ANALYSIS),
     Verb("basins", "basins of attraction of coexisting motions", None, *_ANALYSIS),
-    Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer", None, *_RERUN),
+    Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),
 )

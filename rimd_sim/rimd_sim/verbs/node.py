@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import importlib
 
-#: Node name -> module with ``main(args)``. The recorder, replay and Rerun bridge join with their issues.
+#: Node name -> module with ``main(args)``. The recorder and replay join with their issue.
 NODES = {
     "simulator": "rimd_sim.nodes.simulator",
+    "rerun": "rimd_sim.nodes.rerun_bridge",
 }
 
 

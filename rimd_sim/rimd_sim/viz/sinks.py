@@ -1,0 +1,217 @@
+"""Where the Rerun stream goes: an ``.rrd`` file, a spawned viewer, a viewer at a URL, or a web viewer on loopback.
+
+:class:`RerunStream` owns the recording stream and any viewer process it started; ``close()`` flushes and
+is safe to call twice (a context manager).
+
+Usage reporting: Rerun's viewer reports anonymous usage unless its configuration
+(``<config dir>/rerun/analytics.json``) says ``analytics_enabled: false``. Unless ``analytics`` is true,
+this module points ``XDG_CONFIG_HOME`` of this process and of the viewers it starts at a private
+directory whose ``rerun/analytics.json`` turns reporting off. The user's own Rerun configuration is
+neither read nor changed; ``analytics=True`` leaves the environment alone (then the user's choice, e.g.
+``rerun analytics enable|disable``, applies).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment"]
+
+SINKS = ("save", "spawn", "connect", "serve_web")
+APPLICATION_ID = "rimd_rig"
+
+
+class SinkError(Exception):
+    """The sink cannot be opened (bad name, unwritable path, viewer did not start); one clear line."""
+
+
+@dataclass(frozen=True)
+class SinkSpec:
+    """Which sink and its settings.
+
+    Attributes:
+        kind: One of :data:`SINKS`.
+        path: ``save``: the ``.rrd`` file to write.
+        url: ``connect``: gRPC URL of a viewer or server (``rerun+http://HOST:PORT/proxy``).
+        grpc_port: ``spawn``/``serve_web``: gRPC port of the viewer or server started (0 = a free one).
+        web_port: ``serve_web``: HTTP port of the web viewer (0 = a free one).
+        memory_limit: Memory limit of the viewer or server started (Rerun drops the oldest data beyond it).
+        analytics: Leave Rerun's usage reporting to the user's configuration (default: off).
+    """
+
+    kind: str
+    path: str = ""
+    url: str = "rerun+http://127.0.0.1:9876/proxy"
+    grpc_port: int = 0
+    web_port: int = 0
+    memory_limit: str = "1GiB"
+    analytics: bool = False
+
+    def validate(self) -> None:
+        """Raise :class:`SinkError` naming the value and the rule when the spec cannot work."""
+        if self.kind not in SINKS:
+            raise SinkError(f"unknown sink {self.kind!r}: one of {', '.join(SINKS)}")
+        if self.kind == "save":
+            if not self.path:
+                raise SinkError("sink 'save' needs a path (.rrd)")
+            parent = Path(self.path).expanduser().resolve().parent
+            try:
+                parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise SinkError(f"cannot create {parent} for {self.path}: {exc.strerror}") from None
+            if not os.access(parent, os.W_OK) or Path(self.path).is_dir():
+                raise SinkError(f"cannot write {self.path}: not a writable file location")
+        if self.kind == "connect" and not self.url.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+            raise SinkError(f"url {self.url!r} is not a Rerun gRPC URL (rerun+http://HOST:PORT/proxy)")
+        for name in ("grpc_port", "web_port"):
+            if not 0 <= getattr(self, name) <= 65535:
+                raise SinkError(f"{name} {getattr(self, name)} is not a port number (0..65535)")
+
+
+def _private_config_home() -> Path:
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "rimd" / "rerun_config"
+
+
+def analytics_off_environment() -> dict[str, str]:
+    """Environment variables under which Rerun (SDK and viewer) reports no usage; writes the private config.
+
+    Returns ``{"XDG_CONFIG_HOME": <private dir>}``; ``<private dir>/rerun/analytics.json`` has
+    ``analytics_enabled: false``.
+    """
+    home = _private_config_home()
+    config_dir = home / "rerun"
+    config_file = config_dir / "analytics.json"
+    config = {
+        "analytics_enabled": False,
+        "analytics_id": "rimd-analytics-off",
+        "metadata": {},
+        "config_file_path": str(config_file),
+        "data_dir_path": str(home / "analytics_data"),
+    }
+    try:
+        config_dir.mkdir(parents=True, exist_ok=True)
+        if not config_file.exists() or json.loads(config_file.read_text()) != config:
+            tmp = config_file.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_text(json.dumps(config))
+            tmp.replace(config_file)
+    except (OSError, ValueError) as exc:
+        raise SinkError(f"cannot write the Rerun analytics-off configuration in {config_dir}: {exc}") from None
+    return {"XDG_CONFIG_HOME": str(home)}
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_port(port: int, proc: subprocess.Popen, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise SinkError(f"the Rerun viewer exited with status {proc.returncode} before listening on {port}")
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise SinkError(f"the Rerun viewer did not listen on 127.0.0.1:{port} within {timeout:g} s")
+
+
+def _rerun_executable() -> str:
+    exe = Path(sys.executable).with_name("rerun")
+    if exe.exists():
+        return str(exe)
+    found = shutil.which("rerun")
+    if found is None:
+        raise SinkError("the rerun command (rerun-sdk) is not installed next to this Python nor on PATH")
+    return found
+
+
+class RerunStream:
+    """A Rerun recording stream connected to one sink; owns the viewer process it starts (serve_web).
+
+    Args:
+        spec: The sink.
+        blueprint: Default layout sent with the stream.
+        recording_name: Shown in the viewer's recording list.
+    """
+
+    def __init__(self, spec: SinkSpec, blueprint: Any = None, *, recording_name: str = "rimd") -> None:
+        """Open the sink (raises :class:`SinkError` with one clear line)."""
+        spec.validate()
+        self.spec = spec
+        self._proc: subprocess.Popen | None = None
+        self._closed = False
+        self.viewer_url = ""
+        if not spec.analytics:
+            os.environ.update(analytics_off_environment())  # before the SDK's first use; inherited by viewers
+        import rerun as rr
+
+        self.rec = rr.RecordingStream(APPLICATION_ID, send_properties=True)
+        self.rec.send_recording_name(recording_name)
+        try:
+            if spec.kind == "save":
+                self.rec.save(str(Path(spec.path).expanduser()), default_blueprint=blueprint)
+                self.viewer_url = str(spec.path)
+            elif spec.kind == "connect":
+                self.rec.connect_grpc(spec.url, default_blueprint=blueprint)
+                self.viewer_url = spec.url
+            elif spec.kind == "spawn":
+                port = spec.grpc_port or _free_port()
+                self.rec.spawn(port=port, memory_limit=spec.memory_limit, default_blueprint=blueprint)
+                self.viewer_url = f"rerun+http://127.0.0.1:{port}/proxy"
+            else:  # serve_web: a Rerun server + web viewer bound to loopback, owned by this stream
+                grpc_port = spec.grpc_port or _free_port()
+                web_port = spec.web_port or _free_port()
+                cmd = [_rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
+                       "--web-viewer-port", str(web_port), "--server-memory-limit", spec.memory_limit]
+                self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL, start_new_session=True)
+                _wait_port(grpc_port, self._proc, timeout=15.0)
+                url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+                self.rec.connect_grpc(url, default_blueprint=blueprint)
+                self.viewer_url = f"http://127.0.0.1:{web_port}/?url={url}"
+        except SinkError:
+            self.close()
+            raise
+        except (OSError, RuntimeError, ValueError) as exc:
+            self.close()
+            raise SinkError(f"cannot open Rerun sink {spec.kind!r}: {exc}") from None
+
+    def close(self) -> None:
+        """Flush everything logged, close the sink (an ``.rrd`` gets its footer) and stop the server we own."""
+        if self._closed:
+            return
+        self._closed = True
+        rec = getattr(self, "rec", None)
+        if rec is not None:
+            try:
+                rec.flush(timeout_sec=10.0)
+            finally:
+                rec.disconnect()
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.terminate()
+            try:
+                self._proc.wait(5.0)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+                self._proc.wait(5.0)
+
+    def __enter__(self) -> RerunStream:
+        """Return the stream."""
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Close the stream."""
+        self.close()
