@@ -115,9 +115,9 @@ class RerunBridgeNode(Node):
             f"status: {self._received} messages, {sum(s.samples.values())} samples, {s.impacts} impacts, "
             f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}")
 
-    def close(self) -> None:
-        """Flush and close the Rerun stream (idempotent)."""
-        self.stream.close()
+    def close(self) -> str:
+        """Flush and close the Rerun stream (idempotent); "" or why the last data could not be delivered."""
+        return self.stream.close()
 
 
 def main(args: list[str] | None = None) -> int:
@@ -138,7 +138,10 @@ def main(args: list[str] | None = None) -> int:
         pass
     finally:
         if node is not None:
-            node.close()
+            problem = node.close()
+            if problem:
+                print(f"rimd_rerun: {problem}", file=sys.stderr)
+                status = 1
             s = node.mapper.stats
             print(f"rimd_rerun: closed {node.stream.viewer_url}: "
                   + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))

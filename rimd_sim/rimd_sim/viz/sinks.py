@@ -16,9 +16,9 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import socket
 import subprocess
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -129,12 +129,18 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout: float) -> None:
 
 
 def _rerun_executable() -> str:
-    exe = Path(sys.executable).with_name("rerun")
-    if exe.exists():
-        return str(exe)
+    """The viewer binary itself (not the ``rerun`` console script, a Python wrapper that runs it)."""
+    try:
+        import rerun_cli
+
+        exe = Path(rerun_cli.__file__).with_name("rerun")
+        if exe.is_file():
+            return str(exe)
+    except ImportError:
+        pass
     found = shutil.which("rerun")
     if found is None:
-        raise SinkError("the rerun command (rerun-sdk) is not installed next to this Python nor on PATH")
+        raise SinkError("the rerun viewer (rerun-sdk) is not installed")
     return found
 
 
@@ -176,6 +182,8 @@ class RerunStream:
                 web_port = spec.web_port or _free_port()
                 cmd = [_rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
                        "--web-viewer-port", str(web_port), "--server-memory-limit", spec.memory_limit]
+                # Its own process group, so that a Ctrl-C to ours does not stop it before the last flush;
+                # close() stops that group.
                 self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                               stderr=subprocess.DEVNULL, start_new_session=True)
                 _wait_port(grpc_port, self._proc, timeout=15.0)
@@ -189,24 +197,35 @@ class RerunStream:
             self.close()
             raise SinkError(f"cannot open Rerun sink {spec.kind!r}: {exc}") from None
 
-    def close(self) -> None:
-        """Flush everything logged, close the sink (an ``.rrd`` gets its footer) and stop the server we own."""
+    def close(self) -> str:
+        """Flush everything logged, close the sink (an ``.rrd`` gets its footer) and stop the server we own.
+
+        Returns "" or, when the last flush failed (viewer gone), why; safe to call twice.
+        """
         if self._closed:
-            return
+            return ""
         self._closed = True
+        problem = ""
         rec = getattr(self, "rec", None)
         if rec is not None:
             try:
                 rec.flush(timeout_sec=10.0)
+            except RuntimeError as exc:  # the viewer or server went away: nothing more can be delivered
+                problem = f"last data not delivered to {self.viewer_url}: {exc}"
             finally:
                 rec.disconnect()
         if self._proc is not None and self._proc.poll() is None:
-            self._proc.terminate()
-            try:
-                self._proc.wait(5.0)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait(5.0)
+            for sig in (signal.SIGTERM, signal.SIGKILL):
+                try:
+                    os.killpg(self._proc.pid, sig)
+                except ProcessLookupError:
+                    break
+                try:
+                    self._proc.wait(5.0)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
+        return problem
 
     def __enter__(self) -> RerunStream:
         """Return the stream."""
