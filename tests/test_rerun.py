@@ -184,10 +184,12 @@ def test_node_refuses_an_unknown_sink(ros_processes):
 
 @pytest.mark.ros
 @pytest.mark.timeout(60)
-def test_web_sink_serves_on_loopback_with_usage_reporting_off(ros_processes, tmp_path):
+def test_web_sink_serves_on_loopback_with_usage_reporting_off(ros_processes, tmp_path, repo_root):
+    """``rimd node rerun`` with the default config: the serve_web sink."""
     cache = tmp_path / "cache"
-    bridge = ros_processes.start_node("rimd_rerun", "--ros-args", "-p", "sink:=serve_web",
-                                      env={"XDG_CACHE_HOME": str(cache)})
+    bridge = ros_processes.start_python("-m", "rimd_sim.cli", "node", "rerun", "--ros-args", "--params-file",
+                                        str(repo_root / "config" / "rimd.yaml"), name="rimd_node_rerun",
+                                        env={"XDG_CACHE_HOME": str(cache)})
     match = bridge.wait_for_output(r"sink serve_web -> (http://127\.0\.0\.1:(\d+)/\?url=rerun\+http://127\.0\.0\.1:"
                                    r"(\d+)/proxy)", timeout=30)
     with urllib.request.urlopen(f"http://127.0.0.1:{match.group(2)}/", timeout=10) as response:
