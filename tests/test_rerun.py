@@ -141,7 +141,10 @@ def test_offline_recording_gives_the_same_entities_and_its_counts(tmp_path, repo
     assert all(runs[name][0] == rec.first_index[name] for name in runs)
     assert data["impacts/table"].times.size == rec.impacts == data["channels/impact_force/impacts"].times.size
     assert data["phase_plane/trajectory"].times.size == rec.truth_blocks
-    assert data["motor/frequency"].times.size == rec.motor_states
+    strips = data["phase_plane/trajectory"].strips()
+    assert len(strips) == rec.truth_blocks and sum(len(s) for s in strips) == 3000 + rec.truth_blocks - 1
+    assert all(np.array_equal(a[-1], b[0]) for a, b in zip(strips, strips[1:], strict=False)), "one unbroken line"
+    assert data["motor/frequency"].times.size == rec.truth_blocks
     # 3 s at 3.75 Hz from phase 0: 11 completed cycles (t = k / 3.75 s, k = 1..11).
     assert np.allclose(data["poincare/points"].times / 1e9, np.arange(1, 12) / 3.75, atol=1e-3)
 

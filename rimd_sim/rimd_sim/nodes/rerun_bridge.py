@@ -22,8 +22,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from rimd_msgs.msg import ImpactEvent, MotorState, RigState, SampleBlock
-from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, MOTOR_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
+from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
+from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
 from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, SinkSpec
 
 __all__ = ["RerunBridgeNode", "main"]
@@ -44,6 +44,8 @@ PARAMETERS: dict[str, tuple[Any, str, tuple[float, float] | None]] = {
     "natural_frequency": (1.82, "Hz: the phase plane's velocity axis is v_rel / (2 pi f)", (0.01, 1000.0)),
     "window": (2.0, "s of channel data the time-series views show", (0.01, 3600.0)),
     "trail": (1.0, "s of phase-plane trajectory shown (trailing line)", (0.01, 3600.0)),
+    "batch_blocks": (5, "blocks of a channel sent per send_columns call (1 = one call per block; more = less CPU, "
+                     "up to that many block periods of latency)", (1, 1000)),
     "reliable": (True, "reliable subscriptions (false: best effort, matches best-effort channels)", None),
     "status_period": (10.0, "s between status lines (0 = none)", (0.0, 3600.0)),
 }
@@ -77,7 +79,8 @@ class RerunBridgeNode(Node):
                         web_port=int(p["web_port"]), memory_limit=p["memory_limit"], analytics=bool(p["analytics"]))
         self.stream = RerunStream(spec, blueprint(window=float(p["window"]), trail=float(p["trail"])),
                                   recording_name=f"rimd {self.get_namespace()}")
-        self.mapper = RigMapper(self.stream.rec, natural_frequency=float(p["natural_frequency"]))
+        self.mapper = RigMapper(self.stream.rec, natural_frequency=float(p["natural_frequency"]),
+                                batch=int(p["batch_blocks"]))
         self.mapper.log_static()
         self._lags: deque[float] = deque(maxlen=10_000)
         self._received = 0
@@ -86,9 +89,10 @@ class RerunBridgeNode(Node):
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=500, reliability=reliability)
         events_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=reliability)
         subscriptions = [(SampleBlock, ch.topic, qos) for ch in CHANNELS] + [
-            (RigState, TRUTH_TOPIC, qos), (MotorState, MOTOR_TOPIC, qos), (ImpactEvent, EVENTS_TOPIC, events_qos)]
+            (RigState, TRUTH_TOPIC, qos), (ImpactEvent, EVENTS_TOPIC, events_qos)]
         for msg_type, topic, profile in subscriptions:
             self.create_subscription(msg_type, topic, self._handler(topic), profile)
+        self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
         if p["status_period"] > 0:
             self.create_timer(float(p["status_period"]), self._report)
         self.get_logger().info(
@@ -117,6 +121,7 @@ class RerunBridgeNode(Node):
 
     def close(self) -> str:
         """Flush and close the Rerun stream (idempotent); "" or why the last data could not be delivered."""
+        self.mapper.flush()
         return self.stream.close()
 
 

@@ -45,12 +45,13 @@ def convert(recording: Path, spec, *, namespace: str = "/rig", natural_frequency
     try:
         first = next(messages, None)  # opens and checks the file before any sink is opened
         with RerunStream(spec, blueprint(), recording_name=recording.name) as stream:
-            mapper = RigMapper(stream.rec, natural_frequency=natural_frequency)
+            mapper = RigMapper(stream.rec, natural_frequency=natural_frequency, batch=50)
             mapper.log_static()
             if first is not None:
                 mapper.log_message(*first)
             for topic, msg in messages:
                 mapper.log_message(topic, msg)
+            mapper.flush()
     except (McapError, SinkError) as exc:
         raise CommandError(str(exc)) from None
     return mapper.stats, info, time.perf_counter() - start

@@ -8,7 +8,7 @@ Timeline ``sim_time`` (a duration): the simulation time of each sample, from the
 ``n`` of a channel at ``rate`` Hz is at ``n / rate``, computed exactly in integer nanoseconds and rounded
 like the simulator rounds its stamps, so ``stamp - origin`` and ``first_index / rate`` agree to the
 nanosecond. The origin (the stamp of sample 0: 0 when the simulator runs in simulation time, the wall-clock
-start at real time) is learnt from the blocks; events and motor states are placed at ``stamp - origin``.
+start at real time) is learnt from the blocks; impact events are placed at ``stamp - origin``.
 
 Entities:
 
@@ -20,7 +20,7 @@ Entities:
   ``trail`` seconds, so it is a trailing line;
 * ``poincare/points``: the same state at motor phase 0, one point per excitation cycle (interpolated
   between truth samples), all shown, so the section builds up;
-* ``motor/frequency``: the actual motor frequency (Hz).
+* ``motor/frequency``: the actual motor frequency (Hz), from the truth, one value per truth block.
 """
 
 from __future__ import annotations
@@ -69,10 +69,10 @@ CHANNELS: tuple[Channel, ...] = (
 )
 _BY_TOPIC = {ch.topic: ch for ch in CHANNELS}
 EVENTS_TOPIC = "impact/events"
-MOTOR_TOPIC = "motor/state"
 TRUTH_TOPIC = "truth"
-#: Topics (relative to the rig namespace) the mapping understands.
-TOPICS = (*(ch.topic for ch in CHANNELS), EVENTS_TOPIC, MOTOR_TOPIC, TRUTH_TOPIC)
+#: Topics (relative to the rig namespace) the mapping uses. The motor's frequency and phase come from the truth
+#: (same values as /rig/motor/state, at the truth rate), which spares the bridge 100 messages/s.
+TOPICS = (*(ch.topic for ch in CHANNELS), EVENTS_TOPIC, TRUTH_TOPIC)
 
 IMPACT_MARKERS = "channels/impact_force/impacts"
 IMPACT_LOG = "impacts/log"
@@ -125,7 +125,6 @@ class MapperStats:
     impacts: int = 0
     poincare_points: int = 0
     truth_blocks: int = 0
-    motor_states: int = 0
 
 
 class RigMapper:
@@ -135,18 +134,28 @@ class RigMapper:
     phase-plane line and to catch phase 0 across block boundaries) and the expected next ``first_index`` of
     each channel (to count dropped blocks).
 
+    Blocks are expanded to per-sample times at once and sent columnar: with ``batch`` 1 one ``send_columns``
+    per block; with ``batch`` k, one per k consecutive blocks of a channel (fewer calls: the live node uses it
+    to stay within its CPU budget, at most k block periods of extra latency). :meth:`flush` sends a partial
+    batch; call it before closing the stream.
+
     Args:
         recording: A ``rerun.RecordingStream``.
         natural_frequency: Hz; the phase plane's velocity axis is ``v_rel / (2 pi natural_frequency)`` so
             that both axes are lengths (mm) and a free oscillation is a circle.
     """
 
-    def __init__(self, recording: Any, *, natural_frequency: float = 1.82) -> None:
+    def __init__(self, recording: Any, *, natural_frequency: float = 1.82, batch: int = 1) -> None:
         """Bind to ``recording``; nothing is logged until :meth:`log_static` or a message."""
         import rerun as rr
 
+        if batch < 1:
+            raise ValueError(f"batch {batch} must be >= 1")
         self._rr = rr
         self.rec = recording
+        self.batch = batch
+        self._blocks: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]] = []
         self.omega_n = 2.0 * math.pi * natural_frequency
         self.origin_ns: int | None = None
         self._next_index: dict[str, int] = {}
@@ -182,8 +191,6 @@ class RigMapper:
                 self._pending.append((topic, msg))
         elif topic == EVENTS_TOPIC:
             self.log_impact(msg)
-        elif topic == MOTOR_TOPIC:
-            self.log_motor(msg)
 
     def _learn_origin(self, stamp: Any, first_index: int, rate: float) -> None:
         origin = stamp_ns(stamp) - int(sample_times_ns(first_index, 1, rate)[0])
@@ -200,8 +207,7 @@ class RigMapper:
     # ---- channels ----------------------------------------------------------------------------------
 
     def log_block(self, channel: Channel, msg: Any) -> None:
-        """One SampleBlock: all its samples at their exact times, in one ``send_columns`` call."""
-        rr = self._rr
+        """One SampleBlock: all its samples at their exact times; sent when ``batch`` blocks are pending."""
         samples = _array(msg.samples)
         first = int(msg.first_index)
         rate = float(msg.sample_rate)
@@ -213,13 +219,30 @@ class RigMapper:
         self._next_index[channel.name] = first + samples.size
         if samples.size == 0:
             return
-        times = sample_times_ns(first, samples.size, rate)
-        rr.send_columns(channel.entity, indexes=[rr.TimeColumn(TIMELINE, duration=times.view("timedelta64[ns]"))],
-                        columns=rr.Scalars.columns(scalars=samples), recording=self.rec)
+        pending = self._blocks.setdefault(channel.name, [])
+        pending.append((sample_times_ns(first, samples.size, rate), samples))
         self.stats.samples[channel.name] = self.stats.samples.get(channel.name, 0) + samples.size
         self.stats.blocks[channel.name] = self.stats.blocks.get(channel.name, 0) + 1
+        if len(pending) >= self.batch:
+            self._send_channel(channel)
 
-    # ---- events and motor --------------------------------------------------------------------------
+    def _send_channel(self, channel: Channel) -> None:
+        pending = self._blocks.pop(channel.name, None)
+        if not pending:
+            return
+        rr = self._rr
+        times = pending[0][0] if len(pending) == 1 else np.concatenate([t for t, _ in pending])
+        values = pending[0][1] if len(pending) == 1 else np.concatenate([v for _, v in pending])
+        rr.send_columns(channel.entity, indexes=[rr.TimeColumn(TIMELINE, duration=times.view("timedelta64[ns]"))],
+                        columns=rr.Scalars.columns(scalars=values), recording=self.rec)
+
+    def flush(self) -> None:
+        """Send everything pending (blocks and truth of an unfinished batch)."""
+        for channel in CHANNELS:
+            self._send_channel(channel)
+        self._send_truth()
+
+    # ---- events ------------------------------------------------------------------------------------
 
     def log_impact(self, ev: Any) -> None:
         """One ImpactEvent: a marker on the force plot, a text line and a table row, at contact start."""
@@ -238,47 +261,53 @@ class RigMapper:
         ), recording=self.rec)
         self.stats.impacts += 1
 
-    def log_motor(self, msg: Any) -> None:
-        """One MotorState: the actual motor frequency."""
-        rr = self._rr
-        rr.set_time(TIMELINE, duration=np.timedelta64(self.sim_time_ns(msg.header.stamp), "ns"), recording=self.rec)
-        rr.log(MOTOR_FREQUENCY, rr.Scalars(float(msg.frequency)), recording=self.rec)
-        self.stats.motor_states += 1
-
-    # ---- truth: phase plane and Poincare section ----------------------------------------------------
+    # ---- truth: phase plane, Poincare section, motor frequency ---------------------------------------
 
     def log_truth(self, msg: Any) -> None:
-        """One RigState block: a phase-plane segment and the Poincare points of the cycles it completes."""
-        rr = self._rr
+        """One RigState block; phase plane, Poincare points and motor frequency are sent per ``batch`` blocks."""
         first = int(msg.first_index)
         rate = float(msg.sample_rate)
         if self.origin_ns is None:
             self._learn_origin(msg.header.stamp, first, rate)
-        x_rel = _array(msg.rimd_position) - _array(msg.cart_position)
-        n = x_rel.size
+        cart = _array(msg.cart_position)
+        n = cart.size
         if n == 0:
             return
-        cart = _array(msg.cart_position)
         # Cart velocity: the cart moves smoothly (no impact), so a second-order difference at the truth rate
         # is accurate to O((Omega dt)^2); the RIMD's own velocity is exact in the truth.
         cart_v = np.gradient(cart, 1.0 / rate, edge_order=2) if n >= 3 else np.zeros(n)
-        v_rel = _array(msg.rimd_velocity) - cart_v
-        phase = _array(msg.motor_phase)
+        x_mm = (_array(msg.rimd_position) - cart) * 1e3
+        y_mm = (_array(msg.rimd_velocity) - cart_v) / self.omega_n * 1e3
         times = sample_times_ns(first, n, rate)
-        x_mm = x_rel * 1e3
-        y_mm = v_rel / self.omega_n * 1e3
+        self._truth.append((times, x_mm, y_mm, _array(msg.motor_phase), float(msg.motor_frequency[-1])))
+        self.stats.truth_blocks += 1
+        if len(self._truth) >= self.batch:
+            self._send_truth()
+
+    def _send_truth(self) -> None:
+        if not self._truth:
+            return
+        rr = self._rr
+        batch, self._truth = self._truth, []
+        times = np.concatenate([b[0] for b in batch])
+        xs = np.concatenate([b[1] for b in batch])
+        ys = np.concatenate([b[2] for b in batch])
+        ph = np.concatenate([b[3] for b in batch])
         prev = self._phase
-        contiguous = prev.t_ns is not None and 0 < times[0] - prev.t_ns <= 2 * NS_PER_S / rate
-        if contiguous:
-            xs = np.concatenate(([prev.x], x_mm))
-            ys = np.concatenate(([prev.v], y_mm))
-            ph = np.concatenate(([prev.phase], phase))
-            ts = np.concatenate(([prev.t_ns], times))
-        else:
-            xs, ys, ph, ts = x_mm, y_mm, phase, times
-        rr.set_time(TIMELINE, duration=np.timedelta64(int(times[-1]), "ns"), recording=self.rec)
-        rr.log(PHASE_PLANE, rr.LineStrips2D([np.column_stack((xs, ys))], colors=[(44, 160, 44)], radii=-1.0),
-               recording=self.rec)
+        step = int(times[1] - times[0]) if times.size > 1 else NS_PER_S
+        if prev.t_ns is not None and 0 < times[0] - prev.t_ns <= 2 * step:  # continue the line across batches
+            xs, ys, ph = np.r_[prev.x, xs], np.r_[prev.v, ys], np.r_[prev.phase, ph]
+            times = np.r_[np.int64(prev.t_ns), times]
+        # One line segment per block (from the last sample of the previous one), at the block's last sample.
+        ends = np.cumsum([b[0].size for b in batch]) + (xs.size - sum(b[0].size for b in batch)) - 1
+        starts = np.r_[0, ends[:-1]]
+        strips = [np.column_stack((xs[a:b + 1], ys[a:b + 1])) for a, b in zip(starts, ends, strict=True)]
+        index = [rr.TimeColumn(TIMELINE, duration=times[ends].view("timedelta64[ns]"))]
+        rr.send_columns(PHASE_PLANE, indexes=index,
+                        columns=rr.LineStrips2D.columns(strips=strips).partition([1] * len(strips)),
+                        recording=self.rec)
+        rr.send_columns(MOTOR_FREQUENCY, indexes=index,
+                        columns=rr.Scalars.columns(scalars=[b[4] for b in batch]), recording=self.rec)
         # Motor phase 0: the phase wraps from near 2 pi to near 0 between two samples.
         wraps = np.nonzero(np.diff(ph) < -math.pi)[0]
         if wraps.size:
@@ -286,13 +315,12 @@ class RigMapper:
             frac = (2 * math.pi - ph[a]) / (ph[b] + 2 * math.pi - ph[a])
             px = xs[a] + frac * (xs[b] - xs[a])
             py = ys[a] + frac * (ys[b] - ys[a])
-            pt = ts[a] + np.rint(frac * (ts[b] - ts[a])).astype(np.int64)
+            pt = times[a] + np.rint(frac * (times[b] - times[a])).astype(np.int64)
             rr.send_columns(POINCARE, indexes=[rr.TimeColumn(TIMELINE, duration=pt.view("timedelta64[ns]"))],
                             columns=rr.Points2D.columns(positions=np.column_stack((px, py))),
                             recording=self.rec)
             self.stats.poincare_points += int(wraps.size)
-        self._phase = _PhaseState(int(times[-1]), float(x_mm[-1]), float(y_mm[-1]), float(phase[-1]))
-        self.stats.truth_blocks += 1
+        self._phase = _PhaseState(int(times[-1]), float(xs[-1]), float(ys[-1]), float(ph[-1]))
 
 
 def blueprint(*, window: float = 2.0, trail: float = 1.0) -> Any:
