@@ -169,11 +169,17 @@ class RigMapper:
         """Log the series styles (names with units, colours, markers) once, as static data."""
         rr = self._rr
         for ch in CHANNELS:
-            rr.log(ch.entity, rr.SeriesLines(names=f"{ch.label} [{ch.unit}]", colors=[ch.color], widths=1.0),
-                   static=True, recording=self.rec)
-        rr.log(IMPACT_MARKERS, rr.SeriesPoints(names="impact (peak force at contact start)", colors=[(0, 0, 0)],
-                                               markers="diamond", marker_sizes=4.0), static=True, recording=self.rec)
+            # MinMax: when a pixel holds many samples (20 kHz over seconds), draw their range, so that a 0.4 ms
+            # impact keeps its peak instead of being averaged away.
+            rr.log(ch.entity, rr.SeriesLines(names=f"{ch.label} [{ch.unit}]", colors=[ch.color], widths=1.0,
+                                             aggregation_policy="MinMax"), static=True, recording=self.rec)
+        rr.log(IMPACT_MARKERS, rr.SeriesPoints(names="impact (peak force at contact start)", colors=[(255, 170, 0)],
+                                               markers="diamond", marker_sizes=5.0), static=True, recording=self.rec)
         rr.log(MOTOR_FREQUENCY, rr.SeriesLines(names="motor frequency [Hz]"), static=True, recording=self.rec)
+        rr.log(PHASE_PLANE, rr.LineStrips2D.from_fields(colors=[(44, 160, 44)], radii=[-1.5]), static=True,
+               recording=self.rec)
+        rr.log(POINCARE, rr.Points2D.from_fields(colors=[(214, 39, 40)], radii=[-4.0]), static=True,
+               recording=self.rec)
 
     # ---- dispatch ----------------------------------------------------------------------------------
 
@@ -251,13 +257,13 @@ class RigMapper:
         rr.log(IMPACT_MARKERS, rr.Scalars(float(ev.peak_force)), recording=self.rec)
         text = (f"impact {int(ev.index)} (cycle {int(ev.cycle_index)}): peak {ev.peak_force:.2f} N, "
                 f"impulse {ev.impulse * 1e3:.3f} mN s, velocity {ev.impact_velocity * 1e3:.1f} mm/s, "
-                f"duration {ev.duration * 1e3:.3f} ms, {ev.excitation_frequency:.3f} Hz")
+                f"duration {ev.duration * 1e3:.3f} ms, penetration {ev.max_penetration * 1e6:.1f} um, "
+                f"{ev.excitation_frequency:.3f} Hz, phase {ev.excitation_phase:.3f} rad")
         rr.log(IMPACT_LOG, rr.TextLog(text, level="INFO"), recording=self.rec)
+        # The table keeps the six columns that fit a view; the log line has the rest.
         rr.log(IMPACT_TABLE, rr.AnyValues(
             index=int(ev.index), cycle=int(ev.cycle_index), peak_force_N=float(ev.peak_force),
-            impulse_Ns=float(ev.impulse), impact_velocity_mps=float(ev.impact_velocity),
-            duration_s=float(ev.duration), max_penetration_m=float(ev.max_penetration),
-            excitation_frequency_Hz=float(ev.excitation_frequency), excitation_phase_rad=float(ev.excitation_phase),
+            impulse_Ns=float(ev.impulse), impact_velocity_mps=float(ev.impact_velocity), duration_s=float(ev.duration),
         ), recording=self.rec)
         self.stats.impacts += 1
 
@@ -323,6 +329,13 @@ class RigMapper:
         self._phase = _PhaseState(int(times[-1]), float(xs[-1]), float(ys[-1]), float(ph[-1]))
 
 
+#: Impact-table columns, most useful first (the viewer would otherwise sort them by name).
+TABLE_COLUMNS = ("index", "cycle", "peak_force_N", "impulse_Ns", "impact_velocity_mps", "duration_s")
+#: Phase plane and Poincare section share these bounds (mm), so that the section reads against the orbit;
+#: they hold the orbits of the paper's gaps (0 to 2.4 mm) and bands; the viewer zooms freely.
+PLANE_BOUNDS = {"x_range": (-10.0, 4.0), "y_range": (-8.0, 8.0)}
+
+
 def blueprint(*, window: float = 2.0, trail: float = 1.0) -> Any:
     """The default layout.
 
@@ -339,18 +352,21 @@ def blueprint(*, window: float = 2.0, trail: float = 1.0) -> Any:
                                        end=rrb.TimeRangeBoundary.cursor_relative())]
     series = [rrb.TimeSeriesView(origin=ch.entity, name=f"{ch.label} [{ch.unit}]", time_ranges=recent(window))
               for ch in CHANNELS]
+    import rerun.blueprint.archetypes as rrba
+
+    bounds = rrb.VisualBounds2D(**PLANE_BOUNDS)
+    table = rrb.DataframeView(origin=IMPACT_TABLE, name="impact table", query=rrba.DataframeQuery(
+        timeline=TIMELINE, select=[TIMELINE, *(f"/{IMPACT_TABLE}:{c}" for c in TABLE_COLUMNS)], auto_scroll=True))
     right = rrb.Vertical(
         rrb.Horizontal(
-            rrb.Spatial2DView(origin="phase_plane", name="phase plane: x - x_c [mm] vs v_rel / omega_n [mm]",
-                              time_ranges=recent(trail)),
-            rrb.Spatial2DView(origin="poincare", name="Poincare section at motor phase 0 (same axes)",
-                              time_ranges=everything),
+            rrb.Spatial2DView(origin="phase_plane", name="phase plane: x - x_c vs v_rel / omega_n [mm]",
+                              time_ranges=recent(trail), visual_bounds=bounds),
+            rrb.Spatial2DView(origin="poincare", name="Poincare section, motor phase 0 [mm]",
+                              time_ranges=everything, visual_bounds=bounds),
         ),
-        rrb.Tabs(
-            rrb.DataframeView(origin=IMPACT_TABLE, name="impact table"),
-            rrb.TextLogView(origin=IMPACT_LOG, name="impact log"),
-        ),
+        rrb.Tabs(table, rrb.TextLogView(origin=IMPACT_LOG, name="impact log")),
         row_shares=[3, 2],
     )
     return rrb.Blueprint(rrb.Horizontal(rrb.Vertical(*series), right, column_shares=[3, 2]),
-                         collapse_panels=False)
+                         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+                         rrb.TimePanel(state="collapsed", timeline=TIMELINE))
