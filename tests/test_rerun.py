@@ -149,6 +149,47 @@ def test_offline_recording_gives_the_same_entities_and_its_counts(tmp_path, repo
     assert np.allclose(data["poincare/points"].times / 1e9, np.arange(1, 12) / 3.75, atol=1e-3)
 
 
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")
+def test_offline_to_a_viewer_at_a_url(ros_processes, tmp_path):
+    """Sink connect: the data reach what listens at the URL (here ``rerun --save``, a Rerun endpoint that
+    writes what it receives); a URL where nothing listens is refused at once."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    received = tmp_path / "received.rrd"
+    endpoint = ros_processes.start([_rerun_cli(), "--save", str(received), "--bind", "127.0.0.1", "--port", str(port)],
+                                   name="rerun_save_endpoint")
+    endpoint.wait_for_output(rf"127\.0\.0\.1:{port}", timeout=30)
+    rec = write_rig_mcap(tmp_path / "rec.mcap", seconds=1.0)
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    result = subprocess.run(["rimd", "rerun", str(rec.path), "--connect", url], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    import time
+
+    sizes = [-1]
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:  # the endpoint writes as it receives: wait until the file stops growing
+        time.sleep(0.5)
+        sizes.append(received.stat().st_size if received.exists() else -1)
+        if sizes[-1] > 0 and sizes[-1] == sizes[-2]:
+            break
+    endpoint.send_signal(signal.SIGTERM)
+    endpoint.wait(20)
+    data = load_rrd(received)  # streamed, so no footer: read chunk by chunk
+    check_channels(data, rec.samples)
+    assert data["impacts/table"].times.size == rec.impacts > 0
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        closed = s.getsockname()[1]
+    result = subprocess.run(["rimd", "rerun", str(rec.path), "--connect", f"rerun+http://127.0.0.1:{closed}/proxy"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and "no Rerun viewer or server at" in result.stderr, result.stderr
+
+
 @pytest.mark.parametrize("case", ["missing", "garbage", "no_rig_topics", "save_is_directory", "save_under_file"])
 def test_offline_bad_input_is_one_clear_line(tmp_path, case):
     mcap = tmp_path / "rec.mcap"

@@ -52,6 +52,9 @@ def convert(recording: Path, spec, *, namespace: str = "/rig", natural_frequency
             for topic, msg in messages:
                 mapper.log_message(topic, msg)
             mapper.flush()
+            problem = stream.close()
+        if problem:
+            raise CommandError(problem)
     except (McapError, SinkError) as exc:
         raise CommandError(str(exc)) from None
     return mapper.stats, info, time.perf_counter() - start

@@ -128,6 +128,21 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout: float) -> None:
     raise SinkError(f"the Rerun viewer did not listen on 127.0.0.1:{port} within {timeout:g} s")
 
 
+def _check_reachable(url: str, timeout: float = 2.0) -> None:
+    """Refuse at once a URL where nothing listens (Rerun would buffer, retry, and drop the data at the end)."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(url)
+    host = parts.hostname or "127.0.0.1"
+    port = parts.port or (443 if parts.scheme == "rerun+https" else 9876)
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return
+    except OSError as exc:
+        raise SinkError(f"no Rerun viewer or server at {url} ({exc.strerror or exc}); start one with "
+                        "`rerun` or pick another sink") from None
+
+
 def _rerun_executable() -> str:
     """The viewer binary itself (not the ``rerun`` console script, a Python wrapper that runs it)."""
     try:
@@ -171,11 +186,15 @@ class RerunStream:
                 self.rec.save(str(Path(spec.path).expanduser()), default_blueprint=blueprint)
                 self.viewer_url = str(spec.path)
             elif spec.kind == "connect":
+                _check_reachable(spec.url)
                 self.rec.connect_grpc(spec.url, default_blueprint=blueprint)
                 self.viewer_url = spec.url
             elif spec.kind == "spawn":
+                import rerun as rr
+
                 port = spec.grpc_port or _free_port()
-                self.rec.spawn(port=port, memory_limit=spec.memory_limit, default_blueprint=blueprint)
+                rr.spawn(port=port, memory_limit=spec.memory_limit, default_blueprint=blueprint,
+                         executable_path=_rerun_executable(), recording=self.rec)
                 self.viewer_url = f"rerun+http://127.0.0.1:{port}/proxy"
             else:  # serve_web: a Rerun server + web viewer bound to loopback, owned by this stream
                 grpc_port = spec.grpc_port or _free_port()
