@@ -17,6 +17,7 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 import urllib.request
 from pathlib import Path
 
@@ -250,3 +251,26 @@ def test_web_sink_serves_on_loopback_with_usage_reporting_off(ros_processes, tmp
     assert bridge.stop() == 0, bridge.tail()
     after = subprocess.run(["ss", "-ltnH"], capture_output=True, text=True).stdout
     assert f":{match.group(3)} " not in after, "the Rerun server the bridge started is stopped with it"
+
+
+def test_sample_times_are_the_simulators_stamps_exactly():
+    """``n / rate`` in integer ns, rounded half up like the simulator's stamps, without overflow far out
+    (10^7 s: 116 days of samples, where ``n * 10^9`` no longer fits in int64 at 20 kHz)."""
+    from fractions import Fraction
+
+    for rate in (2000.0, 20000.0, 1000.0, 3.0, 1234.5):
+        for first in (0, 7, int(rate * 1e7) + 3):
+            got = sample_times_ns(first, 50, rate)
+            r = Fraction(repr(rate))
+            want = [(2 * n * 1_000_000_000 * r.denominator + r.numerator) // (2 * r.numerator)
+                    for n in range(first, first + 50)]
+            tolerance = 0 if rate.is_integer() else 2_000  # float64 fallback for non-integer rates
+            assert np.max(np.abs(got - np.array(want, dtype=np.int64))) <= tolerance, (rate, first)
+
+
+def test_mapping_and_offline_path_import_without_ros():
+    code = ("import sys; sys.modules['rclpy'] = None; sys.modules['rimd_msgs'] = None\n"
+            "import rimd_sim.viz.rerun_map, rimd_sim.viz.sinks, rimd_sim.viz.mcap_source, rimd_sim.viz.rrd_data\n"
+            "import rimd_sim.verbs.rerun\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr

@@ -19,6 +19,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -191,6 +192,11 @@ class RerunStream:
                 self.viewer_url = spec.url
             elif spec.kind == "spawn":
                 import rerun as rr
+
+                if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                            or os.environ.get("WAYLAND_DISPLAY")):
+                    raise SinkError("no display for a viewer window (DISPLAY and WAYLAND_DISPLAY unset): save an "
+                                    ".rrd, connect to a viewer elsewhere, or serve the web viewer")
 
                 port = spec.grpc_port or _free_port()
                 rr.spawn(port=port, memory_limit=spec.memory_limit, default_blueprint=blueprint,
