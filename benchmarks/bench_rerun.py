@@ -11,7 +11,7 @@ Prints, in one run:
 The lag includes a constant offset of the simulator (its stamps start at the whole millisecond before its
 start-up pass), so its growth, not its value, is the figure.
 
-Run: python benchmarks/bench_rerun.py [--seconds 60] [--sink save|serve_web]   (after `source env.sh`)
+Run: python benchmarks/bench_rerun.py [--seconds 60] [--sink save|serve_web] [--batch 5]   (after `source env.sh`)
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import psutil
 
 REPO = Path(__file__).resolve().parent.parent
 STATUS = re.compile(r"status: (\d+) messages, (\d+) samples, (\d+) impacts, (\d+) Poincare points, (\d+) gaps; "
-                    r"lag p50 ([\d.]+) ms, max ([\d.]+) ms")
+                    r"lag p50 ([\d.]+) ms, max ([\d.]+) ms, slowest message ([\d.]+) ms")
 
 
 def start(exe_name: str, *ros_args: str, log: Path) -> subprocess.Popen:
@@ -62,14 +62,14 @@ def wait_for(log: Path, pattern: str, timeout: float) -> None:
     raise SystemExit(f"no /{pattern}/ in {log} within {timeout} s:\n{log.read_text(errors='replace')[-2000:]}")
 
 
-def live(seconds: float, sink: str, tmp: Path) -> None:
+def live(seconds: float, sink: str, tmp: Path, batch: int) -> None:
     sim_log, bridge_log = tmp / "sim.log", tmp / "bridge.log"
     sim = start("rimd_simulator", "-p", "motor.initial_frequency:=3.75", log=sim_log)
     bridge = None
     try:
         wait_for(sim_log, r"rig ready", 60)
         bridge = start("rimd_rerun", "-p", f"sink:={sink}", "-p", f"save_path:={tmp / 'live.rrd'}",
-                       "-p", "status_period:=5.0", log=bridge_log)
+                       "-p", "status_period:=5.0", "-p", f"batch_blocks:={batch}", log=bridge_log)
         wait_for(bridge_log, r"rerun bridge ready", 60)
         time.sleep(2.0)
         ps = psutil.Process(bridge.pid)
@@ -89,12 +89,16 @@ def live(seconds: float, sink: str, tmp: Path) -> None:
     p50 = [s[5] for s in status[1:]]  # the first window includes start-up
     samples, gaps = status[-1][1], status[-1][4]
     size = (tmp / "live.rrd").stat().st_size if (tmp / "live.rrd").exists() else 0
-    print(f"live, real time, default rates, sink {sink}, {seconds:.0f} s: bridge CPU median "
+    print(f"live, real time, default rates, sink {sink}, batch_blocks {batch}, {seconds:.0f} s: bridge CPU median "
           f"{statistics.median(cpu):.1f} % of one core (p90 {sorted(cpu)[int(0.9 * len(cpu))]:.1f} %; target <= 20 %); "
           f"lag p50 per 5 s window first {p50[0]:.1f} ms, last {p50[-1]:.1f} ms, max of windows "
           f"{max(s[6] for s in status[1:]):.1f} ms (growth {p50[-1] - p50[0]:+.1f} ms); {samples:.0f} samples, "
           f"{status[-1][2]:.0f} impacts, {gaps:.0f} dropped blocks"
           + (f"; .rrd {size / 1e6:.1f} MB ({size / 1e6 / (seconds + 2):.2f} MB/s)" if size else ""))
+    if gaps or max(s[6] for s in status[1:]) > 1000:
+        print("  status lines (a stall or dropped blocks: see the lag and slowest message per window):")
+        for m in STATUS.finditer(bridge_log.read_text(errors="replace")):
+            print("   ", m.group(0))
 
 
 def offline(seconds: float, tmp: Path) -> None:
@@ -115,11 +119,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="live measurement, s (default 60)")
     parser.add_argument("--sink", default="save", choices=("save", "serve_web"))
+    parser.add_argument("--batch", type=int, default=5, help="batch_blocks of the bridge (default 5, as configured)")
     parser.add_argument("--offline-seconds", type=float, default=20.0, help="simulated s converted offline")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_rerun_") as tmp:
         offline(args.offline_seconds, Path(tmp))
-        live(args.seconds, args.sink, Path(tmp))
+        live(args.seconds, args.sink, Path(tmp), args.batch)
 
 
 if __name__ == "__main__":

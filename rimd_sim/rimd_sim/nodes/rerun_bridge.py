@@ -84,6 +84,7 @@ class RerunBridgeNode(Node):
         self.mapper.log_static()
         self._lags: deque[float] = deque(maxlen=10_000)
         self._received = 0
+        self._slowest = 0.0  # s, longest message handling since the last status line
 
         reliability = ReliabilityPolicy.RELIABLE if p["reliable"] else ReliabilityPolicy.BEST_EFFORT
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=500, reliability=reliability)
@@ -102,7 +103,9 @@ class RerunBridgeNode(Node):
     def _handler(self, topic: str):
         def on_message(msg: Any) -> None:
             self._received += 1
+            start = time.perf_counter()
             self.mapper.log_message(topic, msg)
+            self._slowest = max(self._slowest, time.perf_counter() - start)
             if topic == "impact/force":
                 end_ns = stamp_ns(msg.header.stamp) + round(len(msg.samples) * 1e9 / msg.sample_rate)
                 self._lags.append((time.time_ns() - end_ns) / 1e9)
@@ -115,6 +118,8 @@ class RerunBridgeNode(Node):
         s = self.mapper.stats
         lag = (f"lag p50 {lags[len(lags) // 2] * 1e3:.1f} ms, max {lags[-1] * 1e3:.1f} ms" if lags
                else "lag n/a")
+        lag += f", slowest message {self._slowest * 1e3:.1f} ms"
+        self._slowest = 0.0
         self.get_logger().info(
             f"status: {self._received} messages, {sum(s.samples.values())} samples, {s.impacts} impacts, "
             f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}")
