@@ -36,6 +36,8 @@ def _config_files() -> list[str]:
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
 NODE_EXECUTABLES: list[str] = [
     "rimd_simulator = rimd_sim.nodes.simulator:main",
+    "rimd_recorder = rimd_sim.nodes.recorder:main",
+    "rimd_replay = rimd_sim.nodes.replay:main",
     "rimd_rerun = rimd_sim.nodes.rerun_bridge:main",
 ]
 

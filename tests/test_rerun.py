@@ -150,6 +150,41 @@ def test_offline_recording_gives_the_same_entities_and_its_counts(tmp_path, repo
     assert np.allclose(data["poincare/points"].times / 1e9, np.arange(1, 12) / 3.75, atol=1e-3)
 
 
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_a_recording_of_rimd_recorder_gives_the_same_view(ros_processes, ros_executor, tmp_path):
+    """The offline path on a file of the real recorder (issue 5): every recorded sample and impact is in the
+    .rrd at its time, with the same entities as the live bridge."""
+    from harness.bags import read_with_mcap_ros2
+    from harness.rig import record_rig
+
+    out = tmp_path / "rec"
+    recorder, _, _ = record_rig(ros_processes, ros_executor, out, 5.0)  # motor ramps 0 -> 3.75 Hz at 2 Hz/s
+    recorder.send_signal(signal.SIGINT)
+    assert recorder.wait(30) == 0, recorder.tail()
+    (path,) = out.glob("*.mcap")
+    recorded = read_with_mcap_ros2(path)
+    samples: dict[str, int] = {}
+    for topic, _, _, msg in recorded:
+        for ch in CHANNELS:
+            if topic == "/rig/" + ch.topic:
+                samples[ch.name] = samples.get(ch.name, 0) + len(msg.samples)
+    events = [msg for topic, _, _, msg in recorded if topic == "/rig/impact/events"]
+    truth = [msg for topic, _, _, msg in recorded if topic == "/rig/truth"]
+    rrd = tmp_path / "from_recorder.rrd"
+    result = subprocess.run(["rimd", "rerun", str(out), "--save", str(rrd)], capture_output=True, text=True,
+                            timeout=60)  # the recording directory
+    assert result.returncode == 0, result.stderr
+    verify_rrd(rrd)
+    data = load_rrd(rrd)
+    assert ENTITIES <= set(data), sorted(ENTITIES - set(data))
+    runs = check_channels(data, samples)
+    assert all(first == 0 for first, _ in runs.values())  # the rig started paused: recorded from sample 0
+    assert events and data["impacts/table"].times.size == len(events)
+    assert np.array_equal(data["impacts/table"].scalars("peak_force_N"), [e.peak_force for e in events])
+    assert data["phase_plane/trajectory"].times.size == len(truth)
+
+
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
 def test_offline_to_a_viewer_at_a_url(ros_processes, tmp_path):
     """Sink connect: the data reach what listens at the URL (here ``rerun --save``, a Rerun endpoint that

@@ -7,15 +7,19 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from harness.ros import spin_until
 from rimd_msgs.msg import MotorState
+from rimd_sim.recording.cdr import block_span
+from rimd_sim.recording.reader import open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
 
-def test_rig_brings_up_the_simulator_and_stops_cleanly(ros_processes, ros_executor):
+def test_rig_brings_up_the_simulator_and_stops_cleanly(ros_processes, ros_executor, tmp_path):
     import rclpy
 
-    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "8", name="rimd_rig")
-    rig.wait_for_output(r"rimd rig: running rimd_simulator", timeout=30)
+    out = tmp_path / "rec"
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "8", "--output-dir", str(out),
+                                     name="rimd_rig")
+    rig.wait_for_output(r"rimd rig: running rimd_recorder, rimd_simulator", timeout=30)
     node = rclpy.create_node("probe_rig", context=ros_executor.context)
     ros_executor.add_node(node)
     motor: list[MotorState] = []
@@ -25,7 +29,31 @@ def test_rig_brings_up_the_simulator_and_stops_cleanly(ros_processes, ros_execut
     assert spin_until(ros_executor, lambda: len(motor) > 100 and motor[-1].frequency > 1.0, timeout=20)
     assert motor[-1].frequency_setpoint == 3.75
     assert rig.wait(30) == 0, rig.tail()  # --duration elapsed: the nodes were stopped in order
-    assert "rimd rig: stopped" in rig.output()
+    assert f"rimd rig: stopped; the recording is in {out}" in rig.output()
+    assert "the rig runs from sample 0" in rig.output()
+    # Stopped in order (simulator, then recorder): the recording is complete and starts at sample 0.
+    recording = open_recording(out)
+    assert recording.complete
+    blocks = [block_span(m.data) for m in recording.messages(["/rig/impact/force"])]
+    assert blocks[0][0] == 0 and len(blocks) > 300
+    assert all(b[0] == a[0] + a[1] for a, b in zip(blocks, blocks[1:], strict=False))
+    assert "LOSS" not in rig.output()
+
+
+def test_rig_without_recorder(ros_processes, tmp_path):
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "3", "--no-record",
+                                     name="rimd_rig_norec")
+    assert rig.wait(40) == 0, rig.tail()
+    assert "rimd rig: running rimd_simulator with" in rig.output() and "Not recording" in rig.output()
+
+
+def test_rig_refuses_a_bad_recorder_section(ros_processes, tmp_path, repo_root):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((repo_root / "config" / "rimd.yaml").read_text().replace("compression: zstd", "compression: rar"))
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--config", str(bad), name="rimd_rig_badrec")
+    assert rig.wait(30) == 1
+    assert "compression: 'rar' refused: must be one of zstd, lz4, none" in rig.output()
+    assert "running" not in rig.output()
 
 
 def test_rig_refuses_a_bad_config_before_starting(ros_processes, tmp_path):

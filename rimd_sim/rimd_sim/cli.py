@@ -54,21 +54,24 @@ class Verb:
 
 _BRING_UP = (5, "Recorder, replay and bring-up")
 _SIMULATOR = (4, "Simulator node")
-_ANALYSIS = (7, "Analysis and experiments")
 
 VERBS: tuple[Verb, ...] = (
-    Verb("rig", "bring up the rig from config (today the simulator; recorder and Rerun bridge: issues 5, 6)",
+    Verb("rig", "bring up the rig from config: recorder and simulator (Rerun bridge: issue 6)",
          "rimd_sim.verbs.rig"),
     Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
-         None, *_ANALYSIS),
+         "rimd_sim.verbs.experiment"),
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
-         None, *_ANALYSIS),
+         "rimd_sim.verbs.analyze"),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
          "rimd_sim.verbs.sweep"),
-    Verb("bifurcation", "bifurcation diagram of the impact force versus motor frequency", None, *_ANALYSIS),
-    Verb("peterka", "Peterka diagram: impact regimes in the (frequency, gap) plane", None, *_ANALYSIS),
-    Verb("poincare", "Poincare sections of the simulated or recorded motion", None, *_ANALYSIS),
-    Verb("basins", "basins of attraction of coexisting motions", None, *_ANALYSIS),
+    Verb("bifurcation", "bifurcation diagram: stroboscopic l sin(theta)/A0 versus frequency ratio, up and down",
+         "rimd_sim.verbs.bifurcation"),
+    Verb("peterka", "Peterka diagram: impact regimes (p impacts / n cycles) in the (frequency, gap) plane",
+         "rimd_sim.verbs.peterka"),
+    Verb("poincare", "phase plane, Poincare map and largest Lyapunov exponent of the simulated motion",
+         "rimd_sim.verbs.poincare"),
+    Verb("basins", "basins of attraction of coexisting motions over initial (theta, theta')",
+         "rimd_sim.verbs.basins"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 from .sweep import SweepResult  # noqa: E402
 
@@ -37,5 +39,219 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
         ax.set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+# ---- nonlinear analyses (issue 7): bifurcation, phase plane + Poincare map, Peterka map, basins ----------
+
+#: Fixed colours of the main classes (the paper's Fig. 12: period 1 red, period 1/2 green).
+CLASS_COLOURS = {
+    "no impact": "#e8e8e8", "1/1": "#d62728", "1/2": "#2ca02c", "2/2": "#ff7f0e", "1/3": "#1f77b4",
+    "2/3": "#9467bd", "2/4": "#8c564b", "2/1": "#e377c2", "chaotic/non-periodic": "#000000",
+    "integration failed": "#ffff00", "inside the stop": "#ffffff",
+}
+_SPARE = ["#17becf", "#bcbd22", "#7f7f7f", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94"]
+OTHER_PERIODIC = "other periodic"
+_OTHER_COLOUR = "#555555"
+
+
+def class_palette(labels) -> dict[str, str]:
+    """Colour per class present: fixed ones first, then spare colours by frequency, the rest 'other periodic'."""
+    from collections import Counter
+
+    counts = Counter(labels)
+    palette = {c: CLASS_COLOURS[c] for c in CLASS_COLOURS if c in counts}
+    spare = iter(_SPARE)
+    for c, _ in counts.most_common():
+        if c not in palette:
+            colour = next(spare, None)
+            palette[c] = colour if colour is not None else _OTHER_COLOUR
+    return palette
+
+
+def _class_image(ax, x, y, labels, palette):
+    from matplotlib.colors import ListedColormap
+
+    names = list(palette)
+    index = {c: i for i, c in enumerate(names)}
+    grid = [[index[c] for c in row] for row in labels]
+    ax.pcolormesh(x, y, grid, cmap=ListedColormap([palette[c] for c in names]), vmin=-0.5,
+                  vmax=len(names) - 0.5, shading="nearest")
+
+
+def _class_legend(ax, palette, extra=()):
+    from matplotlib.patches import Patch
+
+    handles, others = [], 0
+    for name, col in palette.items():
+        if col == _OTHER_COLOUR:
+            others += 1
+        else:
+            handles.append(Patch(facecolor=col, edgecolor="0.5", label=name))
+    if others:
+        handles.append(Patch(facecolor=_OTHER_COLOUR, edgecolor="0.5", label=f"{OTHER_PERIODIC} ({others} classes)"))
+    ax.legend(handles=[*handles, *extra], fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+              title="impacts / cycles", title_fontsize=8)
+
+
+def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
+    """Stroboscopic ``l sin(theta) / A0`` versus Omega/omega_n, up and down sweeps (the paper's Fig. 11)."""
+    fig, ax = plt.subplots(figsize=(9, 5))
+    style = {"up": ("tab:blue", 1.6), "down": ("tab:red", 0.8)}
+    for b in branches:
+        colour, size = style.get(b.direction, ("k", 1.0))
+        xs = [p.frequency_ratio for p in b.points for _ in p.u]
+        ys = [float(u) for p in b.points for u in p.u]
+        ax.scatter(xs, ys, s=size, c=colour, label=f"sweep {b.direction}", linewidths=0, alpha=0.8)
+    ax.set_xlabel("Omega / omega_n")
+    ax.set_ylabel("l sin(theta) / A0 (stroboscopic)")
+    ax.grid(alpha=0.3)
+    ax.legend(markerscale=6, fontsize=8)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title: str = "") -> Path:
+    """Displacements over time and the phase plane with the Poincare map (the paper's Figs 9 and 10).
+
+    ``x_rimd``, ``x_cart`` in mm (inertial); ``u = l sin(theta) / A0``, ``v`` its rate over ``A0 Omega``.
+    """
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.8))
+    ax.plot(t, x_rimd, "b-", lw=1, label="RIMD (inertial)")
+    ax.plot(t, x_cart, "k--", lw=1, label="cart")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("displacement (mm)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    ax2.plot(u, v, "b-", lw=0.6, label="phase plane")
+    ax2.plot(strobe_u, strobe_v, "ro", ms=5, label="Poincare map (motor phase 0)")
+    ax2.set_xlabel("l sin(theta) / A0")
+    ax2.set_ylabel("l theta' cos(theta) / (A0 Omega)")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=8, loc="upper left")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_peterka(result, path: Path, title: str = "") -> Path:
+    """Class of the motion from rest over gap/A0 x Omega/omega_n, coexisting attractors marked (Fig. 12 left)."""
+    from matplotlib.lines import Line2D
+
+    palette = class_palette(result.primary.ravel().tolist())
+    fig, ax = plt.subplots(figsize=(10, 6))
+    _class_image(ax, result.frequency_ratio, result.gap_ratio, result.primary, palette)
+    gi, fj = np.nonzero(result.coexisting)
+    marks = []
+    if len(gi):
+        ms = max(1.0, min(4.0, 400.0 / max(result.primary.shape)))
+        ax.plot(result.frequency_ratio[fj], result.gap_ratio[gi], "x", color="0.25", ms=ms, mew=0.6)
+        marks = [Line2D([], [], marker="x", ls="", color="0.25", label="coexisting attractors")]
+    ax.set_xlabel("Omega / omega_n")
+    ax.set_ylabel("gap / A0")
+    _class_legend(ax, palette, marks)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_basins(result, path: Path, title: str = "") -> Path:
+    """Class of the steady motion per initial condition (theta0, theta_dot0)."""
+    palette = class_palette(result.labels.ravel().tolist())
+    fig, ax = plt.subplots(figsize=(9, 6))
+    _class_image(ax, result.theta0 * 1e3, result.theta_dot0, result.labels, palette)
+    ax.set_xlabel("initial theta (mrad)")
+    ax.set_ylabel("initial theta' (rad/s)")
+    _class_legend(ax, palette)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+# ---- recorded analyses (rimd analyze) ---------------------------------------------------------------------
+
+def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
+    """Steady peak force per dwell step versus motor frequency, from the events and from the force channel."""
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    for label, marker in (("events", "o"), ("channel", "x")):
+        pts = [(r["frequency_hz"], r[f"peak_force_{label}_n"], r[f"impacts_per_cycle_{label}"]) for r in rows
+               if r[f"peak_force_{label}_n"] is not None]
+        if pts:
+            f, peak, rate = zip(*pts, strict=True)
+            ax.plot(f, peak, marker, ms=6, label=f"from /rig/impact/{'events' if label == 'events' else 'force'}")
+            ax2.plot(f, rate, marker, ms=6)
+    ax.set_ylabel("steady peak force F_i (N)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    ax2.set_ylabel("impacts / cycle")
+    ax2.set_xlabel("motor frequency setpoint (Hz)")
+    ax2.grid(alpha=0.3)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "") -> Path:
+    """Peak force of every impact over time (events and force-channel detections), steps shaded."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for s in steps:
+        if s.steady_from is not None:
+            ax.axvspan(s.steady_from, s.end, color="#dddddd", alpha=0.5, lw=0)
+            ax.text(s.steady_from, 0, f"{s.setpoint:g} Hz", fontsize=7, va="bottom")
+    ax.plot(events_t, events_peak, "o", ms=4, mfc="none", label="/rig/impact/events peak_force")
+    ax.plot(det_t, det_peak, "x", ms=4, label="detected in /rig/impact/force")
+    ax.set_xlabel("time (s, simulation)")
+    ax.set_ylabel("peak force (N)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") -> Path:
+    """One panel per step: phase plane (relative displacement vs velocity, mm and mm/s) and Poincare points.
+
+    Each panel dict: ``label``, ``x``, ``v`` (curve, m and m/s), ``px``, ``pv`` (Poincare points).
+    """
+    n = max(1, len(panels))
+    cols = min(4, n)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3.6 * rows), squeeze=False)
+    for ax, panel in zip(axes.flat, panels, strict=False):
+        ax.plot(np.asarray(panel["x"]) * 1e3, np.asarray(panel["v"]) * 1e3, "b-", lw=0.5)
+        ax.plot(np.asarray(panel["px"]) * 1e3, np.asarray(panel["pv"]) * 1e3, "ro", ms=4, label="motor phase 0")
+        ax.set_title(panel["label"], fontsize=9)
+        ax.set_xlabel("x_rimd - x_cart (mm)", fontsize=8)
+        ax.set_ylabel("velocity (mm/s)", fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.axis("off")
+    if panels:
+        axes.flat[0].legend(fontsize=7, loc="upper left")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

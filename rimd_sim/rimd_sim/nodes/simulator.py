@@ -113,7 +113,13 @@ class SimulatorNode(Node):
         self._t0_ns = (time.time_ns() // 1_000_000) * 1_000_000 if self._rtf == 1.0 else 0
         self._wall_ref = time.monotonic()
         self._sim_ref = Fraction(0)
-        self._paused = False
+        # Node-only, read at start: wait for /rig/resume (lets recorders and DAQ software connect first, so
+        # that they see sample 0). At real time the wall-clock t0 is then taken at the first resume.
+        self.declare_parameter("start_paused", False, ParameterDescriptor(
+            name="start_paused", type=_ROS_TYPES["bool"], read_only=True,
+            description="start paused: publish nothing until /rig/resume (t0 is then the time of that call)"))
+        self._paused = bool(self.get_parameter("start_paused").value)
+        self._started = not self._paused
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._lateness: deque[float] = deque(maxlen=1000)
@@ -122,7 +128,11 @@ class SimulatorNode(Node):
         self._impacts = 0
         self._last_error = ""
 
-        depth = max(10, math.ceil(self._config.block_rate) + 10)  # at least one second of blocks
+        # History of each publisher: one second of blocks at real time. Faster than real time, 20 s of simulation
+        # time (at 20x that is still one second of wall time for a reliable subscriber, such as the recorder,
+        # to fall behind without losing a block; memory: about 3 MB per 20 kHz channel).
+        seconds = 1 if self._rtf == 1.0 else 20
+        depth = max(10, math.ceil(self._config.block_rate * seconds) + 10)
         self._rates = {ch.name: Fraction(repr(ch.sample_rate)) for ch in self._config.channels}
         self._truth_rate = Fraction(repr(self._config.truth_rate))
         self._msgs = {ch.name: SampleBlock() for ch in self._config.channels}
@@ -402,6 +412,9 @@ class SimulatorNode(Node):
                 return response
             self._sim_ref = self._sim.time
             self._wall_ref = time.monotonic()
+            if not self._started and self._rtf == 1.0:
+                self._t0_ns = (time.time_ns() // 1_000_000) * 1_000_000
+            self._started = True
             self._paused = False
         self._wake.set()
         response.success = True

@@ -8,6 +8,8 @@ import importlib
 #: Node name -> module with ``main(args)``. The recorder and replay join with their issue.
 NODES = {
     "simulator": "rimd_sim.nodes.simulator",
+    "recorder": "rimd_sim.nodes.recorder",
+    "replay": "rimd_sim.nodes.replay",
     "rerun": "rimd_sim.nodes.rerun_bridge",
 }
 

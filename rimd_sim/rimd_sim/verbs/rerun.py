@@ -1,4 +1,6 @@
-"""``rimd rerun REC.mcap [--save OUT.rrd | --connect URL]``: the live bridge's view of a recording, without ROS.
+"""``rimd rerun REC [--save OUT.rrd | --connect URL]``: the live bridge's view of a recording, without ROS.
+
+``REC`` is an ``.mcap`` file or a recording directory (all its ``.mcap`` files, in order).
 
 Reads the rig topics of a ROS 2 MCAP recording and logs them through the same mapping as the ``rimd_rerun``
 node (:mod:`rimd_sim.viz.rerun_map`), to a spawned viewer (default), a viewer at a URL, or an ``.rrd`` file.
@@ -16,7 +18,8 @@ from rimd_sim.cli import CommandError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``rimd rerun``."""
-    parser.add_argument("recording", type=Path, help="ROS 2 MCAP recording (REC.mcap)")
+    parser.add_argument("recording", type=Path,
+                        help="ROS 2 MCAP recording: one .mcap file or a recording directory of rimd_recorder")
     target = parser.add_mutually_exclusive_group()
     target.add_argument("--save", type=Path, default=None, metavar="OUT.rrd",
                         help="write an .rrd file instead of opening a viewer")

@@ -1,8 +1,11 @@
 """``rimd rig``: bring up the rig from a configuration file, like a launch file.
 
-Today the rig is the simulator node; the recorder and the Rerun bridge join it when their issues land
-(5 and 6). The nodes run as separate processes; Ctrl-C (or ``--duration``) stops them in reverse order,
-each with SIGINT first, then SIGTERM, then SIGKILL after bounded waits.
+The rig is the simulator, the recorder (when its config section has ``enabled: true``) and, once it lands,
+the Rerun bridge, each a separate process started with ``--ros-args --params-file CONFIG``. Consumers start
+first; the simulator starts paused and is resumed once every rig topic has all its consumers, so the
+recording holds every sample from sample 0. Ctrl-C (or ``--duration``) stops the nodes in reverse order
+(simulator first, recorder last, so the recording gets everything), each with SIGINT, then SIGTERM, then
+SIGKILL after bounded waits.
 """
 
 from __future__ import annotations
@@ -13,13 +16,31 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from rimd_sim.core import ConfigError, load_config
-from rimd_sim.core.config import find_config_file
+from rimd_sim.core.config import find_config_file, read_ros_parameters
 
-#: (name, module) of the nodes of the rig, started in this order and stopped in the reverse order.
-RIG_NODES = (("rimd_simulator", "rimd_sim.nodes.simulator"),)
+
+@dataclass(frozen=True)
+class RigNode:
+    """A node of the rig: its name (= config section), module, and whether it consumes the rig's topics."""
+
+    name: str
+    module: str
+    consumer: bool
+
+
+#: The nodes in start order (stopped in reverse). Consumers start before the simulator.
+RIG_NODES = (
+    RigNode("rimd_recorder", "rimd_sim.nodes.recorder", consumer=True),
+    RigNode("rimd_simulator", "rimd_sim.nodes.simulator", consumer=False),
+)
+
+#: Topics every consumer subscribes to before the simulator is resumed.
+RIG_TOPICS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
+              "/rig/impact/events", "/rig/motor/state", "/rig/truth")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ROS parameter YAML of the rig (default: config/rimd.yaml)")
     parser.add_argument("--duration", type=float, default=0.0,
                         help="stop after this many seconds of wall time (default: run until Ctrl-C)")
+    parser.add_argument("--output-dir", type=Path, default=None,
+                        help="record into this directory (default: the recorder's output_dir in the config)")
+    parser.add_argument("--no-record", action="store_true", help="do not start the recorder")
 
 
 def _stop(proc: subprocess.Popen, name: str) -> int | None:
@@ -45,14 +69,71 @@ def _stop(proc: subprocess.Popen, name: str) -> int | None:
     return proc.returncode
 
 
+def _section(config_path: Path, name: str) -> dict | None:
+    try:
+        return read_ros_parameters(config_path, node=name)
+    except ConfigError:
+        return None
+
+
+def _plan(args: argparse.Namespace, config_path: Path) -> list[tuple[RigNode, list[str]]]:
+    """The nodes to start with their extra ROS arguments; raises ConfigError for a bad recorder section."""
+    plan = []
+    for node in RIG_NODES:
+        extra: list[str] = []
+        if node.name == "rimd_recorder":
+            section = _section(config_path, node.name)
+            if args.no_record or section is None or not section.get("enabled", True):
+                continue
+            from rimd_sim.recording.settings import RecorderConfigError, check_recorder_parameters
+
+            if args.output_dir is not None:
+                section["output_dir"] = str(args.output_dir)
+            try:
+                check_recorder_parameters(section)
+            except RecorderConfigError as exc:
+                raise ConfigError("rimd_recorder", str(config_path), str(exc)) from None
+            output_dir = Path(section.get("output_dir", "recordings")).expanduser().resolve()
+            extra = ["-p", f"output_dir:={output_dir}"]
+        plan.append((node, extra))
+    return plan
+
+
+def _resume_when_connected(consumers: int, procs, timeout: float = 20.0) -> bool:  # noqa: ANN001
+    """Wait until each rig topic has ``consumers`` subscribers, then call /rig/resume. True when resumed."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    from std_srvs.srv import Trigger
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        node = rclpy.create_node("rimd_rig", context=context, start_parameter_services=False)
+        deadline = time.monotonic() + timeout
+        client = node.create_client(Trigger, "/rig/resume")
+        while time.monotonic() < deadline and all(p.poll() is None for _, p in procs):
+            if all(node.count_subscribers(t) >= consumers for t in RIG_TOPICS) and client.service_is_ready():
+                future = client.call_async(Trigger.Request())
+                executor = rclpy.executors.SingleThreadedExecutor(context=context)
+                executor.add_node(node)
+                executor.spin_until_future_complete(future, timeout_sec=5.0)
+                return bool(future.done() and future.result().success)
+            time.sleep(0.05)
+        return False
+    finally:
+        context.try_shutdown()
+
+
 def main(args: argparse.Namespace) -> int:
     """Start the rig's nodes and wait; return non-zero if a node failed."""
     try:
         config_path = args.config if args.config is not None else find_config_file("rimd.yaml")
         config = load_config(config_path)  # refuse a bad file before starting anything
+        plan = _plan(args, Path(config_path))
     except ConfigError as exc:
         print(f"rimd rig: {exc}", file=sys.stderr)
         return 1
+    consumers = sum(1 for node, _ in plan if node.consumer)
     procs: list[tuple[str, subprocess.Popen]] = []
     stopping = False
 
@@ -62,14 +143,27 @@ def main(args: argparse.Namespace) -> int:
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     status = 0
+    recording_dir = None
     try:
-        for name, module in RIG_NODES:
-            cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(config_path)]
-            procs.append((name, subprocess.Popen(cmd, start_new_session=True)))
+        for node, extra in plan:
+            cmd = [sys.executable, "-m", node.module, "--ros-args", "--params-file", str(config_path), *extra]
+            if node.name == "rimd_simulator" and consumers:
+                cmd += ["-p", "start_paused:=true"]
+            if node.name == "rimd_recorder":
+                recording_dir = extra[-1].split(":=", 1)[1]
+            procs.append((node.name, subprocess.Popen(cmd, start_new_session=True)))
         print(f"rimd rig: running {', '.join(n for n, _ in procs)} with {config_path} "
               f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
               f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
-              "Recorder and Rerun bridge: not implemented yet (issues 5, 6). Ctrl-C stops.", flush=True)
+              + (f"Recording into {recording_dir}. " if recording_dir else "Not recording. ")
+              + "Ctrl-C stops.", flush=True)
+        if consumers:
+            if _resume_when_connected(consumers, procs):
+                print("rimd rig: every consumer is connected; the rig runs from sample 0", flush=True)
+            elif all(p.poll() is None for _, p in procs):
+                print("rimd rig: the consumers did not all connect within 20 s; resuming the rig anyway",
+                      file=sys.stderr, flush=True)
+                _resume_when_connected(0, procs, timeout=10.0)
         deadline = time.monotonic() + args.duration if args.duration > 0 else None
         while not stopping and (deadline is None or time.monotonic() < deadline):
             for name, proc in procs:
@@ -85,5 +179,9 @@ def main(args: argparse.Namespace) -> int:
                 status = 1
         for s, handler in previous.items():
             signal.signal(s, handler)
-    print("rimd rig: stopped", flush=True)
+    if recording_dir:
+        print(f"rimd rig: stopped; the recording is in {recording_dir} "
+              f"(replay: rimd node replay --ros-args -p file:={recording_dir})", flush=True)
+    else:
+        print("rimd rig: stopped", flush=True)
     return status

@@ -40,14 +40,28 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
                       info: RecordingInfo | None = None) -> Iterator[tuple[str, Any]]:
     """Yield ``(relative topic, decoded message)`` of the rig topics of ``path`` in log-time order.
 
+    ``path`` is one ``.mcap`` file or a recording directory (a rosbag2 bag of ``rimd_recorder``: its
+    ``.mcap`` files in name order, i.e. in the order they were split).
+
     Raises:
-        McapError: The file cannot be opened or read as MCAP, or has no rig topic under ``namespace``.
+        McapError: A file cannot be opened or read as MCAP, or has no rig topic under ``namespace``.
     """
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(path.glob("*.mcap"))
+        if not files:
+            raise McapError(f"{path}: a directory without .mcap files")
+        for file in files:
+            yield from _read_file(file, namespace, info)
+    else:
+        yield from _read_file(path, namespace, info)
+
+
+def _read_file(path: Path, namespace: str, info: RecordingInfo | None) -> Iterator[tuple[str, Any]]:
     from mcap.exceptions import McapError as _McapLibError
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    path = Path(path)
     if not path.is_file():
         raise McapError(f"{path}: no such file")
     try:

@@ -1,0 +1,383 @@
+"""Analyses of a recording alone (never the simulator's internals): impacts, stepped sweeps, phase planes.
+
+Everything here works on what a recording holds (SPEC section 4):
+
+* **Impact detection from the sampled force channel** (``/rig/impact/force``), the paper's routine (section
+  3: "for each excitation frequency the maximum impact force is detected"): every run of consecutive samples
+  at or above a threshold (default 2 N, 200 times the sensor's noise) is one impact; its force peak ``F_i``
+  is the largest sample of the run (no interpolation: the paper reads the maximum value), its start the
+  threshold crossing (linearly interpolated between samples), its impulse the sum of the run's samples times
+  the sample period. A run that touches a hole in the data (lost blocks, the start or end of the recording)
+  is flagged ``complete = False``.
+* **Cross-check** with the recorded ``/rig/impact/events``: an event (contact start ``t``, duration ``d``)
+  matches the first unmatched detection whose peak lies in ``[t - 2/rate, t + d + 2/rate]``. Events without
+  a detection are misses (split into below-threshold ones and others), detections without an event extras;
+  events outside the force channel's recorded samples are "not covered", not misses.
+* **Stepped sweeps**: ``/rig/motor/state`` is cut into steps of constant ``frequency_setpoint``. Each step's
+  ramp ends when the actual ``frequency`` reaches the setpoint; ``settle`` seconds after that are discarded
+  and the rest of the step is the steady window, over which the steady peak force (largest peak, as the
+  paper and :mod:`rimd_sim.analysis.sweep` read it) and the impacts per cycle are taken, both from the
+  events and from the force channel.
+* **Phase plane**: RIMD displacement relative to the cart (``/rig/rimd/displacement`` minus
+  ``/rig/cart/displacement``, both inertial lasers at 2 kHz) versus its velocity, a Savitzky-Golay derivative
+  (cubic, 21 samples = 10.5 ms at 2 kHz, which keeps the laser noise's derivative small and still follows
+  an impact's velocity reversal within a few samples).
+* **Poincare map**: one point per excitation cycle, at motor phase 0: the instants where the unwrapped
+  motor phase ``2 pi cycle_index + phase`` crosses a multiple of ``2 pi``, linearly interpolated between
+  motor states (exact at constant frequency), the phase-plane coordinates interpolated there.
+
+Times are seconds relative to the recording's earliest stamp (``origin_ns``); stamps are simulation time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rimd_sim.recording.reader import Recording, open_recording
+
+FORCE = "/rig/impact/force"
+EVENTS = "/rig/impact/events"
+MOTOR = "/rig/motor/state"
+RIMD_X = "/rig/rimd/displacement"
+CART_X = "/rig/cart/displacement"
+BLOCK_TOPICS = (FORCE, RIMD_X, CART_X)
+
+#: Default detection threshold of the force channel (N).
+DEFAULT_THRESHOLD = 2.0
+
+__all__ = [
+    "Channel", "RecordedData", "Step", "load", "detect_impacts", "match_impacts", "segment_steps",
+    "step_table", "phase_plane", "poincare_times", "poincare_points",
+]
+
+
+@dataclass
+class Channel:
+    """A sampled channel: sample indices, times (s from the origin) and values, with its holes."""
+
+    topic: str
+    rate: float
+    index: np.ndarray
+    time: np.ndarray
+    values: np.ndarray
+    lost_samples: int = 0
+    lost_blocks: int = 0
+
+    def segments(self) -> list[slice]:
+        """Slices of consecutive samples (split at every hole of the index)."""
+        if self.index.size == 0:
+            return []
+        cuts = np.flatnonzero(np.diff(self.index) != 1) + 1
+        bounds = [0, *cuts.tolist(), self.index.size]
+        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+
+@dataclass
+class RecordedData:
+    """The decoded content of a recording that the analyses use."""
+
+    path: Path
+    recording: Recording
+    origin_ns: int
+    channels: dict[str, Channel] = field(default_factory=dict)
+    events: dict[str, np.ndarray] = field(default_factory=dict)
+    motor: dict[str, np.ndarray] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+    undecodable: dict[str, int] = field(default_factory=dict)
+
+    def loss(self) -> dict:
+        """What was lost: unreadable file tails, holes in the sampled channels, undecodable messages."""
+        return {
+            "complete": self.recording.complete,
+            "files": [r.describe() for r in self.recording.reports],
+            "lost_samples": {t: c.lost_samples for t, c in self.channels.items() if c.lost_samples},
+            "lost_blocks": {t: c.lost_blocks for t, c in self.channels.items() if c.lost_blocks},
+            "undecodable_messages": dict(self.undecodable),
+        }
+
+
+def _stamp_ns(header) -> int:  # noqa: ANN001
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+_EVENT_FIELDS = ("duration", "peak_force", "impulse", "impact_velocity", "max_penetration", "excitation_frequency",
+                 "excitation_phase", "cycle_index", "index")
+_MOTOR_FIELDS = ("frequency_setpoint", "frequency", "phase", "cycle_index")
+
+
+def load(path: str | Path) -> RecordedData:
+    """Open and decode a recording (file or directory); damaged parts are skipped and reported.
+
+    Raises:
+        rimd_sim.recording.reader.RecordingError: The path does not exist or is not MCAP at all.
+    """
+    from rclpy.serialization import deserialize_message
+
+    import rimd_msgs.msg
+
+    recording = open_recording(path)
+    kinds = {FORCE: rimd_msgs.msg.SampleBlock, RIMD_X: rimd_msgs.msg.SampleBlock,
+             CART_X: rimd_msgs.msg.SampleBlock, EVENTS: rimd_msgs.msg.ImpactEvent, MOTOR: rimd_msgs.msg.MotorState}
+    blocks: dict[str, list] = {t: [] for t in BLOCK_TOPICS}
+    events: list = []
+    motor: list = []
+    undecodable: dict[str, int] = {}
+    counts: dict[str, int] = {}
+    for msg in recording.messages(list(kinds)):
+        try:
+            decoded = deserialize_message(msg.data, kinds[msg.topic])
+        except Exception:  # noqa: BLE001 - damaged bytes inside a readable record: count, do not stop
+            undecodable[msg.topic] = undecodable.get(msg.topic, 0) + 1
+            continue
+        counts[msg.topic] = counts.get(msg.topic, 0) + 1
+        if msg.topic in blocks:
+            blocks[msg.topic].append((_stamp_ns(decoded.header), int(decoded.first_index),
+                                      float(decoded.sample_rate), np.asarray(decoded.samples, dtype=float)))
+        elif msg.topic == EVENTS:
+            events.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _EVENT_FIELDS)))
+        else:
+            motor.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _MOTOR_FIELDS)))
+    stamps = [b[0][0] for b in blocks.values() if b] + [e[0] for e in events[:1]] + [m[0] for m in motor[:1]]
+    origin = min(stamps) if stamps else 0
+    data = RecordedData(Path(path), recording, origin, counts=counts, undecodable=undecodable)
+    for topic, items in blocks.items():
+        if items:
+            data.channels[topic] = _channel(topic, items, origin)
+    events.sort(key=lambda e: e[0])
+    data.events = _columns(events, ("time", *_EVENT_FIELDS), origin)
+    motor.sort(key=lambda m: m[0])
+    data.motor = _columns(motor, ("time", *_MOTOR_FIELDS), origin)
+    return data
+
+
+def _columns(rows: list[tuple], names: tuple[str, ...], origin: int) -> dict[str, np.ndarray]:
+    cols = {name: np.array([r[i] for r in rows], dtype=float) for i, name in enumerate(names)}
+    cols["time"] = np.array([(r[0] - origin) * 1e-9 for r in rows], dtype=float)
+    return cols
+
+
+def _channel(topic: str, items: list, origin: int) -> Channel:
+    """Samples of a channel in index order; sample n is at ``t_ref + n / rate`` (SPEC section 4)."""
+    items.sort(key=lambda b: b[1])
+    stamp0, first0, rate, _ = items[0]
+    index_parts, value_parts = [], []
+    expected = None
+    lost_samples = lost_blocks = 0
+    for _, first, _, samples in items:
+        if expected is not None and first < expected:   # duplicate or restarted counter: keep the first copy
+            continue
+        if expected is not None and first > expected:
+            lost_samples += first - expected
+            lost_blocks += max(1, round((first - expected) / max(samples.size, 1)))
+        index_parts.append(np.arange(first, first + samples.size, dtype=np.int64))
+        value_parts.append(samples)
+        expected = first + samples.size
+    index = np.concatenate(index_parts)
+    # Integer nanoseconds to the origin first: absolute stamps in float seconds would lose ~0.2 us.
+    t_ref = (stamp0 - origin) * 1e-9 - first0 / rate
+    return Channel(topic, rate, index, t_ref + index / rate, np.concatenate(value_parts), lost_samples, lost_blocks)
+
+
+# ---- impacts from the force channel ------------------------------------------------------------------------
+
+def detect_impacts(force: Channel, threshold: float = DEFAULT_THRESHOLD) -> dict[str, np.ndarray]:
+    """Impacts of the sampled force signal: one per run of samples ``>= threshold`` (see the module doc).
+
+    Returns:
+        Columns ``start`` (s, interpolated threshold crossing), ``peak_time`` (s), ``peak_force`` (N),
+        ``duration`` (s above the threshold), ``impulse`` (N s, over the run), ``complete`` (1.0 or 0.0).
+    """
+    rows = []
+    dt = 1.0 / force.rate
+    for seg in force.segments():
+        v = force.values[seg]
+        t = force.time[seg]
+        above = v >= threshold
+        if not above.any():
+            continue
+        edges = np.diff(above.astype(np.int8))
+        starts = np.flatnonzero(edges == 1) + 1
+        ends = np.flatnonzero(edges == -1) + 1
+        if above[0]:
+            starts = np.r_[0, starts]
+        if above[-1]:
+            ends = np.r_[ends, v.size]
+        for a, b in zip(starts, ends, strict=True):
+            k = a + int(np.argmax(v[a:b]))
+            if a > 0:   # interpolated crossing between sample a-1 (below) and a (at or above)
+                start = t[a - 1] + (threshold - v[a - 1]) / (v[a] - v[a - 1]) * dt
+            else:
+                start = t[a]
+            complete = a > 0 and b < v.size
+            rows.append((start, t[k], v[k], (b - a) * dt, float(v[a:b].sum()) * dt, float(complete)))
+    names = ("start", "peak_time", "peak_force", "duration", "impulse", "complete")
+    arr = np.array(rows, dtype=float).reshape(-1, len(names))
+    return {name: arr[:, i] for i, name in enumerate(names)}
+
+
+def _covered(force: Channel | None, times: np.ndarray) -> np.ndarray:
+    """True where a time lies inside a stretch of consecutive recorded force samples."""
+    covered = np.zeros(times.shape, dtype=bool)
+    if force is None:
+        return covered
+    for seg in force.segments():
+        covered |= (times >= force.time[seg][0]) & (times <= force.time[seg][-1])
+    return covered
+
+
+def match_impacts(detected: dict[str, np.ndarray], events: dict[str, np.ndarray], force: Channel | None,
+                  threshold: float = DEFAULT_THRESHOLD) -> dict:
+    """Cross-check detected impacts with the recorded events (see the module doc).
+
+    Returns:
+        ``event_match`` (per event: index of the matching detection or -1), ``detected_match`` (per detection:
+        index of the matching event or -1), ``covered`` (per event) and the counts ``matches``, ``misses``,
+        ``misses_below_threshold``, ``not_covered``, ``extras``, with the largest and median relative peak
+        difference of the matches.
+    """
+    n_ev = events.get("time", np.empty(0)).size
+    n_det = detected["peak_time"].size
+    event_match = np.full(n_ev, -1, dtype=int)
+    detected_match = np.full(n_det, -1, dtype=int)
+    slack = 2.0 / force.rate if force is not None else 0.0
+    order = np.argsort(detected["peak_time"])
+    peaks = detected["peak_time"][order]
+    for i in range(n_ev):
+        lo, hi = events["time"][i] - slack, events["time"][i] + events["duration"][i] + slack
+        for j in range(np.searchsorted(peaks, lo), np.searchsorted(peaks, hi, side="right")):
+            if detected_match[order[j]] < 0:
+                detected_match[order[j]] = i
+                event_match[i] = order[j]
+                break
+    covered = _covered(force, events["time"]) if n_ev else np.zeros(0, dtype=bool)
+    missed = (event_match < 0) & covered
+    below = missed & (events["peak_force"] < threshold) if n_ev else missed
+    matched = event_match >= 0
+    rel = np.abs(detected["peak_force"][event_match[matched]] / events["peak_force"][matched] - 1.0)
+    return {
+        "event_match": event_match, "detected_match": detected_match, "covered": covered,
+        "matches": int(matched.sum()), "misses": int(missed.sum()), "misses_below_threshold": int(below.sum()),
+        "not_covered": int((~covered).sum()), "extras": int((detected_match < 0).sum()),
+        "peak_difference_max": float(rel.max()) if rel.size else None,
+        "peak_difference_median": float(np.median(rel)) if rel.size else None,
+    }
+
+
+# ---- stepped sweeps ----------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Step:
+    """A dwell step of the motor: constant setpoint from ``start`` to ``end``; steady from ``steady_from``."""
+
+    number: int
+    setpoint: float
+    start: float
+    ramp_end: float | None
+    steady_from: float | None
+    end: float
+
+    @property
+    def steady_seconds(self) -> float:
+        """Length of the steady window (0 when the step never became steady)."""
+        return 0.0 if self.steady_from is None else max(0.0, self.end - self.steady_from)
+
+
+def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: float = 1e-6) -> list[Step]:
+    """Cut the motor states into steps of constant setpoint; discard the ramp plus ``settle`` seconds."""
+    t = motor.get("time", np.empty(0))
+    if t.size == 0:
+        return []
+    sp, f = motor["frequency_setpoint"], motor["frequency"]
+    cuts = np.flatnonzero(np.diff(sp) != 0) + 1
+    bounds = [0, *cuts.tolist(), t.size]
+    steps = []
+    for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        end = t[b] if b < t.size else t[-1]
+        reached = np.flatnonzero(np.abs(f[a:b] - sp[a]) <= tolerance_hz)
+        ramp_end = float(t[a + reached[0]]) if reached.size else None
+        steady = None if ramp_end is None or ramp_end + settle >= end else ramp_end + settle
+        steps.append(Step(n, float(sp[a]), float(t[a]), ramp_end, steady, float(end)))
+    return steps
+
+
+def step_table(steps: list[Step], events: dict[str, np.ndarray], detected: dict[str, np.ndarray],
+               force: Channel | None) -> list[dict]:
+    """Per step: steady peak force and impacts per cycle from the events and from the force channel."""
+    rows = []
+    for s in steps:
+        row = {"step": s.number, "frequency_hz": s.setpoint, "start_s": s.start, "ramp_end_s": s.ramp_end,
+               "steady_from_s": s.steady_from, "end_s": s.end, "steady_seconds": s.steady_seconds}
+        cycles = s.steady_seconds * s.setpoint
+        for label, times, peaks in (("events", events.get("time"), events.get("peak_force")),
+                                    ("channel", detected["start"], detected["peak_force"])):
+            if s.steady_from is None or times is None or (label == "channel" and force is None):
+                row.update({f"peak_force_{label}_n": None, f"impacts_{label}": None,
+                            f"impacts_per_cycle_{label}": None})
+                continue
+            sel = (times >= s.steady_from) & (times < s.end)
+            row[f"peak_force_{label}_n"] = float(peaks[sel].max()) if sel.any() else 0.0
+            row[f"impacts_{label}"] = int(sel.sum())
+            row[f"impacts_per_cycle_{label}"] = float(sel.sum() / cycles) if cycles > 0 else None
+        rows.append(row)
+    return rows
+
+
+# ---- phase plane and Poincare map ------------------------------------------------------------------------
+
+def phase_plane(rimd: Channel, cart: Channel, window: int = 21) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Relative displacement ``x_rimd - x_cart`` (m) and its velocity (m/s) at the RIMD laser's samples.
+
+    The cart is interpolated onto the RIMD laser's times (both lasers sample together at the same rate, so
+    this is exact where both have data); samples outside the cart's recorded stretches are dropped. The
+    velocity is a cubic Savitzky-Golay derivative per stretch of consecutive samples (``np.gradient`` for
+    stretches shorter than ``window``); stretches are separated by NaN so plots do not join across holes.
+    """
+    from scipy.signal import savgol_filter
+
+    ts, xs, vs = [], [], []
+    cart_ok = _covered(cart, rimd.time)
+    for seg in rimd.segments():
+        ok = cart_ok[seg]
+        if ok.sum() < 3:
+            continue
+        t = rimd.time[seg][ok]
+        x = rimd.values[seg][ok] - np.interp(t, cart.time, cart.values)
+        dt = 1.0 / rimd.rate
+        v = savgol_filter(x, window, 3, deriv=1, delta=dt) if x.size >= window else np.gradient(x, dt)
+        ts += [t, [np.nan]]
+        xs += [x, [np.nan]]
+        vs += [v, [np.nan]]
+    if not ts:
+        return np.empty(0), np.empty(0), np.empty(0)
+    return np.concatenate(ts[:-1]), np.concatenate(xs[:-1]), np.concatenate(vs[:-1])
+
+
+def poincare_times(motor: dict[str, np.ndarray]) -> np.ndarray:
+    """Instants (s) at which the motor phase crosses 0, interpolated between consecutive motor states."""
+    t = motor.get("time", np.empty(0))
+    if t.size < 2:
+        return np.empty(0)
+    phi = 2.0 * math.pi * motor["cycle_index"] + motor["phase"]
+    turns = np.floor(phi / (2.0 * math.pi))
+    i = np.flatnonzero((turns[1:] > turns[:-1]) & (phi[1:] > phi[:-1]) & (np.diff(t) > 0))
+    target = 2.0 * math.pi * turns[i + 1]
+    return t[i] + (target - phi[i]) / (phi[i + 1] - phi[i]) * (t[i + 1] - t[i])
+
+
+def poincare_points(t: np.ndarray, x: np.ndarray, v: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Phase-plane points at ``times`` (rows ``time, x, v``), only where the phase plane has samples around."""
+    if t.size == 0 or times.size == 0:
+        return np.empty((0, 3))
+    ok = np.isfinite(t)
+    tt, xx, vv = t[ok], x[ok], v[ok]
+    j = np.searchsorted(tt, times)
+    inside = (j > 0) & (j < tt.size)
+    jj = np.clip(j, 1, max(tt.size - 1, 1))
+    # Neighbours must be consecutive samples (no hole between them).
+    inside &= (tt[jj] - tt[jj - 1]) < 1.5 * np.median(np.diff(tt)) if tt.size > 1 else False
+    sel = times[inside]
+    return np.column_stack([sel, np.interp(sel, tt, xx), np.interp(sel, tt, vv)])

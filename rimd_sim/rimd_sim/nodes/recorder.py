@@ -1,0 +1,431 @@
+"""Node ``rimd_recorder``: records rig topics into rosbag2-compatible MCAP files (SPEC section 6).
+
+* Discovery: every ``discovery_period`` the node lists the graph's topics and subscribes, with raw
+  (serialized) subscriptions, to each topic matching one of ``topics`` (regular expressions, full match) and
+  none of ``exclude``, as soon as it has a publisher. The subscription's QoS follows the publishers (reliable
+  when they all are; transient local when they all are) with a deep history, and the offered profiles are
+  stored with the channel, as rosbag2 does.
+* The executor thread only stamps (node clock: wall time, or simulation time with ``use_sim_time``) and
+  queues each message; a writer thread owns the files (:class:`rimd_sim.recording.bag.BagWriter`), counts
+  loss and closes a chunk at least every ``flush_interval`` seconds. A full queue (``queue_size`` messages)
+  drops the newest message and counts it; nothing is ever dropped silently.
+* Loss per topic: samples missing between consecutive blocks (``first_index`` gaps of SampleBlock and
+  RigState) and queue overflows, reported in ``/diagnostics`` (1 Hz), the log, and the final summary.
+* On ``~/stop``, SIGINT and SIGTERM the current file is finished (summary, indexes, rosbag2 metadata) and
+  ``metadata.yaml`` is written; a SIGKILL loses at most the chunk in progress.
+* Metadata in every file: the software version and recorder settings (``rimd_recording``) and the rig's
+  parameters read from ``rig_node`` (``rimd_rig_parameters``) once that node answers.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import sys
+import threading
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Trigger
+
+from rimd_sim import __version__
+from rimd_sim.recording.bag import BagWriter
+from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
+from rimd_sim.recording.msgdefs import MessageDefinitionError
+from rimd_sim.recording.settings import PARAMETERS, RecorderConfigError, check_parameter, compile_patterns
+
+__all__ = ["RecorderNode", "main"]
+
+NODE_NAME = "rimd_recorder"
+
+def _duration_dict(duration: Duration) -> dict[str, int]:
+    ns = duration.nanoseconds
+    if ns <= 0 or ns >= 2147483647 * 1_000_000_000:
+        return {"sec": 2147483647, "nsec": 4294967295}
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
+    """An offered QoS profile (from graph discovery) in rosbag2's dictionary form."""
+    return {
+        "history": qos.history.name.lower(),
+        "depth": int(qos.depth),
+        "reliability": qos.reliability.name.lower(),
+        "durability": qos.durability.name.lower(),
+        "deadline": _duration_dict(qos.deadline),
+        "lifespan": _duration_dict(qos.lifespan),
+        "liveliness": qos.liveliness.name.lower(),
+        "liveliness_lease_duration": _duration_dict(qos.liveliness_lease_duration),
+        "avoid_ros_namespace_conventions": bool(qos.avoid_ros_namespace_conventions),
+    }
+
+
+class RecorderNode(Node):
+    """The recorder node. See the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for name, (default, description) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        values = {name: self.get_parameter(name).value for name in PARAMETERS}
+        for name, value in values.items():
+            check_parameter(name, value)
+        self._p = values
+        self._include = compile_patterns("topics", values["topics"])
+        self._exclude = compile_patterns("exclude", values["exclude"])
+        output_dir = Path(values["output_dir"]).expanduser()
+        try:
+            output_dir.mkdir(parents=True, exist_ok=True)
+            probe = output_dir / f".rimd_recorder_probe_{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        except OSError as exc:
+            raise RecorderConfigError(f"output_dir: '{output_dir}' is not a writable directory "
+                                      f"({exc.strerror or exc})") from None
+        self.output_dir = output_dir.resolve()
+        self._bag = BagWriter(self.output_dir, prefix=values["prefix"], compression=values["compression"],
+                              chunk_size=values["chunk_size"],
+                              max_duration_ns=round(values["max_duration"] * 1e9), max_size=values["max_size"],
+                              library=f"rimd_recorder {__version__}", metadata={"rimd_recording": {
+                                  "software": f"rimd_sim {__version__}",
+                                  "recorder": self.get_fully_qualified_name(),
+                                  "host": socket.gethostname(),
+                                  "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
+                                  "rmw": rclpy.utilities.get_rmw_implementation_identifier(),
+                                  "topics": " ".join(values["topics"]),
+                                  "use_sim_time": str(self.get_parameter("use_sim_time").value),
+                              }})
+        # Shared between the executor thread and the writer thread (deque appends/pops are atomic).
+        self._queue: deque[tuple] = deque()
+        self._queue_size = values["queue_size"]
+        self._recording = True
+        self._paused = bool(values["start_paused"])
+        self._subs: dict[str, Any] = {}
+        self._types: dict[str, str] = {}
+        self._received: dict[str, int] = {}
+        self._dropped: dict[str, int] = {}  # queue overflow
+        self._skipped_paused = 0
+        self._unknown: dict[str, str] = {}
+        # Writer-thread state.
+        self._loss = LossCounter()
+        self._written: dict[str, int] = {}
+        self._write_errors = 0
+        self._stop = threading.Event()
+        self._writer = threading.Thread(target=self._write_loop, name="rimd_recorder_writer", daemon=True)
+
+        self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        for name, handler in (("start", self._on_start), ("stop", self._on_stop), ("split", self._on_split),
+                              ("pause", self._on_pause), ("resume", self._on_resume)):
+            self.create_service(Trigger, f"~/{name}", handler)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._params_client = AsyncParameterClient(self, values["rig_node"]) if values["rig_node"] else None
+        self._params_future = None
+        self._params_done = self._params_client is None
+        self.create_timer(values["discovery_period"], self._discover)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._writer.start()
+        self.get_logger().info(f"recording {', '.join(values['topics'])} into {self.output_dir}"
+                               + (" (paused: call ~/resume to start)" if self._paused else ""))
+
+    # -- discovery and subscriptions --------------------------------------------------------------------------
+    def _wanted(self, topic: str) -> bool:
+        return (any(p.fullmatch(topic) for p in self._include)
+                and not any(p.fullmatch(topic) for p in self._exclude))
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._subs or topic in self._unknown or not self._wanted(topic):
+                continue
+            publishers = [p for p in self.get_publishers_info_by_topic(topic) if p.node_name != NODE_NAME
+                          or p.node_namespace != self.get_namespace()]
+            if not publishers:
+                continue
+            type_name = types[0]
+            try:
+                module, _, cls = type_name.rpartition("/")
+                msg_type = getattr(__import__(module.replace("/", "."), fromlist=[cls]), cls)
+            except (ImportError, AttributeError):
+                self._unknown[topic] = type_name
+                self.get_logger().error(f"cannot record {topic}: its type {type_name} is not installed here")
+                continue
+            offered = [qos_to_dict(p.qos_profile) for p in publishers]
+            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+            latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                             reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+            self._types[topic] = type_name
+            self._received[topic] = 0
+            self._queue.append(("topic", topic, type_name, offered))
+            self._subs[topic] = self.create_subscription(
+                msg_type, topic, self._make_callback(topic), qos, raw=True)
+            self.get_logger().info(f"recording {topic} ({type_name}, "
+                                   f"{'reliable' if reliable else 'best effort'})")
+        self._fetch_rig_parameters()
+
+    def _make_callback(self, topic: str):
+        """Return the callback of one topic.
+
+        It queues the message, then drains the messages already waiting in the subscription
+        (``take_message`` in a loop): one executor dispatch then serves a burst of messages, which multiplies
+        the rate the recorder sustains when the rig runs faster than real time.
+        """
+        queue = self._queue
+        clock = self.get_clock()
+        received = self._received
+        dropped = self._dropped
+
+        def accept(data: bytes, info: dict) -> None:
+            received[topic] += 1
+            if len(queue) >= self._queue_size:
+                dropped[topic] = dropped.get(topic, 0) + 1
+                return
+            queue.append(("msg", topic, data, clock.now().nanoseconds, info.get("source_timestamp", 0)))
+
+        def callback(data: bytes, info: dict) -> None:
+            if not self._recording or self._paused:
+                self._skipped_paused += 1
+                return
+            accept(data, info)
+            sub = self._subs.get(topic)
+            if sub is None:
+                return
+            for _ in range(1000):
+                try:
+                    with sub.handle:
+                        taken = sub.handle.take_message(sub.msg_type, True)
+                except Exception:  # noqa: BLE001 - the subscription is being destroyed
+                    return
+                if taken is None:
+                    return
+                accept(taken[0], taken[1])
+
+        return callback
+
+    def _fetch_rig_parameters(self) -> None:
+        """Ask ``rig_node`` for its parameters (list, then get), one step per discovery tick, never blocking."""
+        if self._params_done:
+            return
+        client, future = self._params_client, self._params_future
+        if future is None:
+            if client.services_are_ready():
+                self._params_future = client.list_parameters()
+            return
+        if not future.done():
+            return
+        response = future.result()
+        if response is not None and hasattr(response, "result"):  # ListParameters answered
+            self._params_names = list(response.result.names)
+            self._params_future = client.get_parameters(self._params_names)
+            return
+        if response is not None:  # GetParameters answered
+            values = {name: parameter_value_to_python(value)
+                      for name, value in zip(self._params_names, response.values, strict=False)}
+            self._queue.append(("metadata", "rimd_rig_parameters", {k: str(v) for k, v in sorted(values.items())}))
+        self._params_done = True
+
+    # -- writer thread ----------------------------------------------------------------------------------------
+    def _write_loop(self) -> None:
+        queue, bag = self._queue, self._bag
+        last_flush = time.monotonic()
+        interval = self._p["flush_interval"]
+        while True:
+            try:
+                item = queue.popleft()
+            except IndexError:
+                if self._stop.is_set():
+                    break
+                now = time.monotonic()
+                if now - last_flush >= interval:
+                    self._safely(bag.flush)
+                    last_flush = now
+                time.sleep(0.002)
+                continue
+            kind = item[0]
+            if kind == "msg":
+                _, topic, data, log_time, publish_time = item
+                if self._types[topic] in BLOCK_TYPES:
+                    try:
+                        first, count = block_span(data)
+                        missing = self._loss.observe(topic, first, count)
+                        if missing:
+                            self.get_logger().warning(f"{topic}: {missing} samples missing before index {first}")
+                    except (ValueError, IndexError):
+                        pass
+                self._written[topic] = self._written.get(topic, 0) + 1
+                self._safely(bag.write, topic, data, log_time, publish_time, self._written[topic])
+                now = time.monotonic()
+                if now - last_flush >= interval:
+                    self._safely(bag.flush)
+                    last_flush = now
+            elif kind == "topic":
+                _, topic, type_name, offered = item
+                try:
+                    bag.add_topic(topic, type_name, offered)
+                except MessageDefinitionError as exc:
+                    self.get_logger().error(f"cannot record {topic}: {exc}")
+                    self._types[topic] = "?"
+            elif kind == "metadata":
+                self._safely(bag.add_metadata, item[1], item[2])
+            elif kind == "call":
+                _, function, done, result = item
+                try:
+                    result.append(function())
+                except Exception as exc:  # noqa: BLE001 - reported to the service caller
+                    result.append(exc)
+                done.set()
+        self._safely(bag.close)
+
+    def _safely(self, function, *args) -> None:  # noqa: ANN001
+        try:
+            function(*args)
+        except Exception as exc:  # noqa: BLE001 - a failing disk must not kill the writer silently
+            self._write_errors += 1
+            if self._write_errors <= 5:
+                self.get_logger().error(f"writing the recording failed: {type(exc).__name__}: {exc}")
+
+    def _on_writer(self, function, timeout: float = 10.0):  # noqa: ANN001
+        """Run ``function`` on the writer thread, after the messages queued before it; return its result."""
+        done, result = threading.Event(), []
+        self._queue.append(("call", function, done, result))
+        if not done.wait(timeout):
+            raise TimeoutError("the writer did not answer")
+        if isinstance(result[0], Exception):
+            raise result[0]
+        return result[0]
+
+    # -- services ---------------------------------------------------------------------------------------------
+    def _on_start(self, request, response):  # noqa: ARG002
+        if self._recording:
+            response.success, response.message = False, "already recording"
+            return response
+        self._recording = True
+        response.success, response.message = True, f"recording into {self.output_dir}"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_stop(self, request, response):  # noqa: ARG002
+        if not self._recording:
+            response.success, response.message = False, "not recording"
+            return response
+        self._recording = False
+        info = self._on_writer(self._bag.split)
+        response.success = True
+        response.message = f"stopped; finished {info.path}" if info is not None else "stopped; no file was open"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_split(self, request, response):  # noqa: ARG002
+        info = self._on_writer(self._bag.split)
+        response.success = True
+        response.message = f"finished {info.path}; the next message opens a new file" if info else "no file was open"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_pause(self, request, response):  # noqa: ARG002
+        if self._paused:
+            response.success, response.message = False, "already paused"
+        else:
+            self._paused = True
+            response.success, response.message = True, "paused: messages are not recorded until ~/resume"
+        return response
+
+    def _on_resume(self, request, response):  # noqa: ARG002
+        if not self._paused:
+            response.success, response.message = False, "not paused"
+        else:
+            self._paused = False
+            response.success, response.message = True, "resumed"
+        return response
+
+    def _on_set_parameters(self, params) -> SetParametersResult:  # noqa: ANN001
+        for param in params:
+            if param.name in PARAMETERS:
+                return SetParametersResult(successful=False, reason=f"{param.name} is read at start only; "
+                                           "restart the recorder to change it")
+        return SetParametersResult(successful=True)
+
+    # -- reporting --------------------------------------------------------------------------------------------
+    def loss_report(self) -> dict[str, dict[str, int]]:
+        """Per topic: messages received, written, samples lost (first_index gaps) and queue drops."""
+        report = {}
+        for topic in sorted(self._types):
+            report[topic] = {"received": self._received.get(topic, 0), "written": self._written.get(topic, 0),
+                             "lost_samples": self._loss.lost_samples.get(topic, 0),
+                             "lost_blocks": self._loss.lost_blocks.get(topic, 0),
+                             "queue_dropped": self._dropped.get(topic, 0)}
+        return report
+
+    def _publish_diagnostics(self) -> None:
+        report = self.loss_report()
+        lost = sum(r["lost_samples"] + r["queue_dropped"] for r in report.values())
+        status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: recording",
+                                  hardware_id="rimd_recorder")
+        status.level = DiagnosticStatus.WARN if lost or self._write_errors else DiagnosticStatus.OK
+        state = "paused" if self._paused else ("recording" if self._recording else "stopped")
+        status.message = f"{state}; " + ("loss: see values" if lost else "no loss")
+        values = {"state": state, "file": str(self._bag.current_path or ""),
+                  "queue": str(len(self._queue)), "write_errors": str(self._write_errors),
+                  "messages_written": str(sum(r["written"] for r in report.values()))}
+        for topic, r in report.items():
+            values[f"{topic} lost_samples"] = str(r["lost_samples"])
+            values[f"{topic} queue_dropped"] = str(r["queue_dropped"])
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        msg = DiagnosticArray(statuses=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics.publish(msg)
+
+    def shutdown(self) -> None:
+        """Let the writer drain the queue, finish the file and print the per-topic summary."""
+        self._recording = False
+        self._stop.set()
+        self._writer.join(timeout=60.0)
+        files = [f for f in self._bag.files if f.finished]
+        lines = [f"recording finished: {len(files)} file(s) in {self.output_dir}"]
+        lines += [f"  {f.path.name}: {f.message_count} messages, {f.size} bytes" for f in files]
+        for topic, r in self.loss_report().items():
+            loss = r["lost_samples"] + r["queue_dropped"]
+            lines.append(f"  {topic}: {r['written']} messages written; "
+                         + (f"LOSS: {r['lost_samples']} samples missing (first_index gaps), "
+                            f"{r['queue_dropped']} messages dropped (queue full)" if loss else "no loss"))
+        print("\n".join(lines), flush=True)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of the ``rimd_recorder`` executable (also ``rimd node recorder``)."""
+    rclpy.init(args=args)
+    node = None
+    executor = SingleThreadedExecutor()
+    try:
+        try:
+            node = RecorderNode()
+        except (RecorderConfigError, rclpy.exceptions.ParameterException) as exc:
+            print(f"rimd_recorder: configuration refused: {exc}", file=sys.stderr)
+            return 2
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        executor.shutdown()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,266 @@
+"""``rimd experiment``: a stepped frequency sweep of the running rig, recorded, then analysed.
+
+The paper's methodology (section 3): the motor frequency is stepped; at each step the rig dwells, the
+transient is discarded and the steady impact force is read. Here each setpoint goes through
+``/rig/set_motor_frequency``; the dwell is counted in simulation time from the setpoint's
+``effective_stamp`` using the stamps of ``/rig/motor/state``, so the schedule is the same at any
+``real_time_factor``. Unless ``--no-record``, the verb starts its own recorder process
+(``rimd_sim.nodes.recorder`` as node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``),
+waits until it subscribes to every rig topic, and finishes it with SIGINT after the last step; then it runs
+``rimd analyze`` on the recording into ``OUT`` with the same ``--settle``. The rig is never stopped: a
+refused setpoint ends the experiment with an error naming it, and the rig keeps running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+RECORDER_NODE = "rimd_experiment_recorder"
+SERVICE = "/rig/set_motor_frequency"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of ``rimd experiment``."""
+    parser.add_argument("--frequencies", type=float, nargs="+", default=None,
+                        help="motor frequencies (Hz) in the order they are set (instead of --f-min/--f-max/--f-step)")
+    parser.add_argument("--f-min", type=float, default=3.0, help="first frequency (Hz, default 3.0)")
+    parser.add_argument("--f-max", type=float, default=4.5, help="last frequency (Hz, default 4.5)")
+    parser.add_argument("--f-step", type=float, default=0.25, help="step (Hz, default 0.25, the paper's grid)")
+    parser.add_argument("--dwell", type=float, default=10.0,
+                        help="simulation seconds per step, from the setpoint taking effect (default 10)")
+    parser.add_argument("--settle", type=float, default=3.0,
+                        help="seconds discarded after the motor reached each setpoint (default 3)")
+    parser.add_argument("--ramp-rate", type=float, default=0.0,
+                        help="ramp rate to each setpoint (Hz/s; 0 = the rig's motor.ramp_rate)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output directory (default experiment_<UTC time>): recording/ and the analysis")
+    parser.add_argument("--no-record", action="store_true",
+                        help="do not start a recorder (a recorder already running records the rig)")
+    parser.add_argument("--recording", type=Path, default=None,
+                        help="with --no-record: the recording to analyse at the end (else no analysis)")
+    parser.add_argument("--timeout", type=float, default=30.0,
+                        help="wall seconds to wait for the rig, the recorder, or the simulation time to advance")
+
+
+def schedule(args: argparse.Namespace) -> list[float]:
+    """The frequencies of the experiment, checked.
+
+    Raises:
+        rimd_sim.cli.CommandError: A bad frequency, range, dwell, settle or ramp rate.
+    """
+    from rimd_sim.cli import CommandError
+    from rimd_sim.verbs._analysis_io import check_positive, check_range
+
+    if args.frequencies:
+        freqs = list(args.frequencies)
+        for f in freqs:
+            if not (math.isfinite(f) and f >= 0):
+                raise CommandError(f"--frequencies {f!r} refused: each must be finite and >= 0 Hz")
+    else:
+        check_range("f", args.f_min, args.f_max)
+        check_positive("--f-step", args.f_step)
+        n = int(math.floor((args.f_max - args.f_min) / args.f_step + 1e-9)) + 1
+        freqs = [round(args.f_min + i * args.f_step, 12) for i in range(n)]
+    check_positive("--dwell", args.dwell)
+    check_positive("--settle", args.settle, inclusive=True)
+    check_positive("--ramp-rate", args.ramp_rate, inclusive=True)
+    check_positive("--timeout", args.timeout)
+    if args.settle >= args.dwell:
+        raise CommandError(f"--settle {args.settle:g} s >= --dwell {args.dwell:g} s: nothing would be measured")
+    if args.ramp_rate > 0:
+        worst = max((abs(b - a) for a, b in zip(freqs, freqs[1:], strict=False)), default=0.0) / args.ramp_rate
+        if worst + args.settle >= args.dwell:
+            raise CommandError(f"--dwell {args.dwell:g} s is too short: a ramp takes up to {worst:g} s at "
+                               f"{args.ramp_rate:g} Hz/s, plus --settle {args.settle:g} s")
+    if args.recording is not None and not args.no_record:
+        raise CommandError("--recording is for --no-record (the experiment records into OUT/recording otherwise)")
+    return freqs
+
+
+class _Rig:
+    """The experiment's node: the setpoint client and the latest motor state (simulation time)."""
+
+    def __init__(self, timeout: float) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+        from rimd_msgs.msg import MotorState
+        from rimd_msgs.srv import SetMotorFrequency
+
+        self.timeout = timeout
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("rimd_experiment", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.client = self.node.create_client(SetMotorFrequency, SERVICE)
+        self.stamp_ns: int | None = None
+        self.frequency = math.nan
+        self.setpoint = math.nan
+        self.node.create_subscription(MotorState, "/rig/motor/state", self._on_motor,
+                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+
+    def _on_motor(self, msg) -> None:  # noqa: ANN001
+        self.stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        self.frequency, self.setpoint = float(msg.frequency), float(msg.frequency_setpoint)
+
+    def spin_until(self, condition, timeout: float) -> bool:  # noqa: ANN001
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() >= deadline:
+                return False
+            self.executor.spin_once(timeout_sec=0.05)
+        return True
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def _stop_recorder(proc: subprocess.Popen) -> int | None:
+    for sig, wait in ((signal.SIGINT, 20.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        if proc.poll() is not None:
+            break
+        proc.send_signal(sig)
+        try:
+            proc.wait(wait)
+        except subprocess.TimeoutExpired:
+            continue
+    return proc.returncode
+
+
+def _tail(path: Path, lines: int = 5) -> str:
+    try:
+        return " | ".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
+    """Run the experiment, then the analysis of its recording."""
+    from rimd_sim.cli import CommandError
+
+    freqs = schedule(args)
+    out = args.out or Path(f"experiment_{datetime.now(UTC).strftime('%Y%m%dT%H%M%SZ')}")
+    out.mkdir(parents=True, exist_ok=True)
+    log = _progress_log
+    rig = _Rig(args.timeout)
+    recorder: subprocess.Popen | None = None
+    record_dir = out / "recording"
+    steps_done: list[dict] = []
+    try:
+        if not rig.client.wait_for_service(timeout_sec=args.timeout):
+            raise CommandError(f"no rig: service {SERVICE} not available after {args.timeout:g} s "
+                               "(start it with `rimd rig`, on the same ROS_DOMAIN_ID)")
+        if not rig.spin_until(lambda: rig.stamp_ns is not None, args.timeout):
+            raise CommandError(f"no /rig/motor/state received in {args.timeout:g} s: is the rig paused?")
+        if not args.no_record:
+            recorder = _start_recorder(rig, record_dir, out / "recorder.log", args.timeout, log)
+        for i, f in enumerate(freqs):
+            steps_done.append(_step(rig, i, len(freqs), f, args, log))
+        if recorder is not None:
+            rig.spin_until(lambda: False, 0.5)   # the last messages reach the recorder
+    finally:
+        if recorder is not None:
+            code = _stop_recorder(recorder)
+            if code not in (0, None):
+                log(f"the recorder exited with status {code}: {_tail(out / 'recorder.log')}")
+        (out / "experiment.json").write_text(json.dumps({
+            "frequencies_hz": freqs, "dwell_s": args.dwell, "settle_s": args.settle, "ramp_rate_hz_s": args.ramp_rate,
+            "recording": None if args.no_record else str(record_dir), "steps": steps_done}, indent=2) + "\n")
+        rig.close()
+    print(file=sys.stderr)
+    target = args.recording if args.no_record else record_dir
+    if target is None:
+        print(f"experiment done ({len(freqs)} steps, not recorded here); schedule in {out / 'experiment.json'}")
+        return 0
+    from rimd_sim.recording.reader import RecordingError
+    from rimd_sim.verbs.analyze import analyze, format_steps
+
+    try:
+        summary = analyze(target, out, settle=args.settle, log=lambda text: log(f"analyze: {text}"))
+    except RecordingError as exc:
+        raise CommandError(f"the experiment ran but its recording cannot be analysed: {exc}") from None
+    for line in format_steps(summary["steps"]):
+        print(line)
+    imp = summary["impacts"]
+    print(f"impacts: {imp['events']} events, {imp['detected']} detected; {imp['matches']} matches, "
+          f"{imp['misses']} misses, {imp['extras']} extras")
+    print(f"recording in {target}; analysis in {out}")
+    return 0
+
+
+def _progress_log(text: str) -> None:
+    print(f"\rrimd experiment: {text}", file=sys.stderr, flush=True)
+
+
+def _start_recorder(rig: _Rig, directory: Path, log_path: Path, timeout: float, log) -> subprocess.Popen:  # noqa: ANN001
+    from rimd_sim.cli import CommandError
+
+    directory.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, "-m", "rimd_sim.nodes.recorder", "--ros-args", "-r", f"__node:={RECORDER_NODE}",
+           "-p", f"output_dir:={directory}", "-p", "topics:=['/rig/.*']", "-p", "prefix:=experiment"]
+    with open(log_path, "w") as log_file:
+        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+    log(f"recorder started (pid {proc.pid}), recording into {directory}")
+
+    def subscribed() -> bool:
+        if proc.poll() is not None:
+            return True
+        topics = [name for name, _ in rig.node.get_topic_names_and_types()
+                  if name.startswith("/rig/") and rig.node.count_publishers(name) > 0]
+        return bool(topics) and all(
+            any(info.node_name == RECORDER_NODE for info in rig.node.get_subscriptions_info_by_topic(t))
+            for t in topics)
+
+    ok = rig.spin_until(subscribed, timeout)
+    if proc.poll() is not None:
+        raise CommandError(f"the recorder exited with status {proc.returncode}: {_tail(log_path)}")
+    if not ok:
+        _stop_recorder(proc)
+        raise CommandError(f"the recorder did not subscribe to the rig topics within {timeout:g} s: {_tail(log_path)}")
+    rig.spin_until(lambda: False, 0.5)   # subscriptions matched with the publishers
+    return proc
+
+
+def _step(rig: _Rig, i: int, n: int, f: float, args: argparse.Namespace, log) -> dict:  # noqa: ANN001
+    from rimd_msgs.srv import SetMotorFrequency
+    from rimd_sim.cli import CommandError
+
+    request = SetMotorFrequency.Request(frequency_hz=float(f), ramp_rate=float(args.ramp_rate))
+    future = rig.client.call_async(request)
+    if not rig.spin_until(future.done, args.timeout):
+        raise CommandError(f"{SERVICE} did not answer the setpoint {f:g} Hz within {args.timeout:g} s")
+    response = future.result()
+    if not response.success:
+        raise CommandError(f"setpoint {f:g} Hz (step {i + 1}/{n}) refused by the rig: {response.message}; "
+                           f"the rig keeps running at its setpoint {response.frequency_hz:g} Hz")
+    effective = int(response.effective_stamp.sec) * 1_000_000_000 + int(response.effective_stamp.nanosec)
+    end = effective + int(round(args.dwell * 1e9))
+    last_stamp, last_change = rig.stamp_ns, time.monotonic()
+    shown = 0.0
+    while rig.stamp_ns is None or rig.stamp_ns < end:
+        rig.executor.spin_once(timeout_sec=0.05)
+        now = time.monotonic()
+        if rig.stamp_ns != last_stamp:
+            last_stamp, last_change = rig.stamp_ns, now
+        elif now - last_change > args.timeout:
+            raise CommandError(f"the rig's simulation time stopped advancing during step {i + 1}/{n} ({f:g} Hz) "
+                               f"for {args.timeout:g} s: paused or stopped?")
+        if now - shown >= 0.5:
+            shown = now
+            elapsed = max(0.0, (rig.stamp_ns - effective) * 1e-9)
+            print(f"\rrimd experiment: step {i + 1}/{n}: {f:g} Hz, {min(elapsed, args.dwell):5.1f}/{args.dwell:g} s "
+                  f"(motor {rig.frequency:.3f} Hz)", end="", file=sys.stderr, flush=True)
+    return {"frequency_hz": f, "effective_stamp_ns": effective, "end_stamp_ns": end, "message": response.message}

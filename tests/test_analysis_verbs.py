@@ -1,0 +1,99 @@
+"""``rimd bifurcation``, ``rimd poincare``, ``rimd peterka`` and ``rimd basins``: files, figures, refusals.
+
+Small grids and few cycles keep these fast; the full sizes run in benchmarks/bench_analysis.py.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+
+from rimd_sim import cli
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _files(out, *names):
+    for name in names:
+        assert (out / name).is_file(), name
+    assert (out / names[0]).read_bytes()[:8] == PNG
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_bifurcation_gap0_shows_the_doubling_window_up_and_down(tmp_path, capsys):
+    """Default preset, gap 0: 1/1 below 4.95 Hz and the period-doubled 2/2 motion at 5.0 Hz in both sweeps
+    (the paper-model preset has it from 4.85 Hz: tests/test_dynamics.py)."""
+    out = tmp_path / "bif"
+    status = cli.main(["bifurcation", "--f-min", "4.8", "--f-max", "5.0", "--f-step", "0.1",
+                       "--transient-cycles", "60", "--sample-cycles", "24", "--out", str(out)])
+    assert status == 0
+    summary = _files(out, "bifurcation.png", "bifurcation.csv", "summary.json")
+    for direction in ("up", "down"):
+        runs = summary["branches"][direction]
+        assert [(r["class"], r["f_from_hz"]) for r in runs][0] == ("1/1", 4.8)
+        assert runs[-1]["class"] == "2/2" and runs[-1]["f_to_hz"] == 5.0
+    rows = list(csv.DictReader(open(out / "bifurcation.csv")))
+    at5 = {round(float(r["displacement_ratio"]), 2) for r in rows
+           if r["direction"] == "up" and r["frequency_hz"] == "5.0"}
+    assert len(at5) == 2  # two stroboscopic values: period 2
+    assert "2/2 (period doubling) at 5-5 Hz" in capsys.readouterr().out
+
+
+def test_poincare_reproduces_fig10_period_half(tmp_path):
+    """Paper Fig. 10: gap 2.4 mm, Omega/omega_n = 2.7, a period-0.5 motion (one impact every two cycles): two
+    Poincare points, class 1/2, negative largest exponent."""
+    out = tmp_path / "p"
+    assert cli.main(["poincare", "--gap-mm", "2.4", "--ratio", "2.7", "--transient-cycles", "100",
+                     "--cycles", "40", "--out", str(out)]) == 0
+    summary = _files(out, "poincare.png", "poincare.csv", "trajectory.csv", "summary.json")
+    assert summary["class"] == "1/2" and summary["impacts_per_cycle"] == 0.5
+    assert summary["lyapunov_exponent_per_s"] < 0 and summary["chaotic"] is False
+    assert len(list(csv.DictReader(open(out / "poincare.csv")))) == 40
+
+
+def test_peterka_small_map_has_period_1_and_half_and_marks_coexistence(tmp_path):
+    """A 2 x 3 map: at gap 0 the 3.75 Hz cell is 1/1 (band A) and 6.75 Hz 1/2 (band B region); at gap 2.4 mm and
+    5.25 Hz rest reaches 1/2 while the upward continuation stays without impact (the coexisting attractors
+    of the paper's Fig. 12, SPEC section 8), so that cell is marked."""
+    out = tmp_path / "pk"
+    assert cli.main(["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3.75",
+                     "--f-max", "6.75", "--freqs", "3", "--transient-cycles", "60", "--measure-cycles", "24",
+                     "--workers", "1", "--out", str(out)]) == 0
+    summary = _files(out, "peterka.png", "peterka.csv", "summary.json")
+    cells = {(float(r["gap_mm"]), float(r["frequency_hz"])): r for r in csv.DictReader(open(out / "peterka.csv"))}
+    assert cells[(0.0, 3.75)]["class_rest"] == "1/1"
+    assert cells[(0.0, 6.75)]["class_rest"] == "1/2"
+    assert cells[(2.4, 5.25)]["class_rest"] == "1/2"
+    assert cells[(2.4, 5.25)]["class_continued"] == "no impact"
+    assert cells[(2.4, 5.25)]["coexisting"] == "True"
+    assert summary["coexisting_cells"] >= 1
+
+
+def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
+    """Gap 2.4 mm, 4.0 Hz: some initial conditions end on the 1/2 impact motion, others on the motion without
+    impact (coexisting attractors)."""
+    out = tmp_path / "b"
+    assert cli.main(["basins", "--size", "5", "--transient-cycles", "60", "--measure-cycles", "24",
+                     "--workers", "1", "--out", str(out)]) == 0
+    summary = _files(out, "basins.png", "basins.csv", "summary.json")
+    assert {"1/2", "no impact"} <= set(summary["classes"]) and summary["coexisting_attractors"] is True
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["bifurcation", "--f-min", "5", "--f-max", "3"], "--f-min 5 > --f-max 3"),
+    (["bifurcation", "--direction", "sideways"], "--direction 'sideways' refused"),
+    (["bifurcation", "--gap-mm", "-1"], "--gap-mm -1.0 refused: must be >= 0"),
+    (["poincare", "--frequency", "-2"], "--frequency -2.0 refused"),
+    (["poincare", "--frequency", "30"], "--frequency 30 refused: above motor.max_frequency"),
+    (["peterka", "--gap-min-mm", "-0.5"], "--gap-min-mm -0.5 refused"),
+    (["peterka", "--f-min", "8", "--f-max", "2"], "--f-min 8 > --f-max 2"),
+    (["basins", "--size", "1"], "--size 1 refused"),
+    (["basins", "--theta-min", "0.1", "--theta-max", "0.0"], "theta_range"),
+])
+def test_bad_input_gives_one_line_and_exit_1(tmp_path, capsys, argv, message):
+    status = cli.main([*argv, "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert status == 1
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -1,0 +1,190 @@
+"""The replay node: original timing, rate, loop, selection and remapping, byte-identical data, damaged files.
+
+One recording of the running rig (simulator + recorder, 3 s) is made once for the module, in its own ROS
+domain; the rig is then stopped, so every message a test subscriber sees comes from the replay.
+"""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import statistics
+import time
+from pathlib import Path
+
+import pytest
+
+from harness.domains import lease_domain_id
+from harness.processes import ProcessManager
+from harness.rig import RIG_TOPICS, RawCollector, run_for, trigger
+from harness.ros import spin_until
+from rimd_sim.recording.reader import open_recording
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:  # noqa: ANN001
+    """A recording of 3 s of the rig at gap 0, 3.75 Hz (impacting), made with the real nodes."""
+    import os
+
+    root = tmp_path_factory.mktemp("replay_source")
+    out = root / "rec"
+    with lease_domain_id() as lease:
+        env = {**os.environ, "ROS_DOMAIN_ID": str(lease.domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+               "ROS_LOG_DIR": str(root / "log"), "PYTHONUNBUFFERED": "1"}
+        with ProcessManager(env, root / "processes") as processes:
+            recorder = processes.start_node("rimd_recorder", "--ros-args", "-p", f"output_dir:={out}",
+                                            "-p", "topics:=['/rig/.*']")
+            recorder.wait_for_output(r"recording .* into", timeout=30)
+            simulator = processes.start_node("rimd_simulator", "--ros-args", "-p", "motor.initial_setpoint:=3.75")
+            simulator.wait_for_output(r"rig ready", timeout=60)
+            recorder.wait_for_output(r"recording /rig/impact/events", timeout=30)
+            time.sleep(3.0)
+            recorder.send_signal(signal.SIGINT)
+            assert recorder.wait(30) == 0, recorder.tail()
+            simulator.stop()
+    assert open_recording(out).complete
+    return out
+
+
+def _recorded(path: Path) -> dict[str, list[tuple[int, bytes]]]:
+    got: dict[str, list[tuple[int, bytes]]] = {}
+    for msg in open_recording(path).messages():
+        got.setdefault(msg.topic, []).append((msg.log_time, msg.data))
+    return got
+
+
+def _replay(ros_processes, ros_executor, collector, *params: str, timeout: float = 30.0):  # noqa: ANN001
+    args = ["--ros-args", "-p", "wait_for_subscribers:=1"]
+    for param in params:
+        args += ["-p", param]
+    replay = ros_processes.start_node("rimd_replay", *args)
+    spin_until(ros_executor, lambda: replay.returncode is not None, timeout)
+    run_for(ros_executor, 0.3)
+    return replay
+
+
+def _timing_errors(recorded, collector, rate: float) -> list[float]:  # noqa: ANN001
+    """Receive time minus due time (recorded log time / rate), centred on the median offset, in s."""
+    pairs = []
+    for topic, items in recorded.items():
+        for (log_time, _), received in zip(items, collector.times.get(topic, []), strict=False):
+            pairs.append((log_time / 1e9 / rate, received))
+    offsets = [received - due for due, received in pairs]
+    centre = statistics.median(offsets)
+    return [abs(o - centre) for o in offsets]
+
+
+def test_replay_at_1x_keeps_timing_and_bytes(ros_processes, ros_executor, recording):
+    recorded = _recorded(recording)
+    collector = RawCollector(ros_executor)
+    replay = _replay(ros_processes, ros_executor, collector, f"file:={recording}")
+    assert replay.returncode == 0, replay.tail()
+    assert "replay finished" in replay.output()
+    for topic in RIG_TOPICS:
+        assert collector.messages[topic] == [data for _, data in recorded[topic]], topic   # identical bytes
+    errors = _timing_errors(recorded, collector, 1.0)
+    assert len(errors) > 1500
+    assert statistics.median(errors) <= 1e-3, f"median timing error {statistics.median(errors) * 1e3:.2f} ms"
+
+
+def test_replay_at_2x_takes_half_the_time(ros_processes, ros_executor, recording):
+    recorded = _recorded(recording)
+    collector = RawCollector(ros_executor)
+    replay = _replay(ros_processes, ros_executor, collector, f"file:={recording}", "rate:=2.0")
+    assert replay.returncode == 0, replay.tail()
+    times = collector.times["/rig/truth"]
+    logs = [t for t, _ in recorded["/rig/truth"]]
+    assert len(times) == len(logs)
+    ratio = (times[-1] - times[0]) / ((logs[-1] - logs[0]) / 1e9)
+    assert ratio == pytest.approx(0.5, abs=0.03)
+    assert statistics.median(_timing_errors(recorded, collector, 2.0)) <= 1e-3
+
+
+def test_loop_selection_remap_pause_and_clock(ros_processes, ros_executor, recording):
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+
+    recorded = _recorded(recording)
+    collector = RawCollector(ros_executor, topics={"/rig/truth": "RigState", "/rig/motor/state": "MotorState"},
+                             remap={"/rig/truth": "/replayed/truth"})
+    clocks = []
+    node = Node("clock_listener", context=ros_executor.context)
+    ros_executor.add_node(node)
+    node.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec), 100)
+    replay = ros_processes.start_node(
+        "rimd_replay", "--ros-args", "-p", f"file:={recording}", "-p", "loop:=true", "-p", "rate:=3.0",
+        "-p", "topics:=['/rig/truth']", "-p", "remap:=['/rig/truth:=/replayed/truth']", "-p", "clock:=true",
+        "-p", "wait_for_subscribers:=1")
+    truth = collector.messages["/rig/truth"]   # keyed by the original name, subscribed to /replayed/truth
+    # 3 s at 3x: a pass takes about 1 s once the node runs (start-up takes longer on a loaded machine).
+    assert spin_until(ros_executor, lambda: len(truth) > 1.5 * len(recorded["/rig/truth"]), 30), replay.tail()
+    assert truth[len(recorded["/rig/truth"])] == recorded["/rig/truth"][0][1]       # the loop starts over
+    assert not collector.messages["/rig/motor/state"]                                # not selected
+    assert clocks and clocks[0] >= recorded["/rig/truth"][0][0] - 10**7
+
+    assert trigger(ros_executor, node, "/rimd_replay/pause").success
+    run_for(ros_executor, 0.3)
+    count = len(truth)
+    run_for(ros_executor, 0.7)
+    assert len(truth) == count                                                       # paused
+    assert trigger(ros_executor, node, "/rimd_replay/resume").success
+    run_for(ros_executor, 0.5)
+    assert len(truth) > count
+    replay.send_signal(signal.SIGINT)
+    assert replay.wait(10) == 0
+
+
+def test_truncated_recording_replays_what_is_valid(ros_processes, ros_executor, recording, tmp_path):
+    (source,) = recording.glob("*.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(source.read_bytes()[: source.stat().st_size // 2])
+    readable = open_recording(cut).message_count
+    collector = RawCollector(ros_executor)
+    replay = _replay(ros_processes, ros_executor, collector, f"file:={cut}", "rate:=4.0")
+    assert replay.returncode == 0, replay.tail()
+    output = replay.output()
+    assert "cut.mcap: incomplete" in output and f"read {readable} messages" in output
+    assert "Traceback" not in output
+    assert sum(len(v) for v in collector.messages.values()) == readable > 0
+
+
+def test_garbage_and_unknown_types_are_named(ros_processes, tmp_path, recording):
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(b"\x00garbage" * 1000)
+    bad = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={garbage}", name="garbage")
+    assert bad.wait(30) == 1
+    assert "garbage.mcap is not an MCAP file" in bad.output() and "Traceback" not in bad.output()
+
+    # A recording with a type this machine does not have (as from another lab's package).
+    from rimd_sim.recording.bag import BagWriter, TopicInfo, qos_profile_dict
+    from rimd_sim.recording.msgdefs import MessageDefinition
+
+    unknown_dir = tmp_path / "unknown"
+    shutil.copytree(recording, unknown_dir)
+    bag = BagWriter(unknown_dir, prefix="other")
+    bag.topics["/lab/gauge"] = TopicInfo("/lab/gauge", "lab_msgs/msg/Gauge", [qos_profile_dict()],
+                                         MessageDefinition("lab_msgs/msg/Gauge", "float64 strain\n", ""))
+    bag.write("/lab/gauge", b"\x00\x01\x00\x00" + b"\x00" * 8, 10**18)
+    bag.close()
+    refused = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={unknown_dir}", name="unknown")
+    assert refused.wait(30) == 1
+    output = refused.output()
+    assert "lab_msgs/msg/Gauge (/lab/gauge)" in output and "not installed" in output
+    assert "skip_unknown" in output and "Traceback" not in output
+
+    missing = ros_processes.start_node("rimd_replay", "--ros-args", "-p", "rate:=0.0",
+                                       "-p", f"file:={recording}", name="bad_rate")
+    assert missing.wait(30) == 1 and "rate: 0.0 refused: must be > 0" in missing.output()
+
+
+def test_start_offset_skips_the_beginning(ros_processes, ros_executor, recording):
+    recorded = _recorded(recording)
+    collector = RawCollector(ros_executor, topics={"/rig/truth": "RigState"})
+    replay = _replay(ros_processes, ros_executor, collector, f"file:={recording}", "rate:=4.0",
+                     "start_offset:=1.5", "topics:=['/rig/truth']")
+    assert replay.returncode == 0, replay.tail()
+    first_log = min(items[0][0] for items in recorded.values())   # the offset counts from the first message
+    expected = [data for log_time, data in recorded["/rig/truth"] if log_time - first_log >= 1_500_000_000]
+    assert collector.messages["/rig/truth"] == expected and 0 < len(expected) < len(recorded["/rig/truth"])
