@@ -13,7 +13,6 @@ from __future__ import annotations
 import sys
 import time
 from collections import deque
-from datetime import UTC, datetime
 from typing import Any
 
 import rclpy
@@ -24,7 +23,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
-from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, SinkSpec
+from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
 
 __all__ = ["RerunBridgeNode", "main"]
 
@@ -74,9 +73,7 @@ class RerunBridgeNode(Node):
         for name, (default, _, _) in PARAMETERS.items():
             self.declare_parameter(name, default, _descriptor(name))
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        save_path = p["save_path"] or f"rimd_{datetime.now(UTC).strftime('%Y%m%dT%H%M%SZ')}.rrd"
-        spec = SinkSpec(p["sink"], path=save_path, url=p["url"], grpc_port=int(p["grpc_port"]),
-                        web_port=int(p["web_port"]), memory_limit=p["memory_limit"], analytics=bool(p["analytics"]))
+        spec = spec_from_parameters(p)
         self.stream = RerunStream(spec, blueprint(window=float(p["window"]), trail=float(p["trail"])),
                                   recording_name=f"rimd {self.get_namespace()}")
         self.mapper = RigMapper(self.stream.rec, natural_frequency=float(p["natural_frequency"]),

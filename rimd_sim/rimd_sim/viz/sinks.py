@@ -21,11 +21,13 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment"]
+__all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment", "spec_from_parameters"]
 
 SINKS = ("save", "spawn", "connect", "serve_web")
 APPLICATION_ID = "rimd_rig"
@@ -76,6 +78,25 @@ class SinkSpec:
         for name in ("grpc_port", "web_port"):
             if not 0 <= getattr(self, name) <= 65535:
                 raise SinkError(f"{name} {getattr(self, name)} is not a port number (0..65535)")
+
+
+def spec_from_parameters(params: Mapping[str, Any]) -> SinkSpec:
+    """The sink of a ``rimd_rerun: ros__parameters:`` section (flat names; defaults for missing ones).
+
+    Shared by the node and by a bring-up that wants to refuse a bad section before starting anything:
+    ``spec_from_parameters(section).validate()`` raises :class:`SinkError` naming the value and the rule.
+    """
+    save_path = str(params.get("save_path", "") or "")
+    if not save_path:
+        save_path = f"rimd_{datetime.now(UTC).strftime('%Y%m%dT%H%M%SZ')}.rrd"
+    try:
+        return SinkSpec(str(params.get("sink", "serve_web")), path=save_path,
+                        url=str(params.get("url", SinkSpec.url)), grpc_port=int(params.get("grpc_port", 0)),
+                        web_port=int(params.get("web_port", 0)),
+                        memory_limit=str(params.get("memory_limit", SinkSpec.memory_limit)),
+                        analytics=bool(params.get("analytics", False)))
+    except (TypeError, ValueError) as exc:
+        raise SinkError(f"bad rimd_rerun parameter: {exc}") from None
 
 
 def _private_config_home() -> Path:
