@@ -38,6 +38,7 @@ NODE_EXECUTABLES: list[str] = [
     "rimd_simulator = rimd_sim.nodes.simulator:main",
     "rimd_recorder = rimd_sim.nodes.recorder:main",
     "rimd_replay = rimd_sim.nodes.replay:main",
+    "rimd_rerun = rimd_sim.nodes.rerun_bridge:main",
 ]
 
 setup(

@@ -54,7 +54,6 @@ class Verb:
 
 _BRING_UP = (5, "Recorder, replay and bring-up")
 _SIMULATOR = (4, "Simulator node")
-_RERUN = (6, "Rerun")
 
 VERBS: tuple[Verb, ...] = (
     Verb("rig", "bring up the rig from config: recorder and simulator (Rerun bridge: issue 6)",
@@ -73,7 +72,7 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.verbs.poincare"),
     Verb("basins", "basins of attraction of coexisting motions over initial (theta, theta')",
          "rimd_sim.verbs.basins"),
-    Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer", None, *_RERUN),
+    Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),
 )

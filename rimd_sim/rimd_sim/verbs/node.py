@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 import importlib
 
-#: Node name -> module with ``main(args)``. The recorder, replay and Rerun bridge join with their issues.
+#: Node name -> module with ``main(args)``. The recorder and replay join with their issue.
 NODES = {
     "simulator": "rimd_sim.nodes.simulator",
     "recorder": "rimd_sim.nodes.recorder",
     "replay": "rimd_sim.nodes.replay",
+    "rerun": "rimd_sim.nodes.rerun_bridge",
 }
 
 

@@ -1,0 +1,164 @@
+"""Node ``rimd_rerun``: streams the rig topics to Rerun on a simulation-time timeline (SPEC section 6).
+
+A thin adapter: subscriptions to the rig topics (relative names, namespace ``/rig`` by default) hand each
+message to :class:`rimd_sim.viz.rerun_map.RigMapper`, which logs it to a :class:`rimd_sim.viz.sinks.RerunStream`
+(``sink``: ``save`` an ``.rrd``, ``spawn`` a viewer, ``connect`` to a URL, ``serve_web`` on loopback).
+Every ``status_period`` seconds it logs one line with what it has logged and its lag behind the data
+(wall time now minus the stamp of a block's last sample: meaningful at ``real_time_factor`` 1, where stamps
+are wall-clock). SIGINT or SIGTERM: the stream is flushed and closed (an ``.rrd`` gets its footer).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import deque
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
+from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
+from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
+
+__all__ = ["RerunBridgeNode", "main"]
+
+NODE_NAME = "rimd_rerun"
+DEFAULT_NAMESPACE = "rig"
+
+#: name -> (default, description, (low, high) or None). Fixed after start (the sink is opened once).
+PARAMETERS: dict[str, tuple[Any, str, tuple[float, float] | None]] = {
+    "enabled": (True, "read by `rimd rig`: whether the bring-up starts this node (the node ignores it)", None),
+    "sink": ("serve_web", f"where the stream goes: one of {', '.join(SINKS)}", None),
+    "save_path": ("", "sink save: .rrd file to write ('' = ./rimd_<UTC timestamp>.rrd)", None),
+    "url": ("rerun+http://127.0.0.1:9876/proxy", "sink connect: gRPC URL of a running viewer or server", None),
+    "grpc_port": (0, "sinks spawn/serve_web: gRPC port of the viewer/server started (0 = a free port)", (0, 65535)),
+    "web_port": (0, "sink serve_web: HTTP port of the web viewer on 127.0.0.1 (0 = a free port)", (0, 65535)),
+    "memory_limit": ("1GiB", "sinks spawn/serve_web: memory limit of the viewer/server (oldest data dropped)", None),
+    "analytics": (False, "let Rerun report usage per the user's Rerun configuration (default: off)", None),
+    "natural_frequency": (1.82, "Hz: the phase plane's velocity axis is v_rel / (2 pi f)", (0.01, 1000.0)),
+    "window": (2.0, "s of channel data the time-series views show", (0.01, 3600.0)),
+    "trail": (1.0, "s of phase-plane trajectory shown (trailing line)", (0.01, 3600.0)),
+    "batch_blocks": (5, "blocks of a channel sent per send_columns call (1 = one call per block; more = less CPU, "
+                     "up to that many block periods of latency)", (1, 1000)),
+    "reliable": (True, "reliable subscriptions (false: best effort, matches best-effort channels)", None),
+    "status_period": (10.0, "s between status lines (0 = none)", (0.0, 3600.0)),
+}
+_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
+
+
+def _descriptor(name: str) -> ParameterDescriptor:
+    default, description, bounds = PARAMETERS[name]
+    desc = ParameterDescriptor(name=name, type=_TYPES[type(default)], description=description, read_only=True,
+                               dynamic_typing=isinstance(default, float))
+    if bounds is not None and isinstance(default, float):
+        desc.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
+    elif bounds is not None:
+        desc.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=0)]
+    return desc
+
+
+class RerunBridgeNode(Node):
+    """The Rerun bridge node. See the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Declare parameters, open the sink (SinkError: caught in main), subscribe."""
+        kwargs.setdefault("namespace", DEFAULT_NAMESPACE)
+        super().__init__(NODE_NAME, **kwargs)
+        for name, (default, _, _) in PARAMETERS.items():
+            self.declare_parameter(name, default, _descriptor(name))
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        spec = spec_from_parameters(p)
+        self.stream = RerunStream(spec, blueprint(window=float(p["window"]), trail=float(p["trail"])),
+                                  recording_name=f"rimd {self.get_namespace()}")
+        self.mapper = RigMapper(self.stream.rec, natural_frequency=float(p["natural_frequency"]),
+                                batch=int(p["batch_blocks"]))
+        self.mapper.log_static()
+        self._lags: deque[float] = deque(maxlen=10_000)
+        self._received = 0
+        self._slowest = 0.0  # s, longest message handling since the last status line
+
+        reliability = ReliabilityPolicy.RELIABLE if p["reliable"] else ReliabilityPolicy.BEST_EFFORT
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=500, reliability=reliability)
+        events_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=reliability)
+        subscriptions = [(SampleBlock, ch.topic, qos) for ch in CHANNELS] + [
+            (RigState, TRUTH_TOPIC, qos), (ImpactEvent, EVENTS_TOPIC, events_qos)]
+        for msg_type, topic, profile in subscriptions:
+            self.create_subscription(msg_type, topic, self._handler(topic), profile)
+        self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
+        if p["status_period"] > 0:
+            self.create_timer(float(p["status_period"]), self._report)
+        self.get_logger().info(
+            f"rerun bridge ready: sink {spec.kind} -> {self.stream.viewer_url}; topics under "
+            f"{self.get_namespace()}; analytics {'per user config' if spec.analytics else 'off'}")
+
+    def _handler(self, topic: str):
+        def on_message(msg: Any) -> None:
+            self._received += 1
+            start = time.perf_counter()
+            self.mapper.log_message(topic, msg)
+            self._slowest = max(self._slowest, time.perf_counter() - start)
+            if topic == "impact/force":
+                end_ns = stamp_ns(msg.header.stamp) + round(len(msg.samples) * 1e9 / msg.sample_rate)
+                self._lags.append((time.time_ns() - end_ns) / 1e9)
+
+        return on_message
+
+    def _report(self) -> None:
+        lags = sorted(self._lags)
+        self._lags.clear()
+        s = self.mapper.stats
+        lag = (f"lag p50 {lags[len(lags) // 2] * 1e3:.1f} ms, max {lags[-1] * 1e3:.1f} ms" if lags
+               else "lag n/a")
+        lag += f", slowest message {self._slowest * 1e3:.1f} ms"
+        self._slowest = 0.0
+        self.get_logger().info(
+            f"status: {self._received} messages, {sum(s.samples.values())} samples, {s.impacts} impacts, "
+            f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}")
+
+    def close(self) -> str:
+        """Flush and close the Rerun stream (idempotent); "" or why the last data could not be delivered."""
+        self.mapper.flush()
+        return self.stream.close()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of the ``rimd_rerun`` executable (also ``rimd node rerun``)."""
+    rclpy.init(args=args)
+    node = None
+    executor = SingleThreadedExecutor()
+    status = 0
+    try:
+        try:
+            node = RerunBridgeNode()
+        except (SinkError, rclpy.exceptions.ParameterException) as exc:
+            print(f"rimd_rerun: {exc}", file=sys.stderr)
+            return 1
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            problem = node.close()
+            if problem:
+                print(f"rimd_rerun: {problem}", file=sys.stderr)
+                status = 1
+            s = node.mapper.stats
+            print(f"rimd_rerun: closed {node.stream.viewer_url}: "
+                  + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
+                  + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
+            node.destroy_node()
+        executor.shutdown()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,372 @@
+"""From rig messages to Rerun: entities, the simulation-time timeline and the blueprint (SPEC section 6).
+
+Pure of ROS: a message is any object with the attributes of its ``rimd_msgs`` type, so rclpy messages and
+messages decoded from an MCAP file by ``mcap_ros2`` go through the same functions. Arrays may be
+``array.array``, lists or numpy arrays.
+
+Timeline ``sim_time`` (a duration): the simulation time of each sample, from the channel's sample 0. Sample
+``n`` of a channel at ``rate`` Hz is at ``n / rate``, computed exactly in integer nanoseconds and rounded
+like the simulator rounds its stamps, so ``stamp - origin`` and ``first_index / rate`` agree to the
+nanosecond. The origin (the stamp of sample 0: 0 when the simulator runs in simulation time, the wall-clock
+start at real time) is learnt from the blocks; impact events are placed at ``stamp - origin``.
+
+Entities:
+
+* ``channels/<name>``: the four instrument channels (Scalars, SI units, one ``send_columns`` per block);
+* ``channels/impact_force/impacts``: one marker per impact at its contact start, at the peak force;
+* ``impacts/log`` (TextLog) and ``impacts/table`` (AnyValues: peak, impulse, velocity, ...): one row per impact;
+* ``phase_plane/trajectory``: relative displacement of the RIMD (``x - x_c``, mm) versus its relative
+  velocity scaled by ``1/omega_n`` (mm), one line segment per truth block; the blueprint shows the last
+  ``trail`` seconds, so it is a trailing line;
+* ``poincare/points``: the same state at motor phase 0, one point per excitation cycle (interpolated
+  between truth samples), all shown, so the section builds up;
+* ``motor/frequency``: the actual motor frequency (Hz), from the truth, one value per truth block.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "CHANNELS",
+    "TIMELINE",
+    "Channel",
+    "RigMapper",
+    "blueprint",
+    "sample_times_ns",
+    "stamp_ns",
+]
+
+TIMELINE = "sim_time"
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One instrument channel: topic relative to the rig namespace, entity path and label."""
+
+    name: str
+    topic: str
+    label: str
+    unit: str
+    color: tuple[int, int, int]
+
+    @property
+    def entity(self) -> str:
+        """Entity path of the channel's time series."""
+        return f"channels/{self.name}"
+
+
+CHANNELS: tuple[Channel, ...] = (
+    Channel("cart_displacement", "cart/displacement", "cart displacement", "m", (31, 119, 180)),
+    Channel("rimd_displacement", "rimd/displacement", "RIMD displacement", "m", (44, 160, 44)),
+    Channel("rimd_acceleration", "rimd/acceleration", "RIMD acceleration", "m/s^2", (148, 103, 189)),
+    Channel("impact_force", "impact/force", "impact force", "N", (214, 39, 40)),
+)
+_BY_TOPIC = {ch.topic: ch for ch in CHANNELS}
+EVENTS_TOPIC = "impact/events"
+TRUTH_TOPIC = "truth"
+#: Topics (relative to the rig namespace) the mapping uses. The motor's frequency and phase come from the truth
+#: (same values as /rig/motor/state, at the truth rate), which spares the bridge 100 messages/s.
+TOPICS = (*(ch.topic for ch in CHANNELS), EVENTS_TOPIC, TRUTH_TOPIC)
+
+IMPACT_MARKERS = "channels/impact_force/impacts"
+IMPACT_LOG = "impacts/log"
+IMPACT_TABLE = "impacts/table"
+PHASE_PLANE = "phase_plane/trajectory"
+POINCARE = "poincare/points"
+MOTOR_FREQUENCY = "motor/frequency"
+
+
+def stamp_ns(stamp: Any) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time``-like object (``sec``, ``nanosec``)."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def sample_times_ns(first_index: int, count: int, rate: float) -> np.ndarray:
+    """Times (int64 ns) of samples ``first_index .. first_index + count - 1`` at ``rate`` Hz: ``n / rate``.
+
+    For an integer rate the arithmetic is exact (``n = q R + r``: ``q s + round(r / R s)``, half up, as the
+    simulator stamps its blocks) and never overflows; other rates fall back to float64.
+    """
+    index = np.int64(first_index) + np.arange(count, dtype=np.int64)
+    if float(rate).is_integer() and rate > 0:
+        r_hz = int(rate)
+        q, r = np.divmod(index, r_hz)
+        return q * NS_PER_S + (2 * r * NS_PER_S + r_hz) // (2 * r_hz)
+    return np.rint(index.astype(np.float64) * (NS_PER_S / float(rate))).astype(np.int64)
+
+
+def _array(values: Any) -> np.ndarray:
+    return np.asarray(values, dtype=np.float64)
+
+
+@dataclass
+class _PhaseState:
+    """Last truth sample seen (continuity of the phase-plane line and phase-0 detection across blocks)."""
+
+    t_ns: int | None = None
+    x: float = 0.0
+    v: float = 0.0
+    phase: float = 0.0
+
+
+@dataclass
+class MapperStats:
+    """What a :class:`RigMapper` has logged, per entity: samples, blocks, gaps (dropped blocks)."""
+
+    samples: dict[str, int] = field(default_factory=dict)
+    blocks: dict[str, int] = field(default_factory=dict)
+    gaps: dict[str, int] = field(default_factory=dict)
+    impacts: int = 0
+    poincare_points: int = 0
+    truth_blocks: int = 0
+
+
+class RigMapper:
+    """Maps rig messages to Rerun calls on one recording stream.
+
+    State kept between messages (nothing else): the time origin, the last truth sample (for a continuous
+    phase-plane line and to catch phase 0 across block boundaries) and the expected next ``first_index`` of
+    each channel (to count dropped blocks).
+
+    Blocks are expanded to per-sample times at once and sent columnar: with ``batch`` 1 one ``send_columns``
+    per block; with ``batch`` k, one per k consecutive blocks of a channel (fewer calls: the live node uses it
+    to stay within its CPU budget, at most k block periods of extra latency). :meth:`flush` sends a partial
+    batch; call it before closing the stream.
+
+    Args:
+        recording: A ``rerun.RecordingStream``.
+        natural_frequency: Hz; the phase plane's velocity axis is ``v_rel / (2 pi natural_frequency)`` so
+            that both axes are lengths (mm) and a free oscillation is a circle.
+    """
+
+    def __init__(self, recording: Any, *, natural_frequency: float = 1.82, batch: int = 1) -> None:
+        """Bind to ``recording``; nothing is logged until :meth:`log_static` or a message."""
+        import rerun as rr
+
+        if batch < 1:
+            raise ValueError(f"batch {batch} must be >= 1")
+        self._rr = rr
+        self.rec = recording
+        self.batch = batch
+        self._blocks: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]] = []
+        self.omega_n = 2.0 * math.pi * natural_frequency
+        self.origin_ns: int | None = None
+        self._next_index: dict[str, int] = {}
+        self._phase = _PhaseState()
+        self._pending: list[tuple[str, Any]] = []
+        self.stats = MapperStats()
+
+    # ---- static ------------------------------------------------------------------------------------
+
+    def log_static(self) -> None:
+        """Log the series styles (names with units, colours, markers) once, as static data."""
+        rr = self._rr
+        for ch in CHANNELS:
+            # MinMax: when a pixel holds many samples (20 kHz over seconds), draw their range, so that a 0.4 ms
+            # impact keeps its peak instead of being averaged away.
+            rr.log(ch.entity, rr.SeriesLines(names=f"{ch.label} [{ch.unit}]", colors=[ch.color], widths=1.0,
+                                             aggregation_policy="MinMax"), static=True, recording=self.rec)
+        rr.log(IMPACT_MARKERS, rr.SeriesPoints(names="impact (peak force at contact start)", colors=[(255, 170, 0)],
+                                               markers="diamond", marker_sizes=5.0), static=True, recording=self.rec)
+        rr.log(MOTOR_FREQUENCY, rr.SeriesLines(names="motor frequency [Hz]"), static=True, recording=self.rec)
+        rr.log(PHASE_PLANE, rr.LineStrips2D.from_fields(colors=[(44, 160, 44)], radii=[-1.5]), static=True,
+               recording=self.rec)
+        rr.log(POINCARE, rr.Points2D.from_fields(colors=[(214, 39, 40)], radii=[-4.0]), static=True,
+               recording=self.rec)
+
+    # ---- dispatch ----------------------------------------------------------------------------------
+
+    def log_message(self, topic: str, msg: Any) -> None:
+        """Log one message of ``topic`` (relative to the rig namespace, e.g. ``impact/force``)."""
+        channel = _BY_TOPIC.get(topic)
+        if channel is not None:
+            self.log_block(channel, msg)
+        elif topic == TRUTH_TOPIC:
+            self.log_truth(msg)
+        elif self.origin_ns is None:
+            # Events and motor states are placed relative to the origin learnt from the blocks; keep the
+            # few that come before the first block (bounded: at most 1000).
+            if len(self._pending) < 1000:
+                self._pending.append((topic, msg))
+        elif topic == EVENTS_TOPIC:
+            self.log_impact(msg)
+
+    def _learn_origin(self, stamp: Any, first_index: int, rate: float) -> None:
+        origin = stamp_ns(stamp) - int(sample_times_ns(first_index, 1, rate)[0])
+        if self.origin_ns != origin:
+            self.origin_ns = origin
+            pending, self._pending = self._pending, []
+            for topic, msg in pending:
+                self.log_message(topic, msg)
+
+    def sim_time_ns(self, stamp: Any) -> int:
+        """Simulation time (ns) of a stamp, relative to the learnt origin (0 while none is known)."""
+        return stamp_ns(stamp) - (self.origin_ns or 0)
+
+    # ---- channels ----------------------------------------------------------------------------------
+
+    def log_block(self, channel: Channel, msg: Any) -> None:
+        """One SampleBlock: all its samples at their exact times; sent when ``batch`` blocks are pending."""
+        samples = _array(msg.samples)
+        first = int(msg.first_index)
+        rate = float(msg.sample_rate)
+        if self.origin_ns is None:
+            self._learn_origin(msg.header.stamp, first, rate)
+        expected = self._next_index.get(channel.name)
+        if expected is not None and first != expected:
+            self.stats.gaps[channel.name] = self.stats.gaps.get(channel.name, 0) + 1
+        self._next_index[channel.name] = first + samples.size
+        if samples.size == 0:
+            return
+        pending = self._blocks.setdefault(channel.name, [])
+        pending.append((sample_times_ns(first, samples.size, rate), samples))
+        self.stats.samples[channel.name] = self.stats.samples.get(channel.name, 0) + samples.size
+        self.stats.blocks[channel.name] = self.stats.blocks.get(channel.name, 0) + 1
+        if len(pending) >= self.batch:
+            self._send_channel(channel)
+
+    def _send_channel(self, channel: Channel) -> None:
+        pending = self._blocks.pop(channel.name, None)
+        if not pending:
+            return
+        rr = self._rr
+        times = pending[0][0] if len(pending) == 1 else np.concatenate([t for t, _ in pending])
+        values = pending[0][1] if len(pending) == 1 else np.concatenate([v for _, v in pending])
+        rr.send_columns(channel.entity, indexes=[rr.TimeColumn(TIMELINE, duration=times.view("timedelta64[ns]"))],
+                        columns=rr.Scalars.columns(scalars=values), recording=self.rec)
+
+    def flush(self) -> None:
+        """Send everything pending (blocks and truth of an unfinished batch)."""
+        for channel in CHANNELS:
+            self._send_channel(channel)
+        self._send_truth()
+
+    # ---- events ------------------------------------------------------------------------------------
+
+    def log_impact(self, ev: Any) -> None:
+        """One ImpactEvent: a marker on the force plot, a text line and a table row, at contact start."""
+        rr = self._rr
+        rr.set_time(TIMELINE, duration=np.timedelta64(self.sim_time_ns(ev.header.stamp), "ns"), recording=self.rec)
+        rr.log(IMPACT_MARKERS, rr.Scalars(float(ev.peak_force)), recording=self.rec)
+        text = (f"impact {int(ev.index)} (cycle {int(ev.cycle_index)}): peak {ev.peak_force:.2f} N, "
+                f"impulse {ev.impulse * 1e3:.3f} mN s, velocity {ev.impact_velocity * 1e3:.1f} mm/s, "
+                f"duration {ev.duration * 1e3:.3f} ms, penetration {ev.max_penetration * 1e6:.1f} um, "
+                f"{ev.excitation_frequency:.3f} Hz, phase {ev.excitation_phase:.3f} rad")
+        rr.log(IMPACT_LOG, rr.TextLog(text, level="INFO"), recording=self.rec)
+        # The table keeps the six columns that fit a view; the log line has the rest.
+        rr.log(IMPACT_TABLE, rr.AnyValues(
+            index=int(ev.index), cycle=int(ev.cycle_index), peak_force_N=float(ev.peak_force),
+            impulse_Ns=float(ev.impulse), impact_velocity_mps=float(ev.impact_velocity), duration_s=float(ev.duration),
+        ), recording=self.rec)
+        self.stats.impacts += 1
+
+    # ---- truth: phase plane, Poincare section, motor frequency ---------------------------------------
+
+    def log_truth(self, msg: Any) -> None:
+        """One RigState block; phase plane, Poincare points and motor frequency are sent per ``batch`` blocks."""
+        first = int(msg.first_index)
+        rate = float(msg.sample_rate)
+        if self.origin_ns is None:
+            self._learn_origin(msg.header.stamp, first, rate)
+        cart = _array(msg.cart_position)
+        n = cart.size
+        if n == 0:
+            return
+        # Cart velocity: the cart moves smoothly (no impact), so a second-order difference at the truth rate
+        # is accurate to O((Omega dt)^2); the RIMD's own velocity is exact in the truth.
+        cart_v = np.gradient(cart, 1.0 / rate, edge_order=2) if n >= 3 else np.zeros(n)
+        x_mm = (_array(msg.rimd_position) - cart) * 1e3
+        y_mm = (_array(msg.rimd_velocity) - cart_v) / self.omega_n * 1e3
+        times = sample_times_ns(first, n, rate)
+        self._truth.append((times, x_mm, y_mm, _array(msg.motor_phase), float(msg.motor_frequency[-1])))
+        self.stats.truth_blocks += 1
+        if len(self._truth) >= self.batch:
+            self._send_truth()
+
+    def _send_truth(self) -> None:
+        if not self._truth:
+            return
+        rr = self._rr
+        batch, self._truth = self._truth, []
+        times = np.concatenate([b[0] for b in batch])
+        xs = np.concatenate([b[1] for b in batch])
+        ys = np.concatenate([b[2] for b in batch])
+        ph = np.concatenate([b[3] for b in batch])
+        prev = self._phase
+        step = int(times[1] - times[0]) if times.size > 1 else NS_PER_S
+        if prev.t_ns is not None and 0 < times[0] - prev.t_ns <= 2 * step:  # continue the line across batches
+            xs, ys, ph = np.r_[prev.x, xs], np.r_[prev.v, ys], np.r_[prev.phase, ph]
+            times = np.r_[np.int64(prev.t_ns), times]
+        # One line segment per block (from the last sample of the previous one), at the block's last sample.
+        ends = np.cumsum([b[0].size for b in batch]) + (xs.size - sum(b[0].size for b in batch)) - 1
+        starts = np.r_[0, ends[:-1]]
+        strips = [np.column_stack((xs[a:b + 1], ys[a:b + 1])) for a, b in zip(starts, ends, strict=True)]
+        index = [rr.TimeColumn(TIMELINE, duration=times[ends].view("timedelta64[ns]"))]
+        rr.send_columns(PHASE_PLANE, indexes=index,
+                        columns=rr.LineStrips2D.columns(strips=strips).partition([1] * len(strips)),
+                        recording=self.rec)
+        rr.send_columns(MOTOR_FREQUENCY, indexes=index,
+                        columns=rr.Scalars.columns(scalars=[b[4] for b in batch]), recording=self.rec)
+        # Motor phase 0: the phase wraps from near 2 pi to near 0 between two samples.
+        wraps = np.nonzero(np.diff(ph) < -math.pi)[0]
+        if wraps.size:
+            a, b = wraps, wraps + 1
+            frac = (2 * math.pi - ph[a]) / (ph[b] + 2 * math.pi - ph[a])
+            px = xs[a] + frac * (xs[b] - xs[a])
+            py = ys[a] + frac * (ys[b] - ys[a])
+            pt = times[a] + np.rint(frac * (times[b] - times[a])).astype(np.int64)
+            rr.send_columns(POINCARE, indexes=[rr.TimeColumn(TIMELINE, duration=pt.view("timedelta64[ns]"))],
+                            columns=rr.Points2D.columns(positions=np.column_stack((px, py))),
+                            recording=self.rec)
+            self.stats.poincare_points += int(wraps.size)
+        self._phase = _PhaseState(int(times[-1]), float(xs[-1]), float(ys[-1]), float(ph[-1]))
+
+
+#: Impact-table columns, most useful first (the viewer would otherwise sort them by name).
+TABLE_COLUMNS = ("index", "cycle", "peak_force_N", "impulse_Ns", "impact_velocity_mps", "duration_s")
+#: Phase plane and Poincare section share these bounds (mm), so that the section reads against the orbit;
+#: they hold the orbits of the paper's gaps (0 to 2.4 mm) and bands; the viewer zooms freely.
+PLANE_BOUNDS = {"x_range": (-10.0, 4.0), "y_range": (-8.0, 8.0)}
+
+
+def blueprint(*, window: float = 2.0, trail: float = 1.0) -> Any:
+    """The default layout.
+
+    The four channels stacked (last ``window`` s) on the left; on the right the phase plane (last ``trail`` s)
+    and the Poincare section (all cycles) side by side, the impact table (and log) below.
+    """
+    import rerun.blueprint as rrb
+
+    def recent(seconds: float) -> Any:
+        return [rrb.VisibleTimeRange(TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-seconds),
+                                     end=rrb.TimeRangeBoundary.cursor_relative())]
+
+    everything = [rrb.VisibleTimeRange(TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
+                                       end=rrb.TimeRangeBoundary.cursor_relative())]
+    series = [rrb.TimeSeriesView(origin=ch.entity, name=f"{ch.label} [{ch.unit}]", time_ranges=recent(window))
+              for ch in CHANNELS]
+    import rerun.blueprint.archetypes as rrba
+
+    bounds = rrb.VisualBounds2D(**PLANE_BOUNDS)
+    table = rrb.DataframeView(origin=IMPACT_TABLE, name="impact table", query=rrba.DataframeQuery(
+        timeline=TIMELINE, select=[TIMELINE, *(f"/{IMPACT_TABLE}:{c}" for c in TABLE_COLUMNS)], auto_scroll=True))
+    right = rrb.Vertical(
+        rrb.Horizontal(
+            rrb.Spatial2DView(origin="phase_plane", name="phase plane: x - x_c vs v_rel / omega_n [mm]",
+                              time_ranges=recent(trail), visual_bounds=bounds),
+            rrb.Spatial2DView(origin="poincare", name="Poincare section, motor phase 0 [mm]",
+                              time_ranges=everything, visual_bounds=bounds),
+        ),
+        rrb.Tabs(table, rrb.TextLogView(origin=IMPACT_LOG, name="impact log")),
+        row_shares=[3, 2],
+    )
+    return rrb.Blueprint(rrb.Horizontal(rrb.Vertical(*series), right, column_shares=[3, 2]),
+                         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+                         rrb.TimePanel(state="collapsed", timeline=TIMELINE))
