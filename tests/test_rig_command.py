@@ -19,7 +19,7 @@ def test_rig_brings_up_the_simulator_and_stops_cleanly(ros_processes, ros_execut
     out = tmp_path / "rec"
     rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "8", "--output-dir", str(out),
                                      name="rimd_rig")
-    rig.wait_for_output(r"rimd rig: running rimd_recorder, rimd_simulator", timeout=30)
+    rig.wait_for_output(r"rimd rig: running rimd_recorder, rimd_rerun, rimd_simulator", timeout=30)
     node = rclpy.create_node("probe_rig", context=ros_executor.context)
     ros_executor.add_node(node)
     motor: list[MotorState] = []
@@ -38,10 +38,13 @@ def test_rig_brings_up_the_simulator_and_stops_cleanly(ros_processes, ros_execut
     assert blocks[0][0] == 0 and len(blocks) > 300
     assert all(b[0] == a[0] + a[1] for a, b in zip(blocks, blocks[1:], strict=False))
     assert "LOSS" not in rig.output()
+    # The Rerun bridge ran with the default sink (a web viewer on loopback) and was closed with the rig.
+    assert "rerun bridge ready: sink serve_web -> http://127.0.0.1:" in rig.output()
+    assert "rimd_rerun: closed" in rig.output()
 
 
 def test_rig_without_recorder(ros_processes, tmp_path):
-    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "3", "--no-record",
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "3", "--no-record", "--no-rerun",
                                      name="rimd_rig_norec")
     assert rig.wait(40) == 0, rig.tail()
     assert "rimd rig: running rimd_simulator with" in rig.output() and "Not recording" in rig.output()
@@ -63,3 +66,11 @@ def test_rig_refuses_a_bad_config_before_starting(ros_processes, tmp_path):
     assert rig.wait(30) == 1
     assert "rimd rig: parameter 'mass' = -1.0 refused: must be > 0" in rig.output()
     assert "running" not in rig.output()
+
+
+def test_rig_refuses_a_bad_rerun_section(ros_processes, tmp_path, repo_root):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((repo_root / "config" / "rimd.yaml").read_text().replace("sink: serve_web", "sink: hologram"))
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--config", str(bad), name="rimd_rig_badrerun")
+    assert rig.wait(30) == 1
+    assert "unknown sink 'hologram'" in rig.output() and "running" not in rig.output()

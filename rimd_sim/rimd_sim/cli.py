@@ -56,7 +56,7 @@ _BRING_UP = (5, "Recorder, replay and bring-up")
 _SIMULATOR = (4, "Simulator node")
 
 VERBS: tuple[Verb, ...] = (
-    Verb("rig", "bring up the rig from config: recorder and simulator (Rerun bridge: issue 6)",
+    Verb("rig", "bring up the rig from config: recorder, Rerun bridge and simulator",
          "rimd_sim.verbs.rig"),
     Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
          "rimd_sim.verbs.experiment"),

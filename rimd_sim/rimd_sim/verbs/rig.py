@@ -1,7 +1,7 @@
 """``rimd rig``: bring up the rig from a configuration file, like a launch file.
 
-The rig is the simulator, the recorder (when its config section has ``enabled: true``) and, once it lands,
-the Rerun bridge, each a separate process started with ``--ros-args --params-file CONFIG``. Consumers start
+The rig is the simulator, the recorder and the Rerun bridge (each when its config section has
+``enabled: true``), each a separate process started with ``--ros-args --params-file CONFIG``. Consumers start
 first; the simulator starts paused and is resumed once every rig topic has all its consumers, so the
 recording holds every sample from sample 0. Ctrl-C (or ``--duration``) stops the nodes in reverse order
 (simulator first, recorder last, so the recording gets everything), each with SIGINT, then SIGTERM, then
@@ -33,8 +33,11 @@ class RigNode:
 
 
 #: The nodes in start order (stopped in reverse). Consumers start before the simulator.
+#: The Rerun bridge is not waited for: it reads motor phase and frequency from /rig/truth and does not
+#: subscribe to every rig topic; it may miss the first blocks (it reports gaps).
 RIG_NODES = (
     RigNode("rimd_recorder", "rimd_sim.nodes.recorder", consumer=True),
+    RigNode("rimd_rerun", "rimd_sim.nodes.rerun_bridge", consumer=False),
     RigNode("rimd_simulator", "rimd_sim.nodes.simulator", consumer=False),
 )
 
@@ -52,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--output-dir", type=Path, default=None,
                         help="record into this directory (default: the recorder's output_dir in the config)")
     parser.add_argument("--no-record", action="store_true", help="do not start the recorder")
+    parser.add_argument("--no-rerun", action="store_true", help="do not start the Rerun bridge")
 
 
 def _stop(proc: subprocess.Popen, name: str) -> int | None:
@@ -95,12 +99,27 @@ def _plan(args: argparse.Namespace, config_path: Path) -> list[tuple[RigNode, li
                 raise ConfigError("rimd_recorder", str(config_path), str(exc)) from None
             output_dir = Path(section.get("output_dir", "recordings")).expanduser().resolve()
             extra = ["-p", f"output_dir:={output_dir}"]
+        elif node.name == "rimd_rerun":
+            section = _section(config_path, node.name)
+            if args.no_rerun or section is None or not section.get("enabled", False):
+                continue
+            from rimd_sim.viz.sinks import SinkError, spec_from_parameters
+
+            try:
+                spec_from_parameters(section).validate()
+            except SinkError as exc:
+                raise ConfigError("rimd_rerun", str(config_path), str(exc)) from None
         plan.append((node, extra))
     return plan
 
 
-def _resume_when_connected(consumers: int, procs, timeout: float = 20.0) -> bool:  # noqa: ANN001
-    """Wait until each rig topic has ``consumers`` subscribers, then call /rig/resume. True when resumed."""
+def _subscribed(node, topic: str, consumers: tuple[str, ...]) -> bool:  # noqa: ANN001
+    names = {info.node_name for info in node.get_subscriptions_info_by_topic(topic)}
+    return all(name in names for name in consumers)
+
+
+def _resume_when_connected(consumers: tuple[str, ...], procs, timeout: float = 20.0) -> bool:  # noqa: ANN001
+    """Wait until each consumer node subscribes to every rig topic, then call /rig/resume. True when resumed."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
     from std_srvs.srv import Trigger
@@ -112,7 +131,7 @@ def _resume_when_connected(consumers: int, procs, timeout: float = 20.0) -> bool
         deadline = time.monotonic() + timeout
         client = node.create_client(Trigger, "/rig/resume")
         while time.monotonic() < deadline and all(p.poll() is None for _, p in procs):
-            if all(node.count_subscribers(t) >= consumers for t in RIG_TOPICS) and client.service_is_ready():
+            if all(_subscribed(node, t, consumers) for t in RIG_TOPICS) and client.service_is_ready():
                 future = client.call_async(Trigger.Request())
                 executor = rclpy.executors.SingleThreadedExecutor(context=context)
                 executor.add_node(node)
@@ -133,7 +152,7 @@ def main(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"rimd rig: {exc}", file=sys.stderr)
         return 1
-    consumers = sum(1 for node, _ in plan if node.consumer)
+    consumers = tuple(node.name for node, _ in plan if node.consumer)
     procs: list[tuple[str, subprocess.Popen]] = []
     stopping = False
 
@@ -163,7 +182,7 @@ def main(args: argparse.Namespace) -> int:
             elif all(p.poll() is None for _, p in procs):
                 print("rimd rig: the consumers did not all connect within 20 s; resuming the rig anyway",
                       file=sys.stderr, flush=True)
-                _resume_when_connected(0, procs, timeout=10.0)
+                _resume_when_connected((), procs, timeout=10.0)
         deadline = time.monotonic() + args.duration if args.duration > 0 else None
         while not stopping and (deadline is None or time.monotonic() < deadline):
             for name, proc in procs:
