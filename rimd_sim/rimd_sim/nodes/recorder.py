@@ -32,7 +32,6 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -40,6 +39,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
+from rimd_sim.nodes._run import run_node
 from rimd_sim.recording.bag import BagWriter
 from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
@@ -404,28 +404,8 @@ class RecorderNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_recorder`` executable (also ``rimd node recorder``)."""
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    try:
-        try:
-            node = RecorderNode()
-        except (RecorderConfigError, rclpy.exceptions.ParameterException) as exc:
-            print(f"rimd_recorder: configuration refused: {exc}", file=sys.stderr)
-            return 2
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        executor.shutdown()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
-
+    return run_node("rimd_recorder", RecorderNode, (RecorderConfigError,), args=args,
+                    refused_prefix="configuration refused: ", close=lambda node: node.shutdown())
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -28,12 +28,12 @@ import rclpy
 import yaml
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
+from rimd_sim.nodes._run import run_node
 from rimd_sim.recording.reader import Recording, RecordingError, open_recording
 
 __all__ = ["ReplayNode", "main"]
@@ -243,32 +243,15 @@ class ReplayNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_replay`` executable (also ``rimd node replay``)."""
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    status = 0
-    try:
-        try:
-            node = ReplayNode()
-        except (ReplayError, rclpy.exceptions.ParameterException) as exc:
-            print(f"rimd_replay: {exc}", file=sys.stderr)
-            return 1
-        executor.add_node(node)
+
+    def spin(node: ReplayNode, executor) -> None:  # noqa: ANN001
         node.start()
         while rclpy.ok() and not node.finished.is_set():
             executor.spin_once(timeout_sec=0.1)
         node.wait_for_acknowledgements()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        executor.shutdown()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return status
 
+    return run_node("rimd_replay", ReplayNode, (ReplayError,), args=args, refused_status=1, spin=spin,
+                    close=lambda node: node.stop())
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -15,13 +15,12 @@ import time
 from collections import deque
 from typing import Any
 
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
+from rimd_sim.nodes._run import run_node
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
 from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
 
@@ -129,36 +128,20 @@ class RerunBridgeNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_rerun`` executable (also ``rimd node rerun``)."""
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    status = 0
-    try:
-        try:
-            node = RerunBridgeNode()
-        except (SinkError, rclpy.exceptions.ParameterException) as exc:
-            print(f"rimd_rerun: {exc}", file=sys.stderr)
-            return 1
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            problem = node.close()
-            if problem:
-                print(f"rimd_rerun: {problem}", file=sys.stderr)
-                status = 1
-            s = node.mapper.stats
-            print(f"rimd_rerun: closed {node.stream.viewer_url}: "
-                  + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
-                  + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
-            node.destroy_node()
-        executor.shutdown()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return status
 
+    def close(node: RerunBridgeNode) -> int:
+        status = 0
+        problem = node.close()
+        if problem:
+            print(f"rimd_rerun: {problem}", file=sys.stderr)
+            status = 1
+        s = node.mapper.stats
+        print(f"rimd_rerun: closed {node.stream.viewer_url}: "
+              + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
+              + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
+        return status
+
+    return run_node("rimd_rerun", RerunBridgeNode, (SinkError,), args=args, refused_status=1, close=close)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -28,11 +28,10 @@ from collections import deque
 from fractions import Fraction
 from typing import Any
 
-import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -43,6 +42,7 @@ from rimd_msgs.srv import Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
 from rimd_sim.core.config import PARAMETERS
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
+from rimd_sim.nodes._run import run_node
 
 __all__ = ["SimulatorNode", "main"]
 
@@ -464,29 +464,14 @@ class SimulatorNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_simulator`` executable (also ``rimd node simulator``)."""
-    rclpy.init(args=args)
-    node = None
-    executor = MultiThreadedExecutor(num_threads=2)
-    try:
-        try:
-            node = SimulatorNode()
-        except (ConfigError, rclpy.exceptions.ParameterException) as exc:
-            print(f"rimd_simulator: configuration refused: {exc}", file=sys.stderr)
-            return 2
-        executor.add_node(node)
+
+    def spin(node: SimulatorNode, executor) -> None:  # noqa: ANN001
         node.start()
         executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        executor.shutdown()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
 
+    return run_node("rimd_simulator", SimulatorNode, (ConfigError,), args=args,
+                    refused_prefix="configuration refused: ", executor=lambda: MultiThreadedExecutor(num_threads=2),
+                    spin=spin, close=lambda node: node.shutdown())
 
 if __name__ == "__main__":
     sys.exit(main())
