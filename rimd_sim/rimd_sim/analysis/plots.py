@@ -14,6 +14,19 @@ import numpy as np  # noqa: E402
 from .sweep import SweepResult  # noqa: E402
 
 
+def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa: ANN001
+    """Title the figure (on ``ax``, else the whole figure), lay it out, write it and close it."""
+    if title:
+        if ax is not None:
+            ax.set_title(title)
+        else:
+            fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
 def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
     """Non-dimensional peak force F_i/mg versus Omega/omega (the paper's Figs 6 and 8).
 
@@ -35,12 +48,7 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
     ax2.set_ylabel("impacts / cycle")
     ax2.set_xlabel("Omega / omega_n")
     ax2.grid(alpha=0.3)
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, ax)
 
 
 # ---- nonlinear analyses (issue 7): bifurcation, phase plane + Poincare map, Peterka map, basins ----------
@@ -108,12 +116,7 @@ def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
     ax.set_ylabel("l sin(theta) / A0 (stroboscopic)")
     ax.grid(alpha=0.3)
     ax.legend(markerscale=6, fontsize=8)
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, ax)
 
 
 def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title: str = "") -> Path:
@@ -134,12 +137,7 @@ def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title
     ax2.set_ylabel("l theta' cos(theta) / (A0 Omega)")
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=8, loc="upper left")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title)
 
 
 def plot_peterka(result, path: Path, title: str = "") -> Path:
@@ -158,12 +156,7 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
     ax.set_xlabel("Omega / omega_n")
     ax.set_ylabel("gap / A0")
     _class_legend(ax, palette, marks)
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, ax)
 
 
 def plot_basins(result, path: Path, title: str = "") -> Path:
@@ -174,12 +167,7 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
     ax.set_xlabel("initial theta (mrad)")
     ax.set_ylabel("initial theta' (rad/s)")
     _class_legend(ax, palette)
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, ax)
 
 
 # ---- recorded analyses (rimd analyze) ---------------------------------------------------------------------
@@ -200,12 +188,7 @@ def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
     ax2.set_ylabel("impacts / cycle")
     ax2.set_xlabel("motor frequency setpoint (Hz)")
     ax2.grid(alpha=0.3)
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, ax)
 
 
 def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "") -> Path:
@@ -221,12 +204,7 @@ def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: P
     ax.set_ylabel("peak force (N)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, ax)
 
 
 def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") -> Path:
@@ -249,9 +227,4 @@ def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") 
         ax.axis("off")
     if panels:
         axes.flat[0].legend(fontsize=7, loc="upper left")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
