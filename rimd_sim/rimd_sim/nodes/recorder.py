@@ -377,7 +377,9 @@ class RecorderNode(Node):
         status.message = f"{state}; " + ("loss: see values" if lost else "no loss")
         values = {"state": state, "file": str(self._bag.current_path or ""),
                   "queue": str(len(self._queue)), "write_errors": str(self._write_errors),
-                  "messages_written": str(sum(r["written"] for r in report.values()))}
+                  "messages_written": str(sum(r["written"] for r in report.values())),
+                  "not_recorded_while_paused_or_stopped": str(self._skipped_paused),
+                  "topics_of_unknown_type": " ".join(sorted(self._unknown))}
         for topic, r in report.items():
             values[f"{topic} lost_samples"] = str(r["lost_samples"])
             values[f"{topic} queue_dropped"] = str(r["queue_dropped"])

@@ -45,16 +45,22 @@ def main(args: argparse.Namespace) -> int:
                           peak=args.peak, log=_log)
     except RecordingError as exc:
         raise CommandError(str(exc)) from None
+    print_report(summary)
+    print(f"results in {args.out}")
+    return 0
+
+
+def print_report(summary: dict) -> None:
+    """Print the step table, the cross-check counts and, when anything was lost, a LOSS line."""
     for line in format_steps(summary["steps"]):
         print(line)
     imp = summary["impacts"]
     print(f"impacts: {imp['events']} events, {imp['detected']} detected in the force channel; "
           f"{imp['matches']} matches, {imp['misses']} misses, {imp['extras']} extras")
-    if not summary["loss"]["complete"] or summary["loss"]["lost_samples"] or summary["loss"]["undecodable_messages"]:
-        print(f"LOSS: {'; '.join(summary['loss']['files'])}; lost samples {summary['loss']['lost_samples']}; "
-              f"undecodable {summary['loss']['undecodable_messages']}")
-    print(f"results in {args.out}")
-    return 0
+    loss = summary["loss"]
+    if not loss["complete"] or loss["lost_samples"] or loss["undecodable_messages"]:
+        print(f"LOSS: {'; '.join(loss['files'])}; lost samples {loss['lost_samples']}; "
+              f"undecodable {loss['undecodable_messages']}")
 
 
 def _log(text: str) -> None:

@@ -185,17 +185,13 @@ def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
         print(f"experiment done ({len(freqs)} steps, not recorded here); schedule in {out / 'experiment.json'}")
         return 0
     from rimd_sim.recording.reader import RecordingError
-    from rimd_sim.verbs.analyze import analyze, format_steps
+    from rimd_sim.verbs.analyze import analyze, print_report
 
     try:
         summary = analyze(target, out, settle=args.settle, log=lambda text: log(f"analyze: {text}"))
     except RecordingError as exc:
         raise CommandError(f"the experiment ran but its recording cannot be analysed: {exc}") from None
-    for line in format_steps(summary["steps"]):
-        print(line)
-    imp = summary["impacts"]
-    print(f"impacts: {imp['events']} events, {imp['detected']} detected; {imp['matches']} matches, "
-          f"{imp['misses']} misses, {imp['extras']} extras")
+    print_report(summary)
     print(f"recording in {target}; analysis in {out}")
     return 0
 
