@@ -3,7 +3,7 @@
 Executables (console scripts) are installed to ``lib/rimd_sim/`` (see setup.cfg) so that a full ROS 2
 install can ``ros2 run rimd_sim <name>`` them; ``env.sh`` also puts that directory on ``PATH`` for the
 ``rimd`` command. A node added later only needs a line in ``NODE_EXECUTABLES`` below, for example
-``"rimd_simulator = rimd_sim.nodes.simulator:main"``.
+``"rimd_simulator = rimd_sim.nodes._entry:simulator"``.
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ def _config_files() -> list[str]:
 
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
 NODE_EXECUTABLES: list[str] = [
-    "rimd_simulator = rimd_sim.nodes.simulator:main",
-    "rimd_recorder = rimd_sim.nodes.recorder:main",
-    "rimd_replay = rimd_sim.nodes.replay:main",
-    "rimd_rerun = rimd_sim.nodes.rerun_bridge:main",
+    "rimd_simulator = rimd_sim.nodes._entry:simulator",
+    "rimd_recorder = rimd_sim.nodes._entry:recorder",
+    "rimd_replay = rimd_sim.nodes._entry:replay",
+    "rimd_rerun = rimd_sim.nodes._entry:rerun",
 ]
 
 setup(

@@ -1,4 +1,18 @@
-"""The common life cycle of the rig's node executables: init, build, spin, close, shut down."""
+"""The common life cycle of the rig's node executables: init, build, spin, close, shut down.
+
+Stopping is ours, not rclpy's. With rclpy's own signal handlers, SIGINT shuts the ROS context down from
+inside the signal handler, at any point of the executor's loop, and raises ``KeyboardInterrupt`` wherever
+the main thread happens to be: between two ``spin_once`` calls the executor then builds a wait set on a
+dead context (``RCLError: failed to initialize wait set``, exit status 1 after a clean stop), and inside a
+callback the interrupt can cut a write in half. Here SIGINT and SIGTERM only *request* a stop
+(:class:`StopRequest`): the executor finishes the callback it runs, the loop sees the request within one
+spin period, ``close`` runs while the context is still valid (the recorder drains its subscriptions and
+finishes its file), and only then is the context shut down. A clean stop exits 0, at any moment.
+
+:func:`~rimd_sim.nodes._stop.install_stop_handlers` is called by the executables' entry module
+(:mod:`rimd_sim.nodes._entry`) before the heavy imports (rclpy, numba, rerun), so a signal that arrives
+while the node is still loading also ends in a clean exit.
+"""
 
 from __future__ import annotations
 
@@ -8,12 +22,25 @@ from collections.abc import Callable
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from rimd_sim.nodes._stop import StopRequest, install_stop_handlers
+
+#: Longest time between a stop request and the loop noticing it (s). rcl_wait cannot be interrupted by a
+#: Python signal handler, so the loop waits at most this long before it looks at the request.
+SPIN_PERIOD_S = 0.1
+
+def spin_until_stopped(executor: Executor, stop: StopRequest, done: Callable[[], bool] | None = None) -> None:
+    """Spin ``executor`` until a stop is requested, ``done()`` is true, or the context is shut down."""
+    context = executor.context
+    while not stop.is_set() and context.ok() and not (done is not None and done()):
+        executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
 
 def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseException], ...], *,
              args: list[str] | None = None, refused_status: int = 2, refused_prefix: str = "",
              executor: Callable[[], Executor] = SingleThreadedExecutor,
-             spin: Callable[[Node, Executor], None] | None = None,
+             spin: Callable[[Node, Executor, StopRequest], None] | None = None,
              close: Callable[[Node], int | None] | None = None) -> int:
     """Run one node until it ends, Ctrl-C, SIGTERM or an external shutdown; return the exit status.
 
@@ -27,11 +54,12 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
         refused_status: Exit status of a refused configuration.
         refused_prefix: Text before the refusal message.
         executor: Factory of the executor.
-        spin: Runs the node (default: ``executor.spin()``).
-        close: Called once in every case after spinning, before the node is destroyed; a non-zero return
-            becomes the exit status.
+        spin: Runs the node until it ends or ``stop`` is set (default: :func:`spin_until_stopped`).
+        close: Called once in every case after spinning, with the context still valid, before the node is
+            destroyed; a non-zero return becomes the exit status.
     """
-    rclpy.init(args=args)
+    stop = install_stop_handlers()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     status = 0
     runner = executor()
@@ -42,12 +70,13 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
             print(f"{name}: {refused_prefix}{exc}", file=sys.stderr)
             return refused_status
         runner.add_node(node)
-        if spin is None:
-            runner.spin()
-        else:
-            spin(node, runner)
+        if not stop.is_set():
+            if spin is None:
+                spin_until_stopped(runner, stop)
+            else:
+                spin(node, runner, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        pass   # KeyboardInterrupt: only if a caller replaced the handlers (e.g. an embedding program)
     finally:
         if node is not None:
             if close is not None:

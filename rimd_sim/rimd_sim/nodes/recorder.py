@@ -112,6 +112,7 @@ class RecorderNode(Node):
         self._recording = True
         self._paused = bool(values["start_paused"])
         self._subs: dict[str, Any] = {}
+        self._drains: dict[str, Any] = {}
         self._types: dict[str, str] = {}
         self._received: dict[str, int] = {}
         self._dropped: dict[str, int] = {}  # queue overflow
@@ -193,24 +194,30 @@ class RecorderNode(Node):
                 return
             queue.append(("msg", topic, data, clock.now().nanoseconds, info.get("source_timestamp", 0)))
 
+        def drain(limit: int = 1000) -> int:
+            """Take up to ``limit`` messages already waiting in the subscription; return how many."""
+            sub = self._subs.get(topic)
+            if sub is None:
+                return 0
+            for n in range(limit):
+                try:
+                    with sub.handle:
+                        taken = sub.handle.take_message(sub.msg_type, True)
+                except Exception:  # noqa: BLE001 - the subscription is being destroyed
+                    return n
+                if taken is None:
+                    return n
+                accept(taken[0], taken[1])
+            return limit
+
         def callback(data: bytes, info: dict) -> None:
             if not self._recording or self._paused:
                 self._skipped_paused += 1
                 return
             accept(data, info)
-            sub = self._subs.get(topic)
-            if sub is None:
-                return
-            for _ in range(1000):
-                try:
-                    with sub.handle:
-                        taken = sub.handle.take_message(sub.msg_type, True)
-                except Exception:  # noqa: BLE001 - the subscription is being destroyed
-                    return
-                if taken is None:
-                    return
-                accept(taken[0], taken[1])
+            drain()
 
+        self._drains[topic] = drain
         return callback
 
     def _fetch_rig_parameters(self) -> None:
@@ -389,7 +396,17 @@ class RecorderNode(Node):
         self._diagnostics.publish(msg)
 
     def shutdown(self) -> None:
-        """Let the writer drain the queue, finish the file and print the per-topic summary."""
+        """Record what already reached the node, let the writer drain the queue, finish the file, print a summary.
+
+        Every message waiting in a subscription when the stop was asked (the executor had not dispatched it
+        yet: the recorder lags behind a fast rig) is taken and written, so a stop never cuts the topics at
+        different times. This runs before the context is shut down (see :mod:`rimd_sim.nodes._run`).
+        """
+        if self._recording and not self._paused and self.context.ok():
+            for drain in list(self._drains.values()):
+                for _ in range(10):   # bounded: a publisher faster than the takes cannot hold the stop
+                    if drain(10_000) < 10_000:
+                        break
         self._recording = False
         self._stop.set()
         self._writer.join(timeout=60.0)

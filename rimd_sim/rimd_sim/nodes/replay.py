@@ -24,7 +24,6 @@ import threading
 import time
 from typing import Any
 
-import rclpy
 import yaml
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
@@ -33,7 +32,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from rimd_sim.nodes._run import run_node
+from rimd_sim.nodes._run import run_node, spin_until_stopped
 from rimd_sim.recording.reader import Recording, RecordingError, open_recording
 
 __all__ = ["ReplayNode", "main"]
@@ -244,10 +243,9 @@ class ReplayNode(Node):
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_replay`` executable (also ``rimd node replay``)."""
 
-    def spin(node: ReplayNode, executor) -> None:  # noqa: ANN001
+    def spin(node: ReplayNode, executor, stop) -> None:  # noqa: ANN001
         node.start()
-        while rclpy.ok() and not node.finished.is_set():
-            executor.spin_once(timeout_sec=0.1)
+        spin_until_stopped(executor, stop, done=node.finished.is_set)
         node.wait_for_acknowledgements()
 
     return run_node("rimd_replay", ReplayNode, (ReplayError,), args=args, refused_status=1, spin=spin,

@@ -25,10 +25,10 @@ from rimd_sim.core.config import find_config_file, read_ros_parameters
 
 @dataclass(frozen=True)
 class RigNode:
-    """A node of the rig: its name (= config section), module, and whether it consumes the rig's topics."""
+    """A node of the rig: its name (= config section), entry (``rimd_sim.nodes._entry``), whether it consumes."""
 
     name: str
-    module: str
+    entry: str
     consumer: bool
 
 
@@ -36,9 +36,9 @@ class RigNode:
 #: The Rerun bridge is not waited for: it reads motor phase and frequency from /rig/truth and does not
 #: subscribe to every rig topic; it may miss the first blocks (it reports gaps).
 RIG_NODES = (
-    RigNode("rimd_recorder", "rimd_sim.nodes.recorder", consumer=True),
-    RigNode("rimd_rerun", "rimd_sim.nodes.rerun_bridge", consumer=False),
-    RigNode("rimd_simulator", "rimd_sim.nodes.simulator", consumer=False),
+    RigNode("rimd_recorder", "recorder", consumer=True),
+    RigNode("rimd_rerun", "rerun", consumer=False),
+    RigNode("rimd_simulator", "simulator", consumer=False),
 )
 
 #: Topics every consumer subscribes to before the simulator is resumed.
@@ -165,7 +165,8 @@ def main(args: argparse.Namespace) -> int:
     recording_dir = None
     try:
         for node, extra in plan:
-            cmd = [sys.executable, "-m", node.module, "--ros-args", "--params-file", str(config_path), *extra]
+            cmd = [sys.executable, "-m", "rimd_sim.nodes._entry", node.entry,
+                   "--ros-args", "--params-file", str(config_path), *extra]
             if node.name == "rimd_simulator" and consumers:
                 cmd += ["-p", "start_paused:=true"]
             if node.name == "rimd_recorder":
