@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from rimd_sim.analysis import recorded as rec
 
@@ -107,3 +109,30 @@ def test_onset_fit_recovers_the_spring_dashpot_peak_at_every_sampling_phase():
         worst_raw = max(worst_raw, 1 - f[run].max() / peak)
     assert worst_fit < 0.002          # the fit: within 0.2 % with the sensor's noise
     assert worst_raw > 0.15           # the largest sample: up to ~18 % low (what the fit removes)
+
+
+def test_settled_tells_a_steady_window_from_one_still_in_its_transient():
+    f = 4.0
+    steady = np.arange(0.0, 8.0, 1 / f) + 0.01          # one impact per cycle over 8 s
+    assert rec.settled(steady, np.full(steady.size, 76.0), 0.0, 8.0, f) is True
+    # Period 2 (one impact every two cycles, alternating magnitudes): still steady.
+    period2 = steady[::2]
+    assert rec.settled(period2, np.where(np.arange(period2.size) % 2, 60.0, 80.0), 0.0, 8.0, f) is True
+    # The 4.0 Hz step of issue 16: no impact for the first 1.7 s of the window, then one per cycle.
+    late = steady[steady >= 1.7]
+    assert rec.settled(late, np.full(late.size, 76.0), 0.0, 8.0, f) is False
+    # Same impacts per cycle, but the peaks still growing by more than 5 % between the halves.
+    assert rec.settled(steady, np.linspace(60.0, 76.0, steady.size), 0.0, 8.0, f) is False
+    # Halves shorter than two cycles: no verdict.
+    assert rec.settled(steady, np.full(steady.size, 76.0), 0.0, 0.9, f) is None
+
+
+def test_the_last_step_ends_where_every_stream_of_the_recording_ends():
+    t = np.arange(0.0, 10.0, 0.01)
+    motor = {"time": t, "frequency_setpoint": np.where(t < 5.0, 3.0, 4.0), "frequency": np.where(t < 5.0, 3.0, 4.0)}
+    steps = rec.segment_steps(motor, settle=1.0, end=8.0)
+    assert [s.setpoint for s in steps] == [3.0, 4.0] and steps[-1].end == pytest.approx(8.0, abs=0.011)
+    assert rec.segment_steps(motor, settle=1.0, end=4.0)[-1].setpoint == 3.0   # a step after the end: dropped
+    force = _channel(np.zeros(int(7.5 * 20000)))
+    data = rec.RecordedData(Path("r"), None, 0, channels={rec.FORCE: force}, motor=motor)
+    assert rec.common_end(data) == pytest.approx(7.5, abs=1e-4)

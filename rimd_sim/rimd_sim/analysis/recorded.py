@@ -61,7 +61,7 @@ DEFAULT_THRESHOLD = 2.0
 
 __all__ = [
     "Channel", "PulseModel", "RecordedData", "Step", "load", "pulse_model", "detect_impacts", "match_impacts",
-    "segment_steps", "step_table", "phase_plane", "poincare_times", "poincare_points",
+    "common_end", "segment_steps", "settled", "step_table", "phase_plane", "poincare_times", "poincare_points",
 ]
 
 
@@ -362,9 +362,35 @@ class Step:
         return 0.0 if self.steady_from is None else max(0.0, self.end - self.steady_from)
 
 
-def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: float = 1e-6) -> list[Step]:
-    """Cut the motor states into steps of constant setpoint; discard the ramp plus ``settle`` seconds."""
+def common_end(data: RecordedData) -> float | None:
+    """The time (s from the origin) up to which every recorded stream of the analysis has its data.
+
+    A recorder stops its topics one after the other, and a recorder that lags behind a fast rig holds each
+    topic's backlog separately, so the streams of a recording can end at different times. An analysis that
+    counts the impact events over a window running to the end of the motor states would count over a tail
+    where the events were not recorded (and read a steady 1 impact per cycle as 0.63). The sampled channels
+    and the motor states end where they end; the sparse impact events are published with the blocks of
+    the same instant, so the earliest end of the others bounds them too.
+    """
+    ends = [float(c.time[-1]) for c in data.channels.values() if c.time.size]
+    t = data.motor.get("time", np.empty(0))
+    if t.size:
+        ends.append(float(t[-1]))
+    return min(ends) if ends else None
+
+
+def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: float = 1e-6,
+                  end: float | None = None) -> list[Step]:
+    """Cut the motor states into steps of constant setpoint; discard the ramp plus ``settle`` seconds.
+
+    ``end``: the time where the recording's streams stop together (:func:`common_end`); the last step ends
+    there when it is earlier than its last motor state, and steps that start after it are dropped.
+    """
     t = motor.get("time", np.empty(0))
+    if end is not None:
+        keep = t <= end
+        motor = {k: v[keep] for k, v in motor.items()}
+        t = motor["time"]
     if t.size == 0:
         return []
     sp, f = motor["frequency_setpoint"], motor["frequency"]
@@ -380,13 +406,54 @@ def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: flo
     return steps
 
 
+#: A step is settled when the two halves of its steady window agree: impact counts within one impact (a
+#: window edge can fall on either side of an impact) plus this much per cycle of a half ...
+SETTLED_IMPACTS_PER_CYCLE = 0.1
+#: ... and largest peak forces within this fraction of the larger.
+SETTLED_PEAK_FRACTION = 0.05
+
+
+def settled(times: np.ndarray, peaks: np.ndarray, start: float, end: float, frequency: float) -> bool | None:
+    """Whether the motion over ``[start, end)`` is steady (None when each half is shorter than two cycles).
+
+    Steady: the two halves hold the same number of impacts, within one (the edges of a window cut the train
+    of impacts at any phase) plus :data:`SETTLED_IMPACTS_PER_CYCLE` per cycle, and the same largest peak
+    force, within :data:`SETTLED_PEAK_FRACTION`.
+
+    A transient that has not died out (a step that started at an unlucky phase, a chaotic motion) shows as
+    halves that differ; a steady periodic motion of period up to a few cycles gives equal halves.
+    """
+    mid = 0.5 * (start + end)
+    cycles = (mid - start) * frequency
+    if not cycles >= 2.0:
+        return None
+    halves = []
+    for lo, hi in ((start, mid), (mid, end)):
+        sel = (times >= lo) & (times < hi)
+        halves.append((int(sel.sum()), float(peaks[sel].max()) if sel.any() else 0.0))
+    (n1, f1), (n2, f2) = halves
+    return bool(abs(n1 - n2) <= 1 + SETTLED_IMPACTS_PER_CYCLE * cycles
+                and abs(f1 - f2) <= SETTLED_PEAK_FRACTION * max(f1, f2))
+
+
 def step_table(steps: list[Step], events: dict[str, np.ndarray], detected: dict[str, np.ndarray],
                force: Channel | None) -> list[dict]:
-    """Per step: steady peak force and impacts per cycle from the events and from the force channel."""
+    """Per step: steady peak force and impacts per cycle from the events and from the force channel.
+
+    ``settled``: whether the step had settled (:func:`settled`, from the events, else the force channel).
+    """
     rows = []
     for s in steps:
         row = {"step": s.number, "frequency_hz": s.setpoint, "start_s": s.start, "ramp_end_s": s.ramp_end,
                "steady_from_s": s.steady_from, "end_s": s.end, "steady_seconds": s.steady_seconds}
+        verdict = None
+        if s.steady_from is not None:
+            times, peaks = events.get("time"), events.get("peak_force")
+            if (times is None or times.size == 0) and detected["start"].size:   # no events recorded
+                times, peaks = detected["start"], detected["peak_force"]
+            if times is not None:
+                verdict = settled(times, peaks, s.steady_from, s.end, s.setpoint)
+        row["settled"] = verdict
         cycles = s.steady_seconds * s.setpoint
         for label, times, peaks in (("events", events.get("time"), events.get("peak_force")),
                                     ("channel", detected["start"], detected["peak_force"])):

@@ -42,7 +42,7 @@ from rimd_msgs.srv import Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
 from rimd_sim.core.config import PARAMETERS
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
-from rimd_sim.nodes._run import run_node
+from rimd_sim.nodes._run import run_node, spin_until_stopped
 
 __all__ = ["SimulatorNode", "main"]
 
@@ -60,6 +60,9 @@ CHANNEL_TOPICS = {
 #: RigState array fields, in the order of the core's truth rows (the 11th row, in_contact, is bool[]).
 TRUTH_ARRAY_FIELDS = ("theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity", "rimd_acceleration",
                       "penetration", "contact_force", "motor_phase", "motor_frequency")
+
+#: Longest a command may be scheduled ahead of the simulation (s of simulation time).
+MAX_SCHEDULE_AHEAD_S = 86_400
 
 _ROS_TYPES = {"float": 3, "int": 2, "bool": 1, "str": 4}  # rcl_interfaces ParameterType values
 
@@ -350,10 +353,32 @@ class SimulatorNode(Node):
 
     # ---- services ----------------------------------------------------------------------------------
 
+    def _start_time(self, stamp: Time) -> Fraction | None:
+        """Simulation time of a request's ``start_stamp`` (None for zero: the next block boundary).
+
+        Raises:
+            CommandError: A stamp before the rig's start, already passed, or more than a day ahead.
+        """
+        ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+        if ns == 0:
+            return None
+        t = Fraction(ns - self._t0_ns, 1_000_000_000)
+        now = self._sim.time
+        rule = "must be zero (next block boundary) or a stamp from now to one day ahead in the rig's time base"
+        if t < now:
+            raise CommandError(f"start_stamp {stamp.sec}.{stamp.nanosec:09d} refused: already passed "
+                               f"(the rig is at {stamp_ns(self._t0_ns, now) / 1e9:.9f}, simulation time "
+                               f"{float(now):.6f} s); {rule}")
+        if t - now > MAX_SCHEDULE_AHEAD_S:
+            raise CommandError(f"start_stamp {stamp.sec}.{stamp.nanosec:09d} refused: {float(t - now):.6g} s "
+                               f"ahead of the rig; {rule}")
+        return t
+
     def _on_set_motor_frequency(self, request, response):
         with self._lock:
             try:
-                when = self._sim.set_motor_frequency(request.frequency_hz, request.ramp_rate)
+                at = self._start_time(request.start_stamp)
+                when = self._sim.set_motor_frequency(request.frequency_hz, request.ramp_rate, at=at)
             except CommandError as exc:
                 response.success = False
                 response.message = str(exc)
@@ -375,7 +400,7 @@ class SimulatorNode(Node):
     def _on_perturb(self, request, response):
         with self._lock:
             try:
-                when = self._sim.perturb(request.velocity)
+                when = self._sim.perturb(request.velocity, at=self._start_time(request.start_stamp))
             except CommandError as exc:
                 response.success = False
                 response.message = str(exc)
@@ -465,9 +490,9 @@ class SimulatorNode(Node):
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_simulator`` executable (also ``rimd node simulator``)."""
 
-    def spin(node: SimulatorNode, executor) -> None:  # noqa: ANN001
+    def spin(node: SimulatorNode, executor, stop) -> None:  # noqa: ANN001
         node.start()
-        executor.spin()
+        spin_until_stopped(executor, stop)
 
     return run_node("rimd_simulator", SimulatorNode, (ConfigError,), args=args,
                     refused_prefix="configuration refused: ", executor=lambda: MultiThreadedExecutor(num_threads=2),

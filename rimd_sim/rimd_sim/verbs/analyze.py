@@ -72,12 +72,18 @@ def format_steps(rows: list[dict]) -> list[str]:
     def num(value, fmt):  # noqa: ANN001
         return "-" if value is None else format(value, fmt)
 
+    verdicts = {True: "yes", False: "NO", None: "-"}
     lines = [f"{'step':>4} {'f (Hz)':>7} {'steady (s)':>10} {'F_i events (N)':>15} {'F_i force (N)':>14} "
-             f"{'impacts/cycle':>13}"]
+             f"{'impacts/cycle':>13} {'settled':>7}"]
     for r in rows:
         lines.append(f"{r['step']:>4} {r['frequency_hz']:>7.3f} {r['steady_seconds']:>10.2f} "
                      f"{num(r['peak_force_events_n'], '15.2f')} {num(r['peak_force_channel_n'], '14.2f')} "
-                     f"{num(r['impacts_per_cycle_events'], '13.3f')}")
+                     f"{num(r['impacts_per_cycle_events'], '13.3f')} {verdicts[r.get('settled')]:>7}")
+    unsettled = [f"{r['frequency_hz']:g} Hz" for r in rows if r.get("settled") is False]
+    if unsettled:
+        lines.append(f"NOT SETTLED: {', '.join(unsettled)}: the two halves of the steady window differ (impacts "
+                     "per cycle or peak force); the step still held a transient, or the motion is not periodic "
+                     "(a longer --dwell or --settle tells which)")
     return lines
 
 
@@ -120,7 +126,7 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
                            "complete")}
     events = data.events
     match = rec.match_impacts(detected, events, force, threshold)
-    steps = rec.segment_steps(data.motor, settle)
+    steps = rec.segment_steps(data.motor, settle, end=rec.common_end(data))
     rows = rec.step_table(steps, events, detected, force)
     log(f"{len(detected['peak_time'])} impacts detected, {events['time'].size} events, {len(steps)} steps")
 

@@ -1,14 +1,18 @@
 """``rimd experiment``: a stepped frequency sweep of the running rig, recorded, then analysed.
 
 The paper's methodology (section 3): the motor frequency is stepped; at each step the rig dwells, the
-transient is discarded and the steady impact force is read. Here each setpoint goes through
-``/rig/set_motor_frequency``; the dwell is counted in simulation time from the setpoint's
-``effective_stamp`` using the stamps of ``/rig/motor/state``, so the schedule is the same at any
-``real_time_factor``. Unless ``--no-record``, the verb starts its own recorder process
-(``rimd_sim.nodes.recorder`` as node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``),
-waits until it subscribes to every rig topic, and finishes it with SIGINT after the last step; then it runs
-``rimd analyze`` on the recording into ``OUT`` with the same ``--settle``. The rig is never stopped: a
-refused setpoint ends the experiment with an error naming it, and the rig keeps running.
+transient is discarded and the steady impact force is read. Here the steps are scheduled on exact stamps of
+the rig's own time base: step ``k`` starts at ``T0 + k * dwell``, where ``T0`` is the first start of a motor
+cycle at least a lead time ahead of the rig when the experiment begins (the lead doubles while the rig
+answers that the time has already passed). Each setpoint goes through ``/rig/set_motor_frequency`` with its
+``start_stamp`` while the step before it is running, so however late a request travels (a loaded machine,
+a fast ``real_time_factor``), the rig changes its setpoint at the same simulation time, and the same
+schedule gives the same data. Unless ``--no-record``, the verb starts its own recorder process
+(``rimd_sim.nodes._entry recorder`` as node ``rimd_experiment_recorder``, topics ``/rig/.*``, into
+``OUT/recording``), waits until it subscribes to every rig topic, and finishes it with SIGINT once the rig has
+passed the end of the last step; then it runs ``rimd analyze`` on the recording into ``OUT`` with the same
+``--settle`` (its step table says whether each step had settled). The rig is never stopped: a refused setpoint
+ends the experiment with an error naming it, and the rig keeps running.
 """
 
 from __future__ import annotations
@@ -106,12 +110,14 @@ class _Rig:
         self.stamp_ns: int | None = None
         self.frequency = math.nan
         self.setpoint = math.nan
+        self.phase = math.nan
         self.node.create_subscription(MotorState, "/rig/motor/state", self._on_motor,
                                       QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
 
     def _on_motor(self, msg) -> None:  # noqa: ANN001
         self.stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         self.frequency, self.setpoint = float(msg.frequency), float(msg.frequency_setpoint)
+        self.phase = float(msg.phase)
 
     def spin_until(self, condition, timeout: float) -> bool:  # noqa: ANN001
         deadline = time.monotonic() + timeout
@@ -166,10 +172,16 @@ def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
             raise CommandError(f"no /rig/motor/state received in {args.timeout:g} s: is the rig paused?")
         if not args.no_record:
             recorder = _start_recorder(rig, record_dir, out / "recorder.log", args.timeout, log)
-        for i, f in enumerate(freqs):
-            steps_done.append(_step(rig, i, len(freqs), f, args, log))
-        if recorder is not None:
-            rig.spin_until(lambda: False, 0.5)   # the last messages reach the recorder
+        dwell_ns = round(args.dwell * 1e9)
+        start_ns, first = _first_step(rig, freqs[0], args, len(freqs))
+        times = [start_ns + k * dwell_ns for k in range(len(freqs))]
+        steps_done.append(_record_step(freqs[0], first, times[0], dwell_ns))
+        for k, f in enumerate(freqs):
+            _wait_for_stamp(rig, times[k], k, len(freqs), f, args, show=False)   # step k in force
+            if k + 1 < len(freqs):   # scheduled while step k runs: a whole dwell of lead
+                response = _request(rig, freqs[k + 1], args, times[k + 1], k + 1, len(freqs))
+                steps_done.append(_record_step(freqs[k + 1], response, times[k + 1], dwell_ns))
+            _wait_for_stamp(rig, times[k] + dwell_ns, k, len(freqs), f, args, show=True, origin=times[k])
     finally:
         if recorder is not None:
             code = _stop_recorder(recorder)
@@ -204,7 +216,7 @@ def _start_recorder(rig: _Rig, directory: Path, log_path: Path, timeout: float, 
     from rimd_sim.cli import CommandError
 
     directory.mkdir(parents=True, exist_ok=True)
-    cmd = [sys.executable, "-m", "rimd_sim.nodes.recorder", "--ros-args", "-r", f"__node:={RECORDER_NODE}",
+    cmd = [sys.executable, "-m", "rimd_sim.nodes._entry", "recorder", "--ros-args", "-r", f"__node:={RECORDER_NODE}",
            "-p", f"output_dir:={directory}", "-p", "topics:=['/rig/.*']", "-p", "prefix:=experiment"]
     with open(log_path, "w") as log_file:
         proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
@@ -230,23 +242,84 @@ def _start_recorder(rig: _Rig, directory: Path, log_path: Path, timeout: float, 
     return proc
 
 
-def _step(rig: _Rig, i: int, n: int, f: float, args: argparse.Namespace, log) -> dict:  # noqa: ANN001
+#: First lead of the schedule (s of simulation time); doubled while the rig answers "already passed".
+FIRST_LEAD_S = 1.0
+MAX_LEAD_DOUBLINGS = 10
+
+
+def _stamp(t) -> int:  # noqa: ANN001 - builtin_interfaces/Time
+    return int(t.sec) * 1_000_000_000 + int(t.nanosec)
+
+
+def _cycle_start_after(rig: _Rig, earliest_ns: int) -> int:
+    """The first start of a motor cycle at or after ``earliest_ns`` (else ``earliest_ns``, the motor ramping).
+
+    The schedule then starts at the same motor phase whenever the experiment is begun.
+    """
+    f, phase, stamp = rig.frequency, rig.phase, rig.stamp_ns
+    if stamp is None or not (f > 0 and abs(f - rig.setpoint) <= 1e-12 and math.isfinite(phase)):
+        return earliest_ns
+    period_ns = 1e9 / f
+    to_next = ((2 * math.pi - phase) % (2 * math.pi)) / (2 * math.pi) * period_ns
+    cycles = max(0, math.ceil((earliest_ns - stamp - to_next) / period_ns))
+    return stamp + math.ceil(to_next + cycles * period_ns)
+
+
+def _request(rig: _Rig, f: float, args: argparse.Namespace, start_ns: int, i: int, n: int,
+             refused_ok: bool = False):  # noqa: ANN202
+    """Send setpoint ``f`` to start at ``start_ns``; return the response (None: refused and ``refused_ok``)."""
+    from builtin_interfaces.msg import Time
+
     from rimd_msgs.srv import SetMotorFrequency
     from rimd_sim.cli import CommandError
 
-    request = SetMotorFrequency.Request(frequency_hz=float(f), ramp_rate=float(args.ramp_rate))
+    request = SetMotorFrequency.Request(frequency_hz=float(f), ramp_rate=float(args.ramp_rate),
+                                        start_stamp=Time(sec=start_ns // 1_000_000_000,
+                                                         nanosec=start_ns % 1_000_000_000))
     future = rig.client.call_async(request)
     if not rig.spin_until(future.done, args.timeout):
         raise CommandError(f"{SERVICE} did not answer the setpoint {f:g} Hz within {args.timeout:g} s")
     response = future.result()
     if not response.success:
+        if refused_ok:
+            return None
         raise CommandError(f"setpoint {f:g} Hz (step {i + 1}/{n}) refused by the rig: {response.message}; "
                            f"the rig keeps running at its setpoint {response.frequency_hz:g} Hz")
-    effective = int(response.effective_stamp.sec) * 1_000_000_000 + int(response.effective_stamp.nanosec)
-    end = effective + int(round(args.dwell * 1e9))
+    return response
+
+
+def _first_step(rig: _Rig, f: float, args: argparse.Namespace, n: int):  # noqa: ANN202
+    """Schedule the first step at a cycle start a lead ahead; double the lead while the rig was faster."""
+    from rimd_sim.cli import CommandError
+
+    lead = FIRST_LEAD_S
+    for _ in range(MAX_LEAD_DOUBLINGS):
+        start = _cycle_start_after(rig, rig.stamp_ns + round(lead * 1e9))
+        response = _request(rig, f, args, start, 0, n, refused_ok=True)
+        if response is not None:
+            return start, response
+        rig.spin_until(lambda: False, 0.05)   # the latest motor state
+        if rig.stamp_ns is not None and rig.stamp_ns < start:   # refused for another reason than lateness
+            _request(rig, f, args, start, 0, n)                 # raises with the rig's message
+        lead *= 2
+    raise CommandError(f"the rig ran past every start time proposed (last lead {lead / 2:g} s of simulation time): "
+                       "is it running far faster than the requests travel?")
+
+
+def _record_step(f: float, response, start_ns: int, dwell_ns: int) -> dict:  # noqa: ANN001
+    effective = _stamp(response.effective_stamp)
+    return {"frequency_hz": f, "scheduled_stamp_ns": start_ns, "effective_stamp_ns": effective,
+            "end_stamp_ns": start_ns + dwell_ns, "message": response.message}
+
+
+def _wait_for_stamp(rig: _Rig, target_ns: int, i: int, n: int, f: float, args: argparse.Namespace, *,
+                    show: bool, origin: int = 0) -> None:
+    """Spin until the rig's motor state stamp reaches ``target_ns``; fail when the rig stops advancing."""
+    from rimd_sim.cli import CommandError
+
     last_stamp, last_change = rig.stamp_ns, time.monotonic()
     shown = 0.0
-    while rig.stamp_ns is None or rig.stamp_ns < end:
+    while rig.stamp_ns is None or rig.stamp_ns < target_ns:
         rig.executor.spin_once(timeout_sec=0.05)
         now = time.monotonic()
         if rig.stamp_ns != last_stamp:
@@ -254,9 +327,11 @@ def _step(rig: _Rig, i: int, n: int, f: float, args: argparse.Namespace, log) ->
         elif now - last_change > args.timeout:
             raise CommandError(f"the rig's simulation time stopped advancing during step {i + 1}/{n} ({f:g} Hz) "
                                f"for {args.timeout:g} s: paused or stopped?")
-        if now - shown >= 0.5:
+        if show and now - shown >= 0.5:
             shown = now
-            elapsed = max(0.0, (rig.stamp_ns - effective) * 1e-9)
+            elapsed = max(0.0, ((rig.stamp_ns or origin) - origin) * 1e-9)
             print(f"\rrimd experiment: step {i + 1}/{n}: {f:g} Hz, {min(elapsed, args.dwell):5.1f}/{args.dwell:g} s "
                   f"(motor {rig.frequency:.3f} Hz)", end="", file=sys.stderr, flush=True)
-    return {"frequency_hz": f, "effective_stamp_ns": effective, "end_stamp_ns": end, "message": response.message}
+    if show:
+        print(f"\rrimd experiment: step {i + 1}/{n}: {f:g} Hz, {args.dwell:5.1f}/{args.dwell:g} s "
+              f"(motor {rig.frequency:.3f} Hz)", end="", file=sys.stderr, flush=True)
