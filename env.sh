@@ -3,7 +3,7 @@
 # It activates the venv (VENV, default .venv), puts the venv's ROS 2 Jazzy wheels on AMENT_PREFIX_PATH and
 # CMAKE_PREFIX_PATH, sources the colcon workspace ros_ws/install/setup.sh and puts `rimd` on PATH.
 # Run `make setup` (or `make test`) first: it creates the venv and builds ros_ws.
-# Sourcing it twice is harmless.
+# Sourcing it twice is harmless, and so is sourcing it from a script that runs with `set -euo pipefail`.
 
 if [ -n "${BASH_SOURCE:-}" ]; then
     RIMD_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd -P)"
@@ -14,6 +14,11 @@ else
 fi
 
 _rimd_env_main() {
+    # The scripts sourced below (the venv's activate, colcon's setup.sh and the package hooks) read unset
+    # variables (COLCON_TRACE, ...) and run commands that may fail: a caller under `set -euo pipefail` would
+    # exit silently in the middle. Run them with the caller's -e and -u off; _rimd_env_restore puts them back.
+    _rimd_env_opts="$-"
+    set +eu
     if [ ! -f "$RIMD_ROOT/env.sh" ] || [ ! -d "$RIMD_ROOT/ros_ws" ]; then
         echo "env.sh: cannot find the repository root (got '$RIMD_ROOT'); source env.sh from the root" >&2
         return 1
@@ -76,7 +81,10 @@ _rimd_env_main() {
 
 _rimd_env_main
 _rimd_env_status=$?
+case "${_rimd_env_opts:-}" in *e*) set -e ;; esac
+case "${_rimd_env_opts:-}" in *u*) set -u ;; esac
 unset -f _rimd_env_main
+unset _rimd_env_opts
 if [ "$_rimd_env_status" -ne 0 ]; then
     unset _rimd_env_status
     return 1 2>/dev/null || exit 1

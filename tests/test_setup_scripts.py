@@ -89,3 +89,27 @@ def test_run_tests_fails_when_no_test_is_collected(repo_root, tmp_path):
     )
     assert result.returncode == 1, result.stdout + result.stderr
     assert "pytest collected no test (exit status 5)" in result.stderr
+
+
+def test_env_sh_works_in_a_strict_script_and_keeps_its_options(repo_root):
+    # colcon's setup.sh reads the unset COLCON_TRACE: under `set -u` the caller used to exit silently.
+    script = (
+        "set -euo pipefail\n"
+        f"cd {repo_root}\n"
+        "source ./env.sh\n"
+        'echo "options $- pipefail $(set -o | grep -E "^pipefail" | tr -s " \\t" " ")"\n'
+        'python -c "import rclpy, rimd_msgs.msg; print(\'imports ok\')"\n'
+        "command -v rimd\n"
+        'echo "$RIMD_SURELY_UNSET_VARIABLE"\n'
+        "echo not reached\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "AMENT_PREFIX_PATH", "COLCON_TRACE")}
+    result = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=60,
+                            stdin=subprocess.DEVNULL, env=env)
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("options ") and "e" in lines[0].split()[1] and "u" in lines[0].split()[1], lines
+    assert lines[0].endswith("pipefail on"), lines
+    assert lines[1] == "imports ok" and lines[2].endswith("/rimd"), (result.stdout, result.stderr)
+    # -u is back in force: the unset variable ends the script, as the caller asked.
+    assert result.returncode == 1 and "RIMD_SURELY_UNSET_VARIABLE: unbound variable" in result.stderr
+    assert "not reached" not in result.stdout
