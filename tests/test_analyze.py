@@ -136,3 +136,9 @@ def test_the_last_step_ends_where_every_stream_of_the_recording_ends():
     force = _channel(np.zeros(int(7.5 * 20000)))
     data = rec.RecordedData(Path("r"), None, 0, channels={rec.FORCE: force}, motor=motor)
     assert rec.common_end(data) == pytest.approx(7.5, abs=1e-4)
+    # The events' stream ended before the force channel: an impact seen by the force sensor after the last
+    # event, with no event of its own, ends the common part there.
+    data.events = {"time": np.array([1.0, 2.0])}
+    detected = {"start": np.array([1.0, 2.0, 3.0, 4.0])}
+    assert rec.common_end(data, detected, np.array([0, 1, -1, -1])) == 3.0
+    assert rec.common_end(data, detected, np.array([0, 1, 2, 3])) == pytest.approx(7.5, abs=1e-4)

@@ -28,10 +28,12 @@ FIELDS = {
                    "theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity",
                    "rimd_acceleration", "penetration", "contact_force", "motor_phase", "motor_frequency")],
                ("in_contact", "sequence<boolean>")],
-    SetMotorFrequency.Request: [("frequency_hz", "double"), ("ramp_rate", "double")],
+    # start_stamp: an extension of the SPEC (issue 16), zero keeps the SPEC's behaviour.
+    SetMotorFrequency.Request: [("frequency_hz", "double"), ("ramp_rate", "double"),
+                                ("start_stamp", "builtin_interfaces/Time")],
     SetMotorFrequency.Response: [("success", "boolean"), ("message", "string"), ("frequency_hz", "double"),
                                  ("effective_stamp", "builtin_interfaces/Time")],
-    Perturb.Request: [("velocity", "double")],
+    Perturb.Request: [("velocity", "double"), ("start_stamp", "builtin_interfaces/Time")],
     Perturb.Response: [("success", "boolean"), ("message", "string"),
                        ("effective_stamp", "builtin_interfaces/Time")],
 }

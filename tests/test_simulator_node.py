@@ -10,6 +10,7 @@ refused with the rule.
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -128,6 +129,33 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     assert before and all(m.frequency == 3.75 for m in before)
     assert f"set_motor_frequency at t = {effective / 1e9:.6f} s" in rig.output()
 
+    # start_stamp: a stamp already passed, or more than a day ahead, is refused naming the field and the rule.
+    from builtin_interfaces.msg import Time
+    now = _ns(motor[-1].header.stamp)
+    for stamp, reason in ((now - 1_000_000_000, "already passed"), (now + 200_000 * 10**9, "ahead of the rig")):
+        request = SetMotorFrequency.Request(frequency_hz=4.0, start_stamp=Time(sec=stamp // 10**9,
+                                                                                nanosec=stamp % 10**9))
+        response = call_service(ros_executor, node, client, request, timeout=10)
+        assert not response.success and "start_stamp" in response.message and reason in response.message, \
+            response.message
+        assert response.frequency_hz == 5.0
+    # A stamp ahead, between two samples: the ramp starts exactly there. The rig runs as fast as it can, so
+    # it is paused while the request travels (the stamp is then surely ahead of it).
+    from std_srvs.srv import Trigger
+    pause, resume = (node.create_client(Trigger, f"/rig/{name}") for name in ("pause", "resume"))
+    paused = call_service(ros_executor, node, pause, Trigger.Request(), timeout=10)
+    assert paused.success, paused.message
+    paused_at = round(float(re.search(r"paused at t = (\S+) s", paused.message).group(1)) * 1e9)  # t0 = 0 here
+    at = paused_at + 3_000_000_000 + 123_457
+    request = SetMotorFrequency.Request(frequency_hz=4.0, ramp_rate=1000.0,
+                                        start_stamp=Time(sec=at // 10**9, nanosec=at % 10**9))
+    response = call_service(ros_executor, node, client, request, timeout=10)
+    assert response.success and _ns(response.effective_stamp) == at, response.message
+    assert call_service(ros_executor, node, resume, Trigger.Request(), timeout=10).success
+    assert spin_until(ros_executor, lambda: _ns(motor[-1].header.stamp) > at + 50_000_000, timeout=20)
+    assert all(m.frequency_setpoint == 5.0 for m in motor if _ns(m.header.stamp) < at)
+    assert all(m.frequency_setpoint == 4.0 for m in motor if _ns(m.header.stamp) > at)
+
     params = node.create_client(SetParameters, "/rig/rimd_simulator/set_parameters")
     for name, value, reason in (("gap", -1e-3, ">= 0"), ("contact.model", "rubber", "one of"),
                                 ("channels.impact_force.sample_rate", 0.0, "> 0")):
@@ -206,11 +234,19 @@ def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     perturb = node.create_client(Perturb, "/rig/perturb")
     assert spin_until(ros_executor, lambda: len(force) > 50, timeout=30)
 
-    assert call_service(ros_executor, node, trig["pause"], Trigger.Request(), timeout=10).success
-    spin_until(ros_executor, lambda: False, timeout=0.5)  # let in-flight blocks arrive
+    paused = call_service(ros_executor, node, trig["pause"], Trigger.Request(), timeout=10)
+    assert paused.success, paused.message
+    # The simulation time where it froze (stamps are simulation time here): every block published before
+    # the pause arrives (an observable condition, however loaded the machine), and none after it.
+    frozen_ns = round(float(re.search(r"paused at t = (\S+) s", paused.message).group(1)) * 1e9)
+
+    def end_ns(blk: SampleBlock) -> int:
+        return _ns(blk.header.stamp) + round(len(blk.samples) * 1e9 / blk.sample_rate)
+
+    assert spin_until(ros_executor, lambda: force and end_ns(force[-1]) >= frozen_ns, timeout=20)
     frozen = len(force)
-    spin_until(ros_executor, lambda: False, timeout=1.0)
-    assert len(force) == frozen, "blocks kept coming while paused"
+    spin_until(ros_executor, lambda: len(force) > frozen, timeout=1.0)   # a window for a wrong block to show
+    assert len(force) == frozen and end_ns(force[-1]) == frozen_ns, "blocks kept coming while paused"
     again = call_service(ros_executor, node, trig["pause"], Trigger.Request(), timeout=10)
     assert not again.success and "already paused" in again.message
     assert call_service(ros_executor, node, trig["resume"], Trigger.Request(), timeout=10).success

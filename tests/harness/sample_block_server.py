@@ -93,15 +93,27 @@ class SampleBlockServer(Node):
 
 def main() -> int:
     """Run the server until SIGINT/SIGTERM; exit status 0 on a clean shutdown."""
-    rclpy.init(args=sys.argv)
+    # The product's stop handling (rimd_sim.nodes._run): with rclpy's own handlers a SIGINT between two
+    # spin_once calls shuts the context down under the executor (RCLError, exit status 1).
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from rimd_sim.nodes._run import spin_until_stopped
+    from rimd_sim.nodes._stop import install_stop_handlers
+
+    stop = install_stop_handlers()
+    rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     node = SampleBlockServer()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     domain_id = node.context.get_domain_id()
     print(f"sample_block_server ready: namespace {node.get_namespace()}, domain {domain_id}", flush=True)
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        spin_until_stopped(executor, stop)
+    except ExternalShutdownException:
         pass
     finally:
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -362,20 +362,28 @@ class Step:
         return 0.0 if self.steady_from is None else max(0.0, self.end - self.steady_from)
 
 
-def common_end(data: RecordedData) -> float | None:
+def common_end(data: RecordedData, detected: dict[str, np.ndarray] | None = None,
+               detected_match: np.ndarray | None = None) -> float | None:
     """The time (s from the origin) up to which every recorded stream of the analysis has its data.
 
     A recorder stops its topics one after the other, and a recorder that lags behind a fast rig holds each
     topic's backlog separately, so the streams of a recording can end at different times. An analysis that
     counts the impact events over a window running to the end of the motor states would count over a tail
     where the events were not recorded (and read a steady 1 impact per cycle as 0.63). The sampled channels
-    and the motor states end where they end; the sparse impact events are published with the blocks of
-    the same instant, so the earliest end of the others bounds them too.
+    and the motor states end where they end. The sparse impact events show their end through the force
+    channel (``detected`` impacts and their ``detected_match`` with the events, :func:`match_impacts`): an
+    impact the force sensor saw after the last recorded event, with no event of its own, is past the end
+    of the events' stream.
     """
     ends = [float(c.time[-1]) for c in data.channels.values() if c.time.size]
     t = data.motor.get("time", np.empty(0))
     if t.size:
         ends.append(float(t[-1]))
+    if detected is not None and detected_match is not None and data.events.get("time", np.empty(0)).size:
+        last_event = float(data.events["time"][-1])
+        orphans = detected["start"][(detected_match < 0) & (detected["start"] > last_event)]
+        if orphans.size:
+            ends.append(float(orphans.min()))
     return min(ends) if ends else None
 
 

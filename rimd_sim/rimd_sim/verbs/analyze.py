@@ -126,7 +126,7 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
                            "complete")}
     events = data.events
     match = rec.match_impacts(detected, events, force, threshold)
-    steps = rec.segment_steps(data.motor, settle, end=rec.common_end(data))
+    steps = rec.segment_steps(data.motor, settle, end=rec.common_end(data, detected, match["detected_match"]))
     rows = rec.step_table(steps, events, detected, force)
     log(f"{len(detected['peak_time'])} impacts detected, {events['time'].size} events, {len(steps)} steps")
 
