@@ -206,6 +206,8 @@ class SimulatorNode(Node):
                     count = max(1, round(float(self._block_rate) / 10))
                     bounds = [Fraction(self._block + i + 1) / self._block_rate for i in range(count)]
                     with self._lock:
+                        if self._paused:   # paused while this thread waited for the lock: nothing more
+                            continue
                         blocks = self._sim.advance_blocks(bounds)
                     self._block += count
                     for block in blocks:
@@ -226,6 +228,8 @@ class SimulatorNode(Node):
                     if late > 1.0 / float(self._block_rate):
                         self._overruns += 1
                 with self._lock:
+                    if self._paused:   # paused while this thread waited for the lock: nothing more
+                        continue
                     block = self._sim.advance(t_end)
                 self._block += 1
                 if not self.context.ok():
@@ -418,14 +422,15 @@ class SimulatorNode(Node):
         return response
 
     def _on_pause(self, request, response):
-        with self._lock:
+        with self._lock:   # the pacing thread checks _paused under this lock: no block is computed after it
             if self._paused:
                 response.success = False
                 response.message = f"already paused at t = {float(self._sim.time):.6f} s"
                 return response
             self._paused = True
+            frozen = self._sim.time
         response.success = True
-        response.message = f"paused at t = {float(self._sim.time):.6f} s (simulation time frozen)"
+        response.message = f"paused at t = {float(frozen):.6f} s (simulation time frozen)"
         self.get_logger().info(response.message)
         return response
 
