@@ -5,8 +5,11 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import sys
+import time
 from pathlib import Path
+from typing import TextIO
 
 from rimd_sim.cli import CommandError
 
@@ -33,13 +36,107 @@ def check_positive(option: str, value: float, *, minimum: float = 0.0, inclusive
         raise CommandError(f"{option} {value!r} refused: must be {rule}")
 
 
-def progress_printer(verb: str, what: str):
-    """A ``progress(done, total)`` callable that rewrites one line on stderr."""
-    def progress(done: int, total: int) -> None:
-        end = "\n" if done == total else ""
-        print(f"\rrimd {verb}: {done}/{total} {what}", end=end, file=sys.stderr, flush=True)
+#: Seconds between two progress lines when stderr is not a terminal (a log file, CI, a test capturing it).
+LOG_INTERVAL = 30.0
 
-    return progress
+_BAR_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt}{unit} [{elapsed}<{remaining}, {rate_noinv_fmt}]"
+_LINE_FORMAT = "{desc}: {n_fmt}/{total_fmt}{unit} [{elapsed}<{remaining}, {rate_noinv_fmt}]"
+_LAST_LINE_FORMAT = "{desc}: {n_fmt}/{total_fmt}{unit} in {elapsed_s:.1f} s ({rate_noinv_fmt})"
+
+
+class Progress:
+    """The ``progress(done, total)`` callable the analyses call, shown on stderr with tqdm.
+
+    On a terminal: a tqdm bar rewritten in place (count, rate, time left), left on screen when the work is
+    done. When stderr is not a terminal: no bar and no carriage returns, but whole lines in tqdm's format,
+    one every :data:`LOG_INTERVAL` seconds while the work runs and one at the end, for example
+    ``rimd peterka: 31/31 gap rows in 19.8 s (1.57 gap rows/s)``. Time counts from the creation of the
+    object (create it when the work starts); the bar appears at the first call (only then is the total
+    known) and ends when ``done`` reaches ``total`` or at :meth:`close`, whichever comes first. Nothing is
+    printed if the work never reported progress (a refusal before it started stays one line).
+    """
+
+    def __init__(self, verb: str, what: str, *, file: TextIO | None = None, interval: float = LOG_INTERVAL) -> None:
+        """Report ``rimd VERB``'s progress in units of ``what`` (plural, e.g. "gap rows") on ``file``."""
+        self.desc = f"rimd {verb}"
+        self.unit = f" {what}"
+        self.interval = interval
+        self._file = file
+        self._bar = None
+        self._t0 = self._last_line = time.monotonic()
+        self._started = False
+        self._done = 0
+        self._total = 0
+        self._closed = False
+
+    def __call__(self, done: int, total: int) -> None:
+        """Record that ``done`` of ``total`` units are finished."""
+        if self._closed:
+            return
+        now = time.monotonic()
+        if not self._started:
+            self._start(total)
+        self._done, self._total = min(done, total), total
+        if self._bar is not None:
+            self._bar.total = total
+            self._bar.update(self._done - self._bar.n)
+        elif self._done < total and now - self._last_line >= self.interval:
+            self._print(_LINE_FORMAT, now)
+            self._last_line = now
+        if self._done >= total:
+            self.close()
+
+    def close(self) -> None:
+        """End the bar (or print the last line); safe to call twice, and a no-op if nothing started."""
+        if self._closed or not self._started:
+            self._closed = True
+            return
+        self._closed = True
+        if self._bar is not None:
+            self._bar.close()
+        else:
+            self._print(_LAST_LINE_FORMAT, time.monotonic())
+
+    def __enter__(self) -> Progress:
+        """Use as ``with progress_printer(...) as progress:`` to close the bar however the work ends."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close the bar."""
+        self.close()
+
+    def _start(self, total: int) -> None:
+        from tqdm import tqdm
+
+        self._started = True
+        self._file = self._file if self._file is not None else sys.stderr  # sys.stderr of now, not of import
+        if _is_terminal(self._file):
+            self._bar = tqdm(total=total, desc=self.desc, unit=self.unit, file=self._file, dynamic_ncols=True,
+                             leave=True, bar_format=_BAR_FORMAT)
+            # Elapsed time, rate and ETA from the start of the work, not from its first report.
+            self._bar.start_t -= time.monotonic() - self._t0
+
+    def _print(self, bar_format: str, now: float) -> None:
+        from tqdm import tqdm
+
+        line = tqdm.format_meter(self._done, self._total, now - self._t0, prefix=self.desc, unit=self.unit,
+                                 bar_format=bar_format)
+        line = " ".join(line.split()).replace("( ", "(")  # tqdm pads the rate to 5 characters
+        print(line, file=self._file, flush=True)
+
+
+def _is_terminal(file: TextIO) -> bool:
+    """Whether ``file`` is a terminal with a size (tqdm shows nothing on a pseudo-terminal of 0 columns or rows)."""
+    try:
+        size = os.get_terminal_size(file.fileno())
+        return file.isatty() and size.columns > 0 and size.lines > 0
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+def progress_printer(verb: str, what: str) -> Progress:
+    """A ``progress(done, total)`` callable for ``rimd VERB``, counting ``what``, on stderr (see :class:`Progress`)."""
+    return Progress(verb, what)
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:

@@ -15,6 +15,8 @@ import numpy as np
 
 from rimd_sim.core import ConfigError, load_config
 
+from ._analysis_io import progress_printer
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd sweep``."""
@@ -42,13 +44,9 @@ def main(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
         freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
-
-        def progress(done: int, total: int) -> None:
-            print(f"\rrimd sweep: {done}/{total} frequencies", end="", file=sys.stderr, flush=True)
-
-        result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
-                       workers=args.workers, progress=progress)
-        print(file=sys.stderr)
+        with progress_printer("sweep", "frequencies") as progress:
+            result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
+                           workers=args.workers, progress=progress)
     except ConfigError as exc:
         print(f"rimd sweep: {exc}", file=sys.stderr)
         return 1

@@ -1,0 +1,422 @@
+#!/usr/bin/env python3
+"""Write the tables of the documentation that restate the code, from the code.
+
+Every parameter table (name, default, type, rule, description) and every ``rimd`` verb's options table
+(option, default, help) in ``README.md`` and ``docs/*.md`` is generated here from its single source:
+
+- the simulator's parameters: ``rimd_sim.core.config.PARAMETERS`` (type, rule, description) and
+  ``SimConfig().to_parameters()`` (defaults);
+- the recorder's: ``rimd_sim.recording.settings.PARAMETERS`` (and the rules that module checks);
+- the replay's: ``rimd_sim.nodes.replay.PARAMETERS``; the Rerun bridge's: ``rimd_sim.nodes.rerun_bridge.PARAMETERS``;
+- the verbs: ``rimd_sim.cli.VERBS`` and each verb's argparse parser (``add_arguments``).
+
+A generated section sits between two markers in a page::
+
+    <!-- BEGIN GENERATED: NAME -->
+    ...
+    <!-- END GENERATED: NAME -->
+
+Usage (in the project environment, ``source env.sh``)::
+
+    python scripts/gen_docs.py           # rewrite the generated sections of the pages
+    python scripts/gen_docs.py --check   # exit 1, naming each page and section that differs from the code
+
+Everything outside the markers is left as written. A section missing from its page is appended at the end of
+that page by a rewrite (move it where it belongs); ``--check`` reports it. ``tests/test_docs.py`` runs the check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import importlib
+import json
+import math
+import re
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT / "rimd_sim") not in sys.path:  # rimd_sim from this checkout, also without env.sh's PYTHONPATH
+    sys.path.insert(0, str(ROOT / "rimd_sim"))
+
+BEGIN = "<!-- BEGIN GENERATED: {name} -->"
+END = "<!-- END GENERATED: {name} -->"
+MARKER = re.compile(r"^<!-- (BEGIN|END) GENERATED: ([\w.-]+) -->[ \t]*$", re.MULTILINE)  # a marker is a line
+
+#: Page of each verb's options table.
+VERB_PAGES = {
+    "rig": "docs/recording.md",
+    "node": "docs/rig.md",
+    "rerun": "docs/rerun.md",
+    "sweep": "docs/analyses.md",
+    "bifurcation": "docs/analyses.md",
+    "poincare": "docs/analyses.md",
+    "peterka": "docs/analyses.md",
+    "basins": "docs/analyses.md",
+    "experiment": "docs/analyses.md",
+    "analyze": "docs/analyses.md",
+    "info": "docs/development.md",
+}
+#: Where a verb that is not in VERB_PAGES yet gets its options table.
+DEFAULT_VERB_PAGE = "docs/analyses.md"
+
+
+@dataclass(frozen=True)
+class Section:
+    """One generated section: its marker name, the page it lives in and the function that writes it."""
+
+    name: str
+    page: str
+    render: Callable[[], str]
+    title: str = ""  # heading used when a rewrite has to append the section to its page
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Formatting
+# ------------------------------------------------------------------------------------------------------------
+
+
+def _cell(text: Any) -> str:
+    """A Markdown table cell: one line, pipes escaped."""
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def _value(value: Any) -> str:
+    """A default as it is written in a ROS parameter YAML file (or on a command line), in backticks."""
+    if value is None:
+        return "—"
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, float):
+        text = repr(value) if math.isfinite(value) else str(value)
+    elif isinstance(value, (list, tuple)):
+        text = json.dumps(list(value))
+    elif isinstance(value, Path):
+        text = str(value)
+    elif isinstance(value, str):
+        text = json.dumps(value) if value == "" or value != value.strip() else value
+    else:
+        text = str(value)
+    return f"`{_cell(text)}`"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _type_name(value: Any) -> str:
+    return {bool: "bool", int: "int", float: "float", str: "str", list: "string list"}.get(type(value),
+                                                                                        type(value).__name__)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Parameter tables
+# ------------------------------------------------------------------------------------------------------------
+
+
+def _simulator_specs() -> tuple[dict[str, Any], dict[str, Any]]:
+    from rimd_sim.core.config import PARAMETERS, SimConfig
+
+    return PARAMETERS, SimConfig().to_parameters()
+
+
+def render_parameters() -> str:
+    """The simulator's parameters other than the channels'."""
+    specs, defaults = _simulator_specs()
+    rows = [[f"`{name}`", _value(defaults.get(name)), _cell(getattr(spec, "kind", "")),
+             _cell(getattr(spec, "rule", "")), _cell(getattr(spec, "description", ""))]
+            for name, spec in specs.items() if not _channel_key(name)]
+    return _table(["parameter", "default", "type", "rule", "description"], rows)
+
+
+def _channel_key(name: str) -> tuple[str, str] | None:
+    parts = name.split(".")
+    if len(parts) == 3 and parts[0] == "channels":
+        return parts[1], parts[2]
+    return None
+
+
+def render_channel_parameters() -> str:
+    """The channels' parameters: one row per field, the default of each channel in its own column."""
+    specs, defaults = _simulator_specs()
+    channels: list[str] = []
+    fields: dict[str, Any] = {}
+    for name, spec in specs.items():
+        key = _channel_key(name)
+        if key is None:
+            continue
+        channel, field = key
+        if channel not in channels:
+            channels.append(channel)
+        fields.setdefault(field, spec)
+    rows = []
+    for field, spec in fields.items():
+        row = [f"`channels.<name>.{field}`", _cell(getattr(spec, "kind", "")), _cell(getattr(spec, "rule", "")),
+               _cell(getattr(spec, "description", ""))]
+        for channel in channels:
+            full = f"channels.{channel}.{field}"
+            row.append(_value(defaults.get(full)) if full in specs else "—")
+        rows.append(row)
+    return _table(["parameter", "type", "rule", "description", *(f"`{c}`" for c in channels)], rows)
+
+
+def _probe_rule(rule: Callable[[Any], Any]) -> str:
+    """The words of a recorder rule (a predicate returning True or the rule), read by breaking it."""
+    for probe in (-math.inf, "", " ", None):
+        try:
+            verdict = rule(probe)
+        except Exception:  # noqa: BLE001 - a probe of the wrong type: try the next one
+            continue
+        if isinstance(verdict, str):
+            return verdict
+    return ""
+
+
+def render_recorder_parameters() -> str:
+    """The recorder's parameters (rimd_sim.recording.settings)."""
+    settings = importlib.import_module("rimd_sim.recording.settings")
+    rules = getattr(settings, "_RULES", {})
+    rows = []
+    for name, entry in settings.PARAMETERS.items():
+        default, description = entry[0], entry[1]
+        rule = _probe_rule(rules[name]) if name in rules else ""
+        if name in ("topics", "exclude"):
+            rule = rule or "regular expressions"
+        rows.append([f"`{name}`", _value(default), _type_name(default), _cell(rule or "—"), _cell(description)])
+    return _table(["parameter", "default", "type", "rule", "description"], rows)
+
+
+def render_replay_parameters() -> str:
+    """The replay's parameters (rimd_sim.nodes.replay)."""
+    replay = importlib.import_module("rimd_sim.nodes.replay")
+    rows = [[f"`{name}`", _value(entry[0]), _type_name(entry[0]), _cell(entry[1])]
+            for name, entry in replay.PARAMETERS.items()]
+    return _table(["parameter", "default", "type", "description"], rows)
+
+
+def render_rerun_parameters() -> str:
+    """The Rerun bridge's parameters (rimd_sim.nodes.rerun_bridge)."""
+    bridge = importlib.import_module("rimd_sim.nodes.rerun_bridge")
+    rows = []
+    for name, entry in bridge.PARAMETERS.items():
+        default, description = entry[0], entry[1]
+        bounds = entry[2] if len(entry) > 2 else None
+        span = f"[{bounds[0]:g}, {bounds[1]:g}]" if bounds else "—"
+        rows.append([f"`{name}`", _value(default), _type_name(default), span, _cell(description)])
+    return _table(["parameter", "default", "type", "range", "description"], rows)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Verb tables
+# ------------------------------------------------------------------------------------------------------------
+
+
+def _verb_parsers() -> dict[str, argparse.ArgumentParser]:
+    from rimd_sim import cli
+
+    parser = cli.build_parser()
+    for action in parser._actions:  # noqa: SLF001 - argparse keeps sub-parsers there only
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            return dict(action.choices)
+    return {}
+
+
+def _option_name(action: argparse.Action) -> str:
+    if action.option_strings:
+        name = ", ".join(action.option_strings)
+        if action.nargs == 0:
+            return f"`{name}`"
+        if action.choices is not None:
+            metavar = "{" + ",".join(map(str, action.choices)) + "}"
+        else:
+            metavar = action.metavar if isinstance(action.metavar, str) else action.dest.upper()
+        if action.nargs in ("+", "*"):
+            metavar = f"{metavar} ..."
+        return f"`{name} {metavar}`"
+    name = action.metavar if isinstance(action.metavar, str) else action.dest
+    if action.choices is not None:
+        name = "{" + ",".join(map(str, action.choices)) + "}"
+    if action.nargs == argparse.REMAINDER:
+        name = f"{name} ..."
+    return f"`{name}`"
+
+
+def _option_default(action: argparse.Action) -> str:
+    if not action.option_strings:
+        return "(optional)" if action.nargs in ("?", "*", argparse.REMAINDER) else "(required)"
+    if action.nargs == 0:
+        return "off" if action.default in (False, None) else _value(action.default)
+    if action.required:
+        return "(required)"
+    return _value(action.default)
+
+
+def _option_help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+    formatter = parser._get_formatter()  # noqa: SLF001 - expands %(default)s and friends like --help does
+    text = formatter._expand_help(action) if action.help else ""  # noqa: SLF001
+    for group in parser._mutually_exclusive_groups:  # noqa: SLF001
+        if action in group._group_actions:  # noqa: SLF001
+            others = [o.option_strings[0] for o in group._group_actions if o is not action and o.option_strings]  # noqa: SLF001
+            if others:
+                text += f" (not with {', '.join(others)})"
+    return _cell(text)
+
+
+def render_verb(name: str) -> str:
+    """The options table of ``rimd NAME``, from its parser."""
+    parser = _verb_parsers()[name]
+    rows = [[_option_name(a), _option_default(a), _option_help(parser, a)]
+            for a in parser._actions  # noqa: SLF001
+            if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)]  # noqa: SLF001
+    usage = " ".join(parser.format_usage().split())
+    usage = usage.removeprefix("usage: ")
+    return f"`{_cell(usage)}`\n\n" + _table(["option", "default", "help"], rows)
+
+
+def render_verbs() -> str:
+    """The overview of the verbs (``rimd_sim.cli.VERBS``) with the page that documents each."""
+    from rimd_sim import cli
+
+    rows = []
+    for verb in cli.VERBS:
+        page = VERB_PAGES.get(verb.name, DEFAULT_VERB_PAGE)
+        status = "" if verb.module else f" (not implemented yet: issue {verb.issue})"
+        rows.append([f"`rimd {verb.name}`", _cell(verb.summary + status), f"[{Path(page).stem}]({page})"])
+    return _table(["command", "what it does", "documented in"], rows)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Sections and pages
+# ------------------------------------------------------------------------------------------------------------
+
+
+def sections() -> list[Section]:
+    """Every generated section, in the order of the pages."""
+    from rimd_sim import cli
+
+    out = [
+        Section("verbs", "README.md", render_verbs, "The `rimd` command"),
+        Section("parameters", "docs/configuration.md", render_parameters, "Parameters"),
+        Section("channel-parameters", "docs/configuration.md", render_channel_parameters, "Channel parameters"),
+        Section("recorder-parameters", "docs/recording.md", render_recorder_parameters, "Recorder parameters"),
+        Section("replay-parameters", "docs/recording.md", render_replay_parameters, "Replay parameters"),
+        Section("rerun-parameters", "docs/rerun.md", render_rerun_parameters, "Rerun bridge parameters"),
+    ]
+    for verb in cli.VERBS:
+        if verb.module is None:
+            continue
+        out.append(Section(f"verb-{verb.name}", VERB_PAGES.get(verb.name, DEFAULT_VERB_PAGE),
+                           lambda name=verb.name: render_verb(name), f"`rimd {verb.name}` options"))
+    return out
+
+
+def _find(text: str, name: str) -> tuple[int, int] | None:
+    """Start and end offsets of section ``name``'s content (between its markers), or None."""
+    begin, end = BEGIN.format(name=name), END.format(name=name)
+    first = re.search(rf"^{re.escape(begin)}[ \t]*$", text, re.MULTILINE)
+    if first is None:
+        return None
+    last = re.compile(rf"^{re.escape(end)}[ \t]*$", re.MULTILINE).search(text, first.end())
+    if last is None:
+        raise ValueError(f"'{begin}' has no '{end}' line after it")
+    return first.end(), last.start()
+
+
+def _block(content: str) -> str:
+    return "\n" + content.strip("\n") + "\n"
+
+
+@dataclass
+class Problem:
+    """A page that does not say what the code says."""
+
+    page: str
+    section: str
+    what: str
+    diff: str = ""
+
+    def __str__(self) -> str:
+        """The page, the section, what is wrong, and the difference if any."""
+        text = f"{self.page}: section '{self.section}' {self.what}"
+        return text + ("\n" + self.diff if self.diff else "")
+
+
+def run(root: Path = ROOT, *, check: bool = False) -> list[Problem]:
+    """Rewrite (or, with ``check``, compare) the generated sections of the pages under ``root``.
+
+    Returns the problems: with ``check``, every section that differs from the code or is missing, and every
+    marker naming an unknown section; when rewriting, only what could not be written (unknown markers,
+    a BEGIN without its END).
+    """
+    problems: list[Problem] = []
+    wanted = sections()
+    pages: dict[str, list[Section]] = {}
+    for section in wanted:
+        pages.setdefault(section.page, []).append(section)
+    known = {s.name for s in wanted}
+    page_files = sorted({*pages, "README.md", *(p.relative_to(root).as_posix() for p in (root / "docs").glob("*.md"))})
+    for page in page_files:
+        path = root / page
+        text = path.read_text() if path.exists() else ""
+        original = text
+        for match in MARKER.finditer(text):
+            if match.group(2) not in known:
+                problems.append(Problem(page, match.group(2), "is not generated by scripts/gen_docs.py "
+                                        "(unknown section: remove its markers)"))
+        for section in pages.get(page, []):
+            content = _block(section.render())
+            try:
+                span = _find(text, section.name)
+            except ValueError as exc:
+                problems.append(Problem(page, section.name, f"is broken: {exc}"))
+                continue
+            if span is None:
+                if check:
+                    problems.append(Problem(page, section.name, "is missing (run python scripts/gen_docs.py)"))
+                else:
+                    heading = f"\n## {section.title}\n\n" if section.title else "\n"
+                    text = (text.rstrip("\n") + "\n" + heading + BEGIN.format(name=section.name) + content
+                            + END.format(name=section.name) + "\n")
+                    print(f"gen_docs: appended section '{section.name}' at the end of {page}: move it where it "
+                          "belongs", file=sys.stderr)
+                continue
+            current = text[span[0]:span[1]]
+            if current != content:
+                if check:
+                    diff = "".join(difflib.unified_diff(
+                        current.splitlines(keepends=True), content.splitlines(keepends=True),
+                        f"{page} ({section.name}, written)", f"{page} ({section.name}, from the code)", n=0))
+                    problems.append(Problem(page, section.name, "differs from the code "
+                                            "(run python scripts/gen_docs.py)", diff))
+                else:
+                    text = text[:span[0]] + content + text[span[1]:]
+        if not check and text != original:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            print(f"gen_docs: wrote {page}", file=sys.stderr)
+    return problems
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: rewrite the pages, or check them with ``--check``."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--check", action="store_true",
+                        help="change nothing; exit 1 naming each page and section that differs from the code")
+    parser.add_argument("--root", type=Path, default=ROOT, help="repository root (default: this checkout)")
+    args = parser.parse_args(argv)
+    problems = run(args.root, check=args.check)
+    for problem in problems:
+        print(f"gen_docs: {problem}", file=sys.stderr)
+    if args.check and not problems:
+        print("gen_docs: every generated section agrees with the code", file=sys.stderr)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
