@@ -1,25 +1,45 @@
 """Reading recordings, including damaged ones, without rclpy.
 
-:func:`open_recording` takes an MCAP file or a recording directory (its ``*.mcap`` files in name order). A
-complete file is read through its summary. A file without a summary (the recorder was killed) or with a
-damaged tail is read record by record up to the first record that cannot be read: everything before it is
-kept, and :class:`FileReport` says how much was lost. A file that is not MCAP at all is refused with
+:func:`open_recording` takes an MCAP file or a recording directory (its ``*.mcap`` files in name order). Each
+file is read record by record, framed by each record's length, up to its footer or up to the first record that
+cannot be read: everything before that record is kept, and :class:`FileReport` says what was wrong and how
+much was lost. Nothing damaged is passed on: a chunk is decompressed and checked against its CRC before any of
+its messages counts, and a chunk that fails (CRC mismatch, undecodable, inconsistent sizes) ends the reading
+of its file there. A file that reads to its footer is complete only if its summary is intact too (the
+footer's summary CRC, the statistics' message count). A file that is not MCAP at all is refused with
 :class:`RecordingError`, naming the file.
 """
 
 from __future__ import annotations
 
+import io
 import struct
+import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mcap.exceptions import McapError
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import EndOfFile
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema, Statistics
+from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 
 _MAGIC = b"\x89MCAP0\r\n"
+#: Largest record (and decompressed chunk) accepted: a longer one is taken for a damaged length field.
+_RECORD_LIMIT = 1 << 30
+#: The records the reader needs, parsed; any other (indexes, attachments, summary offsets) is skipped by length.
+_PARSED = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read, Opcode.CHUNK: Chunk.read,
+           Opcode.METADATA: Metadata.read, Opcode.DATA_END: DataEnd.read, Opcode.FOOTER: Footer.read,
+           Opcode.STATISTICS: Statistics.read}
+#: Where each record may stand (MCAP spec; the Header only first): a record found elsewhere has a damaged opcode.
+#: Private records (opcodes 0x80 and up) may stand anywhere and are skipped, as the spec says.
+_DATA_SECTION = {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE, Opcode.CHUNK, Opcode.MESSAGE_INDEX, Opcode.ATTACHMENT,
+                 Opcode.METADATA, Opcode.DATA_END}
+_SUMMARY_SECTION = {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS, Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX,
+                    Opcode.METADATA_INDEX, Opcode.SUMMARY_OFFSET, Opcode.FOOTER}
+_TRUNCATED = "the file ends in the middle of a record: truncated, or the recorder did not finish it"
 
 
 class RecordingError(Exception):
@@ -35,6 +55,7 @@ class RecordedTopic:
     offered_qos_profiles: str
     definition: str
     message_encoding: str
+    schema_encoding: str = ""
 
 
 @dataclass(frozen=True)
@@ -88,95 +109,278 @@ class Recording:
         return sum(r.messages for r in self.reports)
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
-        """Yield the readable messages in file order (log-time order for the recorder's files)."""
+        """Yield the readable messages in file order (log-time order for the recorder's files).
+
+        Exactly the messages :func:`open_recording` counted: the same checks stop at the same record.
+        """
         wanted = set(topics) if topics is not None else None
         for path, report in zip(self.files, self.reports, strict=True):
             channels: dict[int, Channel] = {}
             schemas: dict[int, Schema] = {}
             yielded = 0
-            for record in _records(path, report.complete):
+            for record, _ in _records(path, None):
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
                     channels[record.id] = record
                 elif isinstance(record, Message):
-                    if yielded >= report.messages:
+                    channel = channels.get(record.channel_id)
+                    if channel is None:   # its channel was never defined: not counted by the scan either
+                        continue
+                    if yielded >= report.messages:   # the file grew since it was opened
                         break
                     yielded += 1
-                    channel = channels.get(record.channel_id)
-                    if channel is None or (wanted is not None and channel.topic not in wanted):
+                    if wanted is not None and channel.topic not in wanted:
                         continue
                     schema = schemas.get(channel.schema_id)
                     yield RecordedMessage(channel.topic, schema.name if schema else "", record.log_time,
                                           record.publish_time, record.data)
+                elif isinstance(record, DataEnd):
+                    break   # the summary section holds no messages
 
 
-def _records(path: Path, complete: bool) -> Iterator:
-    """Records of a file in order; stops quietly at the first unreadable record of an incomplete file."""
+class _Body(ReadDataStream):
+    """One record's bytes; reading past their end raises (mcap's stream returns a short read silently)."""
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(io.BytesIO(data))
+
+    def read(self, length: int) -> bytes:
+        if length < 0:
+            raise ValueError(f"negative field length {length}")
+        try:
+            data = super().read(length) if length else b""
+        except EndOfFile:
+            data = b""
+        if len(data) != length:
+            raise ValueError("a field runs past the end of its record")
+        return data
+
+
+def _parse(opcode: int, body: bytes):  # noqa: ANN202
+    """The record of ``opcode`` from its body, or None for a record the reader does not need."""
+    if opcode == Opcode.MESSAGE_INDEX:
+        # Not needed, but cheap to check: its entries (16 bytes each) must fill its length. Damaged bytes taken
+        # for a message index (a chunk with a flipped opcode) fail here instead of being skipped, chunk and all.
+        size = struct.unpack_from("<I", body, 2)[0] if len(body) >= 6 else -1
+        if size != len(body) - 6 or size % 16:
+            raise ValueError("its entries do not fill its length")
+        return None
+    if opcode == Opcode.MESSAGE:
+        if len(body) < 22:
+            raise ValueError(f"a message record of {len(body)} bytes (at least 22)")
+        return Message.read(_Body(body), len(body))
+    read = _PARSED.get(opcode)
+    return read(_Body(body)) if read is not None else None
+
+
+def _chunk_records(chunk: Chunk) -> list:
+    """The records of a chunk, after checking its sizes and its CRC: never altered bytes, or an exception."""
+    if chunk.compression not in ("", "zstd", "lz4"):
+        raise ValueError(f"unknown compression {chunk.compression!r}")
+    if chunk.uncompressed_size > _RECORD_LIMIT:
+        raise ValueError(f"uncompressed size {chunk.uncompressed_size} is beyond any chunk")
+    # A damaged frame header can announce any size: decompress only when it agrees with the chunk's.
+    if chunk.compression == "zstd":
+        import zstandard
+
+        announced = zstandard.frame_content_size(chunk.data)
+    elif chunk.compression == "lz4":
+        import lz4.frame
+
+        announced = lz4.frame.get_frame_info(chunk.data).get("content_size") or -1
+    else:
+        announced = -1
+    if announced not in (-1, chunk.uncompressed_size):
+        raise ValueError(f"the {chunk.compression} frame holds {announced} bytes, the chunk says "
+                         f"{chunk.uncompressed_size}")
+    stream, size = get_chunk_data_stream(chunk, validate_crc=True)   # raises CRCValidationError on a mismatch
+    data = stream.read(size) if size else b""
+    if len(data) != chunk.uncompressed_size:
+        raise ValueError(f"{len(data)} bytes uncompressed, the chunk says {chunk.uncompressed_size}")
+    records = []
+    position = 0
+    while position < len(data):
+        opcode, length = struct.unpack_from("<BQ", data, position)
+        body = data[position + 9:position + 9 + length]
+        if len(body) != length:
+            raise ValueError("a record runs past the end of the chunk")
+        record = _parse(opcode, body)
+        if record is not None:
+            records.append(record)
+        position += 9 + length
+    return records
+
+
+def _records(path: Path, report: FileReport | None) -> Iterator[tuple[object, int]]:
+    """Yield ``(record, end offset)`` of a file in order (a chunk's records once the chunk checked out).
+
+    Stops at the footer or at the first record that cannot be read; with ``report`` (the scan), says why in
+    ``report.error`` and checks the summary and the end of the file. A chunk's records are yielded only when
+    the whole chunk was read and verified, so a consumer never sees part of a damaged chunk.
+
+    Raises:
+        RecordingError: The file does not start with the MCAP magic bytes.
+        OSError: The file cannot be read.
+    """
+    def damaged(reason: str) -> None:
+        if report is not None:
+            report.error = reason
+
+    size = path.stat().st_size
     with path.open("rb") as stream:
-        reader = StreamReader(stream, record_size_limit=1 << 30)
-        iterator = iter(reader.records)
+        head = stream.read(len(_MAGIC))
+        if head != _MAGIC:
+            raise RecordingError(_not_mcap(path, head))
+        # A file that still ends with the closing magic bytes was not cut short: a record running past its end
+        # has a damaged length.
+        stream.seek(max(size - len(_MAGIC), len(_MAGIC)))
+        ends_with_magic = size >= 2 * len(_MAGIC) and stream.read(len(_MAGIC)) == _MAGIC
+        stream.seek(len(_MAGIC))
+        position = len(_MAGIC)
+        data_crc = zlib.crc32(head)     # of the data section, up to DataEnd (the scan only)
+        data_end: int | None = None     # where the summary section starts
+        data_end_record: DataEnd | None = None
+        chunked = False
         while True:
+            header = stream.read(9)
+            if not header:
+                return damaged("the file ends without its footer: truncated, or the recorder did not finish it")
+            if len(header) < 9:
+                return damaged(_TRUNCATED)
+            opcode, length = struct.unpack("<BQ", header)
+            if opcode == 0 or 0x10 <= opcode < 0x80:   # reserved opcodes: this is not a record header
+                return damaged(f"damaged record at byte {position}: opcode 0x{opcode:02x} is not an MCAP record")
+            first = position == len(_MAGIC)
+            if first != (opcode == Opcode.HEADER) or (
+                    not first and opcode < 0x80
+                    and opcode not in (_DATA_SECTION if data_end is None else _SUMMARY_SECTION)):
+                where = "first" if first else "in the data section" if data_end is None else "in the summary section"
+                name = Opcode(opcode).name.lower() if opcode < 0x80 else f"private (0x{opcode:02x})"
+                return damaged(f"damaged record at byte {position}: a {name} record cannot stand {where}")
+            if opcode == Opcode.MESSAGE and chunked:
+                # A writer that chunks puts every message in a chunk (CRC-protected); a message record between
+                # chunks is another record with a flipped opcode (a message index), not data to pass on.
+                return damaged(f"damaged record at byte {position}: a message record between the chunks")
+            if length > size - position - 9:
+                if ends_with_magic:
+                    return damaged(f"damaged record at byte {position}: its length ({length} bytes) runs past the "
+                                   "end of the file")
+                return damaged(_TRUNCATED)
+            if length > _RECORD_LIMIT:
+                return damaged(f"damaged record at byte {position}: a length of {length} bytes")
+            body = stream.read(length)
+            if len(body) != length:
+                return damaged(_TRUNCATED)   # the file shrank while being read
             try:
-                record = next(iterator)
-            except StopIteration:
+                record = _parse(opcode, body)
+                inner = _chunk_records(record) if isinstance(record, Chunk) else ()
+            except CRCValidationError:
+                return damaged(f"damaged chunk at byte {position}: its contents do not match its CRC")
+            except Exception as exc:  # noqa: BLE001 - any failure to read a record is damage, reported
+                name = Opcode(opcode).name.lower() if opcode < 0x80 else f"0x{opcode:02x}"
+                return damaged(f"unreadable {name} record at byte {position}: {type(exc).__name__}: "
+                               f"{str(exc) or 'damaged'}")
+            if report is not None and data_end is None:
+                data_crc = zlib.crc32(body, zlib.crc32(header, data_crc)) if opcode != Opcode.DATA_END else data_crc
+            position += 9 + length
+            chunked = chunked or isinstance(record, Chunk)
+            for item in inner:
+                yield item, position
+            if record is None or isinstance(record, Chunk):
+                continue
+            yield record, position
+            if isinstance(record, DataEnd) and data_end is None:
+                data_end, data_end_record = position, record
+            elif isinstance(record, Footer):
+                if report is not None:
+                    problem, good_until = _check_end(stream, position, size, record, data_end, data_end_record,
+                                                     data_crc)
+                    if problem:
+                        damaged(problem)
+                        report.bytes_read = good_until
                 return
-            except Exception:  # noqa: BLE001 - a damaged tail; the scan in open_recording reported it
-                if complete:
-                    raise
-                return
-            yield record
+
+
+def _check_end(stream, footer_end: int, size: int, footer: Footer, data_end: int | None,  # noqa: ANN001
+               data_end_record: DataEnd | None, data_crc: int) -> tuple[str | None, int]:
+    """What is wrong with a file read to its footer, and up to which byte it is good.
+
+    Checked: the closing magic bytes, the data section's CRC (when written), the footer's summary position and
+    the summary's CRC.
+    """
+    tail = stream.read(len(_MAGIC))
+    if tail != _MAGIC:
+        if _MAGIC.startswith(tail):
+            return "the file ends within its closing magic bytes: truncated", footer_end
+        return "damaged end of file: the footer is not followed by the MCAP magic bytes", footer_end
+    if footer_end + len(_MAGIC) != size:
+        return f"{size - footer_end - len(_MAGIC)} bytes after the end of the MCAP data", footer_end + len(_MAGIC)
+    if data_end is None:
+        return "damaged file: no DataEnd record before the footer", footer_end
+    if data_end_record.data_section_crc not in (0, data_crc):
+        return "the data section's CRC does not match: a record outside the chunks is damaged", data_end
+    if footer.summary_start not in (0, data_end) or (footer.summary_start == 0 and footer_end - 29 != data_end):
+        return (f"damaged footer: it places the summary at byte {footer.summary_start}, after the data section "
+                f"ending at byte {data_end}"), data_end
+    if footer.summary_crc:
+        stream.seek(data_end)
+        crc = zlib.crc32(stream.read(footer_end - 4 - data_end))   # up to the footer's summary_crc field
+        if crc != footer.summary_crc:
+            return "the summary section is damaged (its CRC does not match)", data_end
+    return None, size
+
+
+def _not_mcap(path: Path, head: bytes) -> str:
+    if not head:
+        return f"{path} is not an MCAP file (it is empty)"
+    if _MAGIC.startswith(head):
+        return f"{path} is not an MCAP file (it ends after {len(head)} bytes, within the MCAP magic bytes)"
+    return f"{path} is not an MCAP file (it does not start with the MCAP magic bytes)"
 
 
 def _scan(path: Path, recording: Recording) -> FileReport:
     """Read a file record by record, collecting topics and metadata, up to its end or its damage."""
     report = FileReport(path, path.stat().st_size)
     schemas: dict[int, Schema] = {}
-    with path.open("rb") as stream:
-        if stream.read(len(_MAGIC)) != _MAGIC:
-            raise RecordingError(f"{path} is not an MCAP file (it does not start with the MCAP magic bytes)")
-        stream.seek(0)
-        reader = StreamReader(stream, record_size_limit=1 << 30)
-        iterator = iter(reader.records)
-        pending_messages = 0
-        while True:
-            try:
-                record = next(iterator)
-            except StopIteration:
-                report.complete = True
-                report.bytes_read = report.size
-                break
-            except (McapError, struct.error, ValueError, EOFError, OSError, MemoryError, Exception) as exc:  # noqa: BLE001
-                at_end = stream.tell() >= report.size
-                report.error = _describe(exc, at_end)
-                break
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                schema = schemas.get(record.schema_id)
-                recording.topics.setdefault(record.topic, RecordedTopic(
-                    record.topic, schema.name if schema else "", record.metadata.get("offered_qos_profiles", ""),
-                    schema.data.decode(errors="replace") if schema else "", record.message_encoding))
-            elif isinstance(record, Message):
-                pending_messages += 1
-            elif isinstance(record, Metadata):
-                recording.metadata.setdefault(record.name, dict(record.metadata))
-            # Messages of a chunk count once the whole chunk was read (the stream position moved past it).
-            position = stream.tell()
-            if position != report.bytes_read:
-                report.bytes_read = position
-                report.messages += pending_messages
-                pending_messages = 0
-        if report.complete:
-            report.messages += pending_messages
+    statistics: Statistics | None = None
+    in_summary = False
+    channels: set[int] = set()
+    orphans = 0   # messages of channels never defined: their Channel record was lost
+    for record, end in _records(path, report):
+        report.bytes_read = end     # every record up to here was read whole (a chunk: and verified)
+        if isinstance(record, DataEnd):
+            in_summary = True       # topics and counts come from the data section; the summary repeats them
+        elif isinstance(record, Statistics):
+            statistics = record
+        elif in_summary:
+            continue
+        elif isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Channel):
+            channels.add(record.id)
+            schema = schemas.get(record.schema_id)
+            recording.topics.setdefault(record.topic, RecordedTopic(
+                record.topic, schema.name if schema else "", record.metadata.get("offered_qos_profiles", ""),
+                schema.data.decode(errors="replace") if schema else "", record.message_encoding,
+                schema.encoding if schema else ""))
+        elif isinstance(record, Message):
+            if record.channel_id in channels:
+                report.messages += 1
+            else:
+                orphans += 1
+        elif isinstance(record, Metadata):
+            recording.metadata.setdefault(record.name, dict(record.metadata))
+    if report.error is None:
+        if orphans:
+            report.error = f"{orphans} messages of channels the file does not define (their channel record is lost)"
+        elif statistics is not None and statistics.message_count != report.messages:
+            report.error = (f"the summary counts {statistics.message_count} messages, "
+                            f"{report.messages} could be read")
+        else:
+            report.complete = True
+            report.bytes_read = report.size
     return report
-
-
-def _describe(exc: BaseException, at_end: bool) -> str:
-    text = str(exc) or type(exc).__name__
-    if at_end or "EndOfFile" in type(exc).__name__ or isinstance(exc, EOFError):
-        return "the file ends in the middle of a record: truncated, or the recorder did not finish it"
-    return f"unreadable record: {type(exc).__name__}: {text}"
 
 
 def _summary_ok(path: Path) -> bool:

@@ -81,6 +81,11 @@ def main(args: argparse.Namespace) -> int:
     print(f"rimd rerun: {args.recording} -> {spec.path or spec.url if spec.kind != 'spawn' else 'viewer'}: "
           f"{samples} samples ({per_channel}), {stats.impacts} impacts, {stats.poincare_points} Poincare points, "
           f"{gaps} gaps, in {wall:.2f} s ({samples / wall if wall > 0 else 0:.0f} samples/s)")
+    # A damaged recording is converted as far as it is readable: say what was lost and what was left out.
+    for line in info.damaged:
+        print(f"rimd rerun: damaged: {line}", file=sys.stderr)
+    for line in info.problems:
+        print(f"rimd rerun: warning: {line}", file=sys.stderr)
     if not stats.samples:
         print("rimd rerun: warning: the recording has no sample block on the rig channels", file=sys.stderr)
     return 0

@@ -1,31 +1,44 @@
 """Rig messages from a ROS 2 MCAP recording (profile ``ros2``, ``ros2msg`` schemas, ``cdr``), without ROS.
 
-Decoding is ``mcap_ros2``'s, from the full message definitions stored in the file, so a recording of any
-build of ``rimd_msgs`` with the same fields reads the same.
+The files are read by the damage-tolerant reader (:mod:`rimd_sim.recording.reader`): a truncated or damaged
+file gives every message before the damage (chunks checked against their CRC, so never altered bytes), and
+what was lost is reported in :class:`RecordingInfo`. Decoding is ``mcap_ros2``'s, from the full message
+definitions stored in the file, so a recording of any build of ``rimd_msgs`` with the same fields reads the
+same.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rimd_sim.viz.rerun_map import TOPICS
+from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TOPICS, TRUTH_TOPIC
 
 __all__ = ["McapError", "RecordingInfo", "read_rig_messages"]
 
+#: The message type of each rig topic (relative name): a topic recorded with another type is not rig data.
+RIG_TYPES = {**{ch.topic: "rimd_msgs/msg/SampleBlock" for ch in CHANNELS},
+             EVENTS_TOPIC: "rimd_msgs/msg/ImpactEvent", TRUTH_TOPIC: "rimd_msgs/msg/RigState"}
+
 
 class McapError(Exception):
-    """The file is missing, not an MCAP file, or holds no rig topic; one clear line."""
+    """The file is missing, not an MCAP file, or holds no readable rig topic; one clear line."""
 
 
 @dataclass
 class RecordingInfo:
-    """What :func:`read_rig_messages` found: rig topics present and messages per topic (filled as read)."""
+    """What :func:`read_rig_messages` found: rig topics present and messages per topic (filled as read).
+
+    ``damaged``: one line per damaged file (what was lost); ``problems``: rig topics left out (foreign type,
+    undecodable definition) and messages that could not be decoded.
+    """
 
     topics: dict[str, str]  # full topic -> relative topic
     counts: dict[str, int]
+    damaged: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
 
 
 def _relative(topic: str, namespace: str) -> str | None:
@@ -38,58 +51,75 @@ def _relative(topic: str, namespace: str) -> str | None:
 
 def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
                       info: RecordingInfo | None = None) -> Iterator[tuple[str, Any]]:
-    """Yield ``(relative topic, decoded message)`` of the rig topics of ``path`` in log-time order.
+    """Yield ``(relative topic, decoded message)`` of the rig topics of ``path`` in file order.
 
     ``path`` is one ``.mcap`` file or a recording directory (a rosbag2 bag of ``rimd_recorder``: its
-    ``.mcap`` files in name order, i.e. in the order they were split).
+    ``.mcap`` files in the order they were split). The recorder writes in log-time order.
 
     Raises:
-        McapError: A file cannot be opened or read as MCAP, or has no rig topic under ``namespace``.
+        McapError: A file cannot be opened or is not MCAP, no rig topic under ``namespace`` can be read, or a
+            damaged recording holds no readable rig message.
     """
-    path = Path(path)
-    if path.is_dir():
-        files = sorted(path.glob("*.mcap"))
-        if not files:
-            raise McapError(f"{path}: a directory without .mcap files")
-        for file in files:
-            yield from _read_file(file, namespace, info)
-    else:
-        yield from _read_file(path, namespace, info)
-
-
-def _read_file(path: Path, namespace: str, info: RecordingInfo | None) -> Iterator[tuple[str, Any]]:
-    from mcap.exceptions import McapError as _McapLibError
-    from mcap.reader import make_reader
+    from mcap.records import Schema
     from mcap_ros2.decoder import DecoderFactory
 
-    if not path.is_file():
+    from rimd_sim.recording.reader import RecordingError, open_recording
+
+    path = Path(path)
+    info = info if info is not None else RecordingInfo({}, {})
+    if path.is_dir() and not any(path.glob("*.mcap")):
+        raise McapError(f"{path}: a directory without .mcap files")
+    if not path.exists():
         raise McapError(f"{path}: no such file")
     try:
-        fh = open(path, "rb")  # noqa: SIM115 - closed in finally, the generator may be abandoned
-    except OSError as exc:
-        raise McapError(f"{path}: cannot open: {exc.strerror}") from None
-    try:
+        recording = open_recording(path)
+    except RecordingError as exc:
+        raise McapError(f"not a readable MCAP file: {exc}") from None
+    info.damaged.extend(r.describe() for r in recording.reports if not r.complete)
+    damage = "; ".join(info.damaged)
+
+    factory = DecoderFactory()
+    decoders = {}
+    for number, (name, topic) in enumerate(sorted(recording.topics.items())):
+        rel = _relative(name, namespace)
+        if rel is None:
+            continue
+        if topic.type_name != RIG_TYPES[rel]:
+            info.problems.append(f"{name} has type {topic.type_name or '(no schema)'}, not {RIG_TYPES[rel]}: "
+                                 "left out")
+            continue
         try:
-            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-            summary = reader.get_summary()
-        except (_McapLibError, ValueError, EOFError, OSError) as exc:
-            raise McapError(f"{path}: not a readable MCAP file ({exc.__class__.__name__}: {exc})") from None
-        if summary is None:
-            raise McapError(f"{path}: not a readable MCAP file (no summary: truncated or not MCAP)")
-        topics = {ch.topic: rel for ch in summary.channels.values()
-                  if (rel := _relative(ch.topic, namespace)) is not None}
-        if not topics:
-            found = sorted({ch.topic for ch in summary.channels.values()})
-            raise McapError(f"{path}: no rig topic under {namespace} (topics: {', '.join(found) or 'none'})")
-        if info is not None:
-            info.topics.update(topics)
+            decoder = factory.decoder_for(topic.message_encoding, Schema(
+                id=number + 1, name=topic.type_name, encoding=topic.schema_encoding, data=topic.definition.encode()))
+        except Exception as exc:  # noqa: BLE001 - a definition mcap_ros2 cannot parse: the topic is left out
+            decoder, why = None, f"{type(exc).__name__}: {exc}"
+        else:
+            why = f"message encoding {topic.message_encoding!r}, schema encoding {topic.schema_encoding!r}"
+        if decoder is None:
+            info.problems.append(f"{name}: cannot decode its messages ({why}): left out")
+            continue
+        decoders[name] = decoder
+        info.topics[name] = rel
+    if not decoders:
+        found = sorted(recording.topics)
+        why = f"; {'; '.join(info.problems)}" if info.problems else ""
+        if damage:
+            raise McapError(f"{path}: no rig topic under {namespace} could be read before the damage ({damage})"
+                            f"{why}")
+        raise McapError(f"{path}: no rig topic under {namespace} (topics: {', '.join(found) or 'none'}){why}")
+
+    undecodable: dict[str, int] = {}
+    yielded = 0
+    for msg in recording.messages(decoders):
+        rel = info.topics[msg.topic]
         try:
-            for _schema, channel, _message, decoded in reader.iter_decoded_messages(topics=list(topics)):
-                rel = topics[channel.topic]
-                if info is not None:
-                    info.counts[rel] = info.counts.get(rel, 0) + 1
-                yield rel, decoded
-        except (_McapLibError, ValueError, EOFError, KeyError, OSError) as exc:
-            raise McapError(f"{path}: stopped reading at a damaged record ({exc.__class__.__name__}: {exc})") from None
-    finally:
-        fh.close()
+            decoded = decoders[msg.topic](msg.data)
+        except Exception:  # noqa: BLE001 - bytes that do not decode with their definition: counted, skipped
+            undecodable[msg.topic] = undecodable.get(msg.topic, 0) + 1
+            continue
+        info.counts[rel] = info.counts.get(rel, 0) + 1
+        yielded += 1
+        yield rel, decoded
+    info.problems.extend(f"{name}: {count} messages could not be decoded" for name, count in undecodable.items())
+    if not yielded and damage:
+        raise McapError(f"{path}: no rig message could be read before the damage ({damage})")
