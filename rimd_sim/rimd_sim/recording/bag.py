@@ -12,11 +12,22 @@ Durability: the file is written without a user-space buffer, chunk by chunk; a c
 reaches ``chunk_size`` bytes or when :meth:`BagWriter.flush` is called (the recorder does this every
 ``flush_interval`` seconds). A process killed without warning therefore loses at most the chunk in
 progress; the finished chunks read back (see :mod:`rimd_sim.recording.reader`).
+
+Write errors (disk full, file too large, quota, I/O): the first ``OSError`` stops the recording. The file
+being written is cut back to its last complete record (the chunk in progress, whose write may have stopped
+half-way, is removed: this also gives back its space) and closed without a summary, like a file of a killed
+recorder: it reads back up to that point. A file left without any message is deleted. ``metadata.yaml`` is
+rewritten if there is room. From then on :meth:`BagWriter.write` writes nothing and counts every message it
+is given as not written (:attr:`BagWriter.not_written`, per topic, with the messages of the lost chunk), so
+a full disk costs neither CPU nor log lines. :attr:`BagWriter.failure` describes the error;
+:meth:`BagWriter.split` clears it, and the next message opens a new file (a retry once space is back). No
+method raises ``OSError``: the caller looks at :attr:`BagWriter.failure`.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -72,21 +83,81 @@ def _now_ns() -> int:
     return time.time_ns()
 
 
+#: errno values that mean "no room for more data": disk full, file size limit (RLIMIT_FSIZE with SIGXFSZ
+#: ignored, or the file system's largest file), disk quota.
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
+
+
+@dataclass
+class WriteFailure:
+    """Why a recording stopped writing: the error, the path it concerns and what it cost.
+
+    Attributes:
+        path: The file that could not be written (an MCAP file or ``metadata.yaml``).
+        error: The ``OSError`` (its ``errno`` and ``strerror``).
+        file: The MCAP file that was being written when the error came (None if none was open); it keeps
+            the messages written before the error (``file.message_count``) and has no summary.
+        lost_in_chunk: Messages of the chunk in progress that the error lost (their write had not completed).
+        time_ns: Wall-clock time of the error.
+    """
+
+    path: Path
+    error: OSError
+    file: FileInfo | None = None
+    lost_in_chunk: int = 0
+    time_ns: int = 0
+
+    @property
+    def disk_full(self) -> bool:
+        """True for "no room" errors (ENOSPC, EFBIG, EDQUOT), as opposed to other I/O errors."""
+        return self.error.errno in DISK_FULL_ERRNOS
+
+    @property
+    def headline(self) -> str:
+        """What happened, in two words: ``disk full``, ``file too large``, ``disk quota exceeded``, ``write error``."""
+        return {errno.ENOSPC: "disk full", errno.EFBIG: "file too large",
+                errno.EDQUOT: "disk quota exceeded"}.get(self.error.errno, "write error")
+
+    @property
+    def reason(self) -> str:
+        """The system's text and the errno name, e.g. ``No space left on device (errno 28, ENOSPC)``."""
+        code = self.error.errno
+        name = errno.errorcode.get(code, "?") if code is not None else "?"
+        return f"{self.error.strerror or self.error} (errno {code}, {name})"
+
+    def describe(self) -> str:
+        """One line: ``disk full: /path/file.mcap: No space left on device (errno 28, ENOSPC)``."""
+        return f"{self.headline}: {self.path}: {self.reason}"
+
+
+def _name_path(exc: OSError, path: Path) -> OSError:
+    """Attach ``path`` to an ``OSError`` raised by a write (``os.write`` errors carry no file name)."""
+    if exc.filename is None:
+        exc.filename = str(path)
+    return exc
+
+
 class _UnbufferedFile:
     """A file written straight to the OS, with no user-space buffer that SIGKILL would lose.
 
     Not an ``io.RawIOBase``, so that ``mcap.Writer`` uses it as is instead of wrapping it in a buffer.
+    ``bytes_written`` counts what reached the file, also when a write fails part-way.
     """
 
     def __init__(self, path: Path) -> None:
+        self.path = path
         self._fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self.bytes_written = 0
 
     def write(self, data) -> int:  # noqa: ANN001
         view = memoryview(data)
-        while view:
-            view = view[os.write(self._fd, view):]
-        self.bytes_written += len(data)
+        try:
+            while view:
+                n = os.write(self._fd, view)
+                self.bytes_written += n
+                view = view[n:]
+        except OSError as exc:
+            raise _name_path(exc, self.path) from None
         return len(data)
 
     def tell(self) -> int:
@@ -94,6 +165,12 @@ class _UnbufferedFile:
 
     def flush(self) -> None:
         pass
+
+    def truncate(self, size: int) -> None:
+        """Cut the file to ``size`` bytes (gives back the space of a half-written tail)."""
+        if self._fd is not None:
+            os.ftruncate(self._fd, size)
+            self.bytes_written = size
 
     def close(self) -> None:
         if self._fd is not None:
@@ -113,7 +190,12 @@ class TopicInfo:
 
 @dataclass
 class FileInfo:
-    """One MCAP file of a recording, with what was written into it."""
+    """One MCAP file of a recording, with what was written into it.
+
+    The counts and times are those of the messages that reached the file (complete chunks); the messages
+    of the chunk in progress join them when the chunk is written. ``error`` is set when a write error
+    stopped the file (it then has no summary and ``finished`` stays False).
+    """
 
     path: Path
     start_ns: int | None = None
@@ -122,33 +204,68 @@ class FileInfo:
     topic_counts: dict[str, int] = field(default_factory=dict)
     size: int = 0
     finished: bool = False
+    error: str | None = None
 
 
 class McapFile:
-    """One rosbag2 MCAP file being written."""
+    """One rosbag2 MCAP file being written.
+
+    It keeps track of the offset after the last complete operation (``_committed``) and of the messages
+    not yet in the file (the chunk in progress), so that after a write error :meth:`fail` can cut the file
+    back to a clean end and say exactly which messages are in it.
+    """
 
     def __init__(self, path: Path, *, compression: str, chunk_size: int, library: str,
                  metadata: Mapping[str, Mapping[str, str]]) -> None:
         self.info = FileInfo(path)
+        #: Log time of the first message given to the file (also while it is still in the chunk in progress).
+        self.first_log_time: int | None = None
+        self._pending: dict[str, int] = {}
+        self._pending_start: int | None = None
+        self._pending_end: int | None = None
+        self._committed = 0
         self._raw = _UnbufferedFile(path)
-        self._writer = Writer(self._raw, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
-        self._writer.start(profile="ros2", library=library)
-        self._compression = compression
-        self._channels: dict[str, int] = {}
-        self._schemas: dict[str, int] = {}
-        self._topics: dict[str, TopicInfo] = {}
-        for name, data in metadata.items():
-            self.add_metadata(name, data)
+        try:
+            self._writer = Writer(self._raw, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+            self._writer.start(profile="ros2", library=library)
+            self._compression = compression
+            self._channels: dict[str, int] = {}
+            self._schemas: dict[str, int] = {}
+            self._topics: dict[str, TopicInfo] = {}
+            for name, data in metadata.items():
+                self.add_metadata(name, data)
+        except OSError:
+            self._raw.close()
+            path.unlink(missing_ok=True)   # nothing of value in it
+            raise
+        self._commit(messages=False)
 
     @property
     def size(self) -> int:
         """Bytes written to the file so far (the chunk in progress is not counted)."""
         return self._raw.tell()
 
+    def _commit(self, *, messages: bool) -> None:
+        """Note that the file is complete up to here; with ``messages``, the pending messages are in it."""
+        self._committed = self._raw.tell()
+        if not messages or not self._pending:
+            return
+        info = self.info
+        if info.start_ns is None or self._pending_start < info.start_ns:
+            info.start_ns = self._pending_start
+        if info.end_ns is None or self._pending_end > info.end_ns:
+            info.end_ns = self._pending_end
+        for topic, count in self._pending.items():
+            info.message_count += count
+            info.topic_counts[topic] = info.topic_counts.get(topic, 0) + count
+        self._pending = {}
+        self._pending_start = self._pending_end = None
+
     def add_topic(self, topic: TopicInfo) -> None:
         """Register a topic's schema and channel (idempotent)."""
         if topic.name in self._channels:
             return
+        before = self._raw.tell()
         schema_id = self._schemas.get(topic.type_name)
         if schema_id is None:
             schema_id = self._writer.register_schema(topic.type_name, "ros2msg", topic.definition.text.encode())
@@ -158,31 +275,39 @@ class McapFile:
             channel_metadata["topic_type_hash"] = topic.definition.type_hash
         self._channels[topic.name] = self._writer.register_channel(topic.name, "cdr", schema_id, channel_metadata)
         self._topics[topic.name] = topic
+        if self._raw.tell() != before:   # the records closed the chunk in progress: it is in the file
+            self._commit(messages=True)
 
     def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int, sequence: int = 0) -> None:
         """Add one serialized message of a registered topic."""
+        before = self._raw.tell()
         self._writer.add_message(self._channels[topic], log_time_ns, data, publish_time_ns, sequence)
-        info = self.info
-        if info.start_ns is None or log_time_ns < info.start_ns:
-            info.start_ns = log_time_ns
-        if info.end_ns is None or log_time_ns > info.end_ns:
-            info.end_ns = log_time_ns
-        info.message_count += 1
-        info.topic_counts[topic] = info.topic_counts.get(topic, 0) + 1
+        if self.first_log_time is None:
+            self.first_log_time = log_time_ns
+        if self._pending_start is None or log_time_ns < self._pending_start:
+            self._pending_start = log_time_ns
+        if self._pending_end is None or log_time_ns > self._pending_end:
+            self._pending_end = log_time_ns
+        self._pending[topic] = self._pending.get(topic, 0) + 1
+        if self._raw.tell() != before:   # the chunk (this message included) and its indexes were written
+            self._commit(messages=True)
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Add an MCAP metadata record (string keys and values)."""
         self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+        self._commit(messages=False)   # a metadata record does not close the chunk in progress
 
     def flush(self) -> None:
         """Close the chunk in progress so that it reaches the file."""
         self._writer.flush()
+        self._commit(messages=True)
 
     def finish(self) -> FileInfo:
-        """Write the rosbag2 metadata record, the summary and the footer, and close the file."""
+        """Write the last chunk, the rosbag2 metadata record, the summary and the footer, and close the file."""
+        self.flush()
         info = self.info
         bag_info = bag_metadata([info], list(self._topics.values()), relative_to=info.path.parent)
-        self._writer.add_metadata(ROSBAG2_METADATA_NAME, {
+        self.add_metadata(ROSBAG2_METADATA_NAME, {
             "serialized_metadata": yaml.safe_dump(bag_info["rosbag2_bagfile_information"], sort_keys=False),
             "ros_distro": ROS_DISTRO,
         })
@@ -191,6 +316,27 @@ class McapFile:
         info.size = info.path.stat().st_size
         info.finished = True
         return info
+
+    def fail(self, reason: str) -> dict[str, int]:
+        """Stop after a write error: cut the file back to its last complete record and close it.
+
+        The writer is not used again (after a failed write its state no longer matches the file). The file
+        keeps every complete chunk and has no summary, like the file of a killed recorder. Returns the
+        messages lost with the chunk in progress, per topic.
+        """
+        try:
+            self._raw.truncate(self._committed)
+        except OSError:
+            pass   # the half-written tail stays; readers stop at it
+        self._raw.close()
+        info = self.info
+        info.error = reason
+        try:
+            info.size = info.path.stat().st_size
+        except OSError:
+            info.size = self._committed
+        lost, self._pending = self._pending, {}
+        return lost
 
     def abandon(self) -> None:
         """Close the file descriptor without finishing (the file keeps its finished chunks)."""
@@ -269,6 +415,14 @@ class BagWriter:
             up to one chunk).
         library: Written into each file's header.
         metadata: MCAP metadata records written into every file (name -> string mapping).
+
+    Attributes:
+        written: Per topic, messages accepted that are in a file or in the chunk in progress.
+        not_written: Per topic, messages that a write error kept out of the files (the chunk in progress
+            when it came, and every message given while :attr:`failure` is set).
+        failure: The write error that stopped the recording, or None (see the module docstring).
+        failures: Every write error of this writer, in order (a retry can fail again).
+        metadata_error: The last error writing ``metadata.yaml``, or None once it was written.
     """
 
     def __init__(self, output_dir: str | Path, *, prefix: str = "rimd", compression: str = "zstd",
@@ -287,6 +441,11 @@ class BagWriter:
         self.metadata: dict[str, dict[str, str]] = {k: dict(v) for k, v in (metadata or {}).items()}
         self.topics: dict[str, TopicInfo] = {}
         self.files: list[FileInfo] = []
+        self.written: dict[str, int] = {}
+        self.not_written: dict[str, int] = {}
+        self.failure: WriteFailure | None = None
+        self.failures: list[WriteFailure] = []
+        self.metadata_error: OSError | None = None
         self._current: McapFile | None = None
         self._next_index = 0
         self._previous = self._read_previous_metadata()
@@ -298,15 +457,23 @@ class BagWriter:
         if topic is None:
             topic = TopicInfo(name, type_name, [dict(p) for p in qos_profiles], message_definition(type_name))
             self.topics[name] = topic
-        if self._current is not None:
-            self._current.add_topic(topic)
+        current = self._current
+        if current is not None:
+            try:
+                current.add_topic(topic)
+            except OSError as exc:
+                self._fail(exc)
         return topic
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Add a metadata record to the current file and to every later file."""
         self.metadata[name] = {str(k): str(v) for k, v in data.items()}
-        if self._current is not None:
-            self._current.add_metadata(name, self.metadata[name])
+        current = self._current
+        if current is not None:
+            try:
+                current.add_metadata(name, self.metadata[name])
+            except OSError as exc:
+                self._fail(exc)
 
     # -- writing ---------------------------------------------------------------------------------------------
     @property
@@ -314,18 +481,31 @@ class BagWriter:
         """Path of the file being written, or None between files."""
         return self._current.info.path if self._current is not None else None
 
-    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int = 0, sequence: int = 0) -> None:
-        """Write one serialized message of a declared topic, opening or splitting files as needed."""
-        current = self._current
-        if current is not None and self._must_split(current, log_time_ns):
-            self.split()
-            current = None
-        if current is None:
-            current = self._open()
-        current.write(topic, data, log_time_ns, publish_time_ns or log_time_ns, sequence)
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int = 0, sequence: int = 0) -> bool:
+        """Write one serialized message of a declared topic, opening or splitting files as needed.
+
+        Returns True when the message was accepted, False when a write error keeps it out (counted in
+        :attr:`not_written`; :attr:`failure` says why).
+        """
+        if self.failure is None:
+            try:
+                current = self._current
+                if current is not None and self._must_split(current, log_time_ns):
+                    self._split()
+                    current = None
+                if current is None:
+                    current = self._open()
+                current.write(topic, data, log_time_ns, publish_time_ns or log_time_ns, sequence)
+            except OSError as exc:
+                self._fail(exc)
+            else:
+                self.written[topic] = self.written.get(topic, 0) + 1
+                return True
+        self.not_written[topic] = self.not_written.get(topic, 0) + 1
+        return False
 
     def _must_split(self, current: McapFile, log_time_ns: int) -> bool:
-        start = current.info.start_ns
+        start = current.first_log_time
         if self.max_duration_ns > 0 and start is not None and log_time_ns - start >= self.max_duration_ns:
             return True
         return self.max_size > 0 and current.size >= self.max_size
@@ -340,37 +520,86 @@ class BagWriter:
                 break
             except FileExistsError:
                 continue
-        for topic in self.topics.values():
-            current.add_topic(topic)
         self._current = current
         self.files.append(current.info)
+        for topic in self.topics.values():
+            current.add_topic(topic)
         self._write_metadata_yaml()
         return current
 
     def flush(self) -> None:
         """Put the chunk in progress into the file (bounds what a crash can lose)."""
-        if self._current is not None:
-            self._current.flush()
+        current = self._current
+        if current is not None:
+            try:
+                current.flush()
+            except OSError as exc:
+                self._fail(exc)
 
     def split(self) -> FileInfo | None:
-        """Finish the current file; the next message opens a new one. Returns the finished file's info."""
-        current, self._current = self._current, None
+        """Finish the current file; the next message opens a new one. Returns the finished file's info.
+
+        After a write error (:attr:`failure` set) there is no file to finish: the error is cleared and the
+        next message opens a new file (a retry once space is back). Returns None then, and when no file was
+        open or finishing it failed.
+        """
+        if self.failure is not None:
+            self.failure = None
+            return None
+        try:
+            return self._split()
+        except OSError as exc:
+            self._fail(exc)
+            return None
+
+    def _split(self) -> FileInfo | None:
+        current = self._current
         if current is None:
             return None
         info = current.finish()
+        self._current = None
         self._write_metadata_yaml()
         return info
 
     def close(self) -> None:
-        """Finish the current file and write ``metadata.yaml``."""
-        self.split()
-        self._write_metadata_yaml()
+        """Finish the current file and write ``metadata.yaml`` (after a write error: only the latter, if it fits)."""
+        try:
+            self._split()
+            self._write_metadata_yaml()
+        except OSError as exc:
+            self._fail(exc)
 
     def abandon(self) -> None:
         """Stop without finishing (for tests of crash behaviour): the file keeps its finished chunks."""
         if self._current is not None:
             self._current.abandon()
             self._current = None
+
+    def _fail(self, exc: OSError) -> None:
+        """Stop writing after ``exc``: keep what the current file holds, count what it lost, record why."""
+        current, self._current = self._current, None
+        path = Path(exc.filename) if exc.filename else (current.info.path if current else self.output_dir)
+        lost: dict[str, int] = {}
+        info = None
+        if current is not None:
+            info = current.info
+            reason = WriteFailure(path, exc).describe()
+            lost = current.fail(reason)
+            if info.message_count == 0:   # nothing worth keeping: give the space back
+                info.path.unlink(missing_ok=True)
+                self.files.remove(info)
+            for topic, count in lost.items():
+                self.written[topic] -= count
+                self.not_written[topic] = self.not_written.get(topic, 0) + count
+        failure = WriteFailure(path, exc, info, sum(lost.values()), _now_ns())
+        if self.failure is None:   # the first error is the one to report; a later one (close) adds nothing
+            self.failure = failure
+            self.failures.append(failure)
+        if not (current is None and path.name in ("metadata.yaml", ".metadata.yaml.tmp")):
+            try:   # list the files as they are now, if there is room for it
+                self._write_metadata_yaml()
+            except OSError:
+                pass
 
     # -- metadata.yaml ---------------------------------------------------------------------------------------
     def _read_previous_metadata(self) -> dict[str, Any] | None:
@@ -386,5 +615,11 @@ class BagWriter:
         content = bag_metadata(self.files, list(self.topics.values()), relative_to=self.output_dir,
                                previous=self._previous)
         tmp = self.output_dir / ".metadata.yaml.tmp"
-        tmp.write_text(yaml.safe_dump(content, sort_keys=False), encoding="utf-8")
-        tmp.replace(self.output_dir / "metadata.yaml")
+        try:
+            tmp.write_text(yaml.safe_dump(content, sort_keys=False), encoding="utf-8")
+            tmp.replace(self.output_dir / "metadata.yaml")
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            self.metadata_error = _name_path(exc, self.output_dir / "metadata.yaml")
+            raise self.metadata_error from None
+        self.metadata_error = None
