@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.rig import run_for
 from harness.ros import call_service, spin_until
 from rimd_sim.analysis.sweep import sweep
 from rimd_sim.core import SimConfig
@@ -32,12 +31,33 @@ def _rimd(ros_processes, *args: str, name: str):  # noqa: ANN001
     return ros_processes.start([executable, *args], name=name)
 
 
+#: Stamp (s) of the first step. The rig starts paused and is resumed once the experiment has scheduled its
+#: steps, so the whole run, from rest at t = 0, is the same however loaded the machine is.
+START = 10.0
+
+
 def _simulator(ros_processes, gap: float, f0: float):  # noqa: ANN001
     sim = ros_processes.start_node(
         "rimd_simulator", "--ros-args", "-p", f"real_time_factor:={RTF}", "-p", f"gap:={gap}",
-        "-p", f"motor.initial_frequency:={f0}", "-p", f"motor.initial_setpoint:={f0}")
+        "-p", f"motor.initial_frequency:={f0}", "-p", f"motor.initial_setpoint:={f0}", "-p", "start_paused:=true")
     sim.wait_for_output(r"rig ready", timeout=60)
     return sim
+
+
+def _resume_when_scheduled(experiment, ros_executor) -> None:  # noqa: ANN001
+    """Resume the paused rig once the experiment says its steps are scheduled."""
+    import rclpy
+
+    from harness.rig import trigger
+
+    experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
+    node = rclpy.create_node("resumer", context=ros_executor.context)
+    ros_executor.add_node(node)
+    assert trigger(ros_executor, node, "/rig/resume").success
+
+
+def _stamp(t) -> int:  # noqa: ANN001 - builtin_interfaces/Time
+    return int(t.sec) * 1_000_000_000 + int(t.nanosec)
 
 
 def _steps(out: Path) -> list[dict]:
@@ -78,7 +98,9 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     simulator = _simulator(ros_processes, 0.0, freqs[0])
     out = tmp_path / "exp"
     experiment = _rimd(ros_processes, "experiment", "--frequencies", *map(str, freqs), "--dwell", str(dwell),
-                       "--settle", str(settle), "--ramp-rate", str(ramp), "--out", str(out), name="experiment")
+                       "--settle", str(settle), "--ramp-rate", str(ramp), "--out", str(out), "--start", str(START),
+                       name="experiment")
+    _resume_when_scheduled(experiment, ros_executor)
     assert experiment.wait(90) == 0, experiment.tail()
     assert "step 4/4" in experiment.output()   # progress shown
 
@@ -123,7 +145,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     # machine was (the requests travel late; the rig applies them at the stamps they name).
     schedule = json.loads((out / "experiment.json").read_text())["steps"]
     starts = [s["scheduled_stamp_ns"] for s in schedule]
-    assert [s["effective_stamp_ns"] for s in schedule] == starts
+    assert [s["effective_stamp_ns"] for s in schedule] == starts and starts[0] == round(START * 1e9)
     assert {b - a for a, b in zip(starts, starts[1:], strict=False)} == {round(dwell * 1e9)}
     _assert_recording_is_the_core_run(out / "recording", 0.0, freqs, ramp, starts)
 
@@ -176,30 +198,47 @@ def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, ros_
                                         "-p", "topics:=['/rig/.*']")
     recorder.wait_for_output(r"recording /rig/impact/events", timeout=30)
     experiment = _rimd(ros_processes, "experiment", "--no-record", "--frequencies", "2.5", "3.0", "4.0", "5.25",
-                       "--dwell", "6", "--settle", "2", "--ramp-rate", "2", "--out", str(out), name="experiment")
+                       "--dwell", "6", "--settle", "2", "--ramp-rate", "2", "--out", str(out), "--start", str(START),
+                       name="experiment")
+    _resume_when_scheduled(experiment, ros_executor)
     assert experiment.wait(90) == 0, experiment.tail()
 
     import rclpy
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray
+
     node = rclpy.create_node("probe", context=ros_executor.context)
     ros_executor.add_node(node)
     events = []
     node.create_subscription(ImpactEvent, "/rig/impact/events", events.append, 100)
-    run_for(ros_executor, 1.0)   # 8 s of simulation at 5.25 Hz
-    assert events == [], "the upward sweep should stay on the non-impacting motion at 5.25 Hz"
-    # A kick lands on band B from about 8 of 10 phases of the cycle (measured with the core): kick again,
-    # as an operator would, until the impacts come (at most 5 kicks).
+    recorded_to = {}   # the recorder's /diagnostics: how far each topic has reached it
+
+    def on_diagnostics(msg) -> None:  # noqa: ANN001
+        for status in msg.status:
+            if "rimd_recorder" in status.name:
+                recorded_to.update({kv.key: int(kv.value) for kv in status.values if kv.key.endswith("last_stamp_ns")})
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    # A kick at an exact stamp, at 5.25 Hz: the whole run is deterministic (the rig started paused, from rest,
+    # and every command names its stamp). Measured with the core, a kick of +0.1 m/s lands on band B from
+    # t = 56, 60 or 64 s and falls off again from 58 or 62 s: the phase decides, so the stamp is fixed.
+    kick_ns = 60 * 10**9
     client = node.create_client(Perturb, "/rig/perturb")
-    for _ in range(5):
-        response = call_service(ros_executor, node, client, Perturb.Request(velocity=0.1), 10)
-        assert response.success, response.message
-        events.clear()
-        run_for(ros_executor, 2.0)   # 16 s of simulation
-        if len(events) >= 20:
-            break
-    assert len(events) >= 20, "no kick put the rig on band B"
-    steady = events[-12:]
+    response = call_service(ros_executor, node, client, Perturb.Request(velocity=0.1, start_stamp=Time(sec=60)), 10)
+    assert response.success, response.message
+    assert _stamp(response.effective_stamp) == kick_ns
+
+    def after_kick() -> list:
+        return [e for e in events if _stamp(e.header.stamp) >= kick_ns]
+
+    assert spin_until(ros_executor, lambda: len(after_kick()) >= 20, 60), "the kick did not put the rig on band B"
+    before = [e for e in events if _stamp(e.header.stamp) < kick_ns]
+    assert before == [], "the upward sweep should stay on the non-impacting motion at 5.25 Hz until the kick"
+    steady = after_kick()[-12:]
     gaps = {b.cycle_index - a.cycle_index for a, b in zip(steady, steady[1:], strict=False)}
     assert gaps == {2}, f"band B: one impact every two cycles, got cycle gaps {gaps}"
+    last = _stamp(after_kick()[19].header.stamp)
+    assert spin_until(ros_executor, lambda: recorded_to.get("/rig/impact/events last_stamp_ns", 0) >= last, 60)
     recorder.send_signal(signal.SIGINT)
     assert recorder.wait(30) == 0
 
@@ -210,7 +249,7 @@ def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, ros_
     assert float(rows[2.5]["impacts_per_cycle_events"]) > 0.9                 # band A: impacting
     assert int(rows[3.0]["impacts_events"]) == int(rows[4.0]["impacts_events"]) == 0   # fell off, stays off
     summary = json.loads((out / "an" / "summary.json").read_text())
-    t_kick = (response.effective_stamp.sec * 10**9 + response.effective_stamp.nanosec - summary["origin_ns"]) * 1e-9
+    t_kick = (kick_ns - summary["origin_ns"]) * 1e-9
     with open(out / "an" / "impact_events.csv") as fh:
         recorded = [float(r["time_s"]) for r in csv.DictReader(fh)]
     at_5_25 = [t for t in recorded if t >= float(rows[5.25]["start_s"])]

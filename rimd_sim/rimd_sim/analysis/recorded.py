@@ -334,10 +334,14 @@ def match_impacts(detected: dict[str, np.ndarray], events: dict[str, np.ndarray]
     below = missed & (events["peak_force"] < threshold) if n_ev else missed
     matched = event_match >= 0
     rel = np.abs(detected["peak_force"][event_match[matched]] / events["peak_force"][matched] - 1.0)
+    # Detections after the events' stream ended (see events_end) are not extras: no event could match them.
+    end = events_end(detected, detected_match, events)
+    beyond = (detected_match < 0) & (detected["start"] >= end) if end is not None else np.zeros(n_det, dtype=bool)
     return {
         "event_match": event_match, "detected_match": detected_match, "covered": covered,
         "matches": int(matched.sum()), "misses": int(missed.sum()), "misses_below_threshold": int(below.sum()),
-        "not_covered": int((~covered).sum()), "extras": int((detected_match < 0).sum()),
+        "not_covered": int((~covered).sum()), "extras": int(((detected_match < 0) & ~beyond).sum()),
+        "detected_after_events_end": int(beyond.sum()),
         "peak_difference_max": float(rel.max()) if rel.size else None,
         "peak_difference_median": float(np.median(rel)) if rel.size else None,
     }
@@ -379,12 +383,27 @@ def common_end(data: RecordedData, detected: dict[str, np.ndarray] | None = None
     t = data.motor.get("time", np.empty(0))
     if t.size:
         ends.append(float(t[-1]))
-    if detected is not None and detected_match is not None and data.events.get("time", np.empty(0)).size:
-        last_event = float(data.events["time"][-1])
-        orphans = detected["start"][(detected_match < 0) & (detected["start"] > last_event)]
-        if orphans.size:
-            ends.append(float(orphans.min()))
+    if detected is not None and detected_match is not None:
+        end = events_end(detected, detected_match, data.events)
+        if end is not None:
+            ends.append(end)
     return min(ends) if ends else None
+
+
+def events_end(detected: dict[str, np.ndarray], detected_match: np.ndarray,
+               events: dict[str, np.ndarray]) -> float | None:
+    """Where the recorded impact events end, when the force channel shows it; else None.
+
+    The start of the first impact that the force sensor saw after the last recorded event with no event of
+    its own. A reliable low-rate topic can lag seconds behind the sampled ones in a loaded recorder (a
+    sample lost in transit holds the later ones back until the writer's next heartbeat), so a stopped
+    recording can hold force samples of impacts whose events it never received.
+    """
+    times = events.get("time", np.empty(0))
+    if not times.size or not detected_match.size:
+        return None
+    orphans = detected["start"][(detected_match < 0) & (detected["start"] > float(times[-1]))]
+    return float(orphans.min()) if orphans.size else None
 
 
 def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: float = 1e-6,

@@ -56,7 +56,9 @@ def print_report(summary: dict) -> None:
         print(line)
     imp = summary["impacts"]
     print(f"impacts: {imp['events']} events, {imp['detected']} detected in the force channel; "
-          f"{imp['matches']} matches, {imp['misses']} misses, {imp['extras']} extras")
+          f"{imp['matches']} matches, {imp['misses']} misses, {imp['extras']} extras"
+          + (f"; {imp['detected_after_events_end']} detected after the recorded events end"
+             if imp.get("detected_after_events_end") else ""))
     loss = summary["loss"]
     if not loss["complete"] or loss["lost_samples"] or loss["undecodable_messages"]:
         print(f"LOSS: {'; '.join(loss['files'])}; lost samples {loss['lost_samples']}; "
@@ -112,7 +114,10 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
     wanted = (rec.FORCE, rec.EVENTS, rec.MOTOR, rec.RIMD_X, rec.CART_X)
     if not any(data.counts.get(t) for t in wanted):
         found = ", ".join(sorted(data.recording.topics)) or "no topics"
-        raise CommandError(f"{recording} holds none of the rig topics analysed ({', '.join(wanted)}); found: {found}")
+        # A damaged recording may have lost them all: the one line says so, not only the log above it.
+        damage = "; ".join(r.describe() for r in data.recording.reports if not r.complete)
+        raise CommandError(f"{recording} holds none of the rig topics analysed ({', '.join(wanted)}); found: {found}"
+                           + (f" (the recording is damaged: {damage})" if damage else ""))
     out.mkdir(parents=True, exist_ok=True)
 
     force = data.channels.get(rec.FORCE)

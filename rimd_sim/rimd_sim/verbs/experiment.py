@@ -50,6 +50,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="do not start a recorder (a recorder already running records the rig)")
     parser.add_argument("--recording", type=Path, default=None,
                         help="with --no-record: the recording to analyse at the end (else no analysis)")
+    parser.add_argument("--start", type=float, default=None,
+                        help="stamp of the first step, in seconds of the rig's time base (simulation time when "
+                             "real_time_factor is not 1); default: the first motor cycle start 1 s ahead of the rig. "
+                             "With --start the rig may be paused until then: the same --start on a rig started the "
+                             "same way gives the same data")
     parser.add_argument("--timeout", type=float, default=30.0,
                         help="wall seconds to wait for the rig, the recorder, or the simulation time to advance")
 
@@ -77,6 +82,8 @@ def schedule(args: argparse.Namespace) -> list[float]:
     check_positive("--settle", args.settle, inclusive=True)
     check_positive("--ramp-rate", args.ramp_rate, inclusive=True)
     check_positive("--timeout", args.timeout)
+    if args.start is not None:
+        check_positive("--start", args.start)
     if args.settle >= args.dwell:
         raise CommandError(f"--settle {args.settle:g} s >= --dwell {args.dwell:g} s: nothing would be measured")
     if args.ramp_rate > 0:
@@ -113,6 +120,25 @@ class _Rig:
         self.phase = math.nan
         self.node.create_subscription(MotorState, "/rig/motor/state", self._on_motor,
                                       QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.recorder_stamps: dict[str, int] = {}   # topic -> last stamp (ns) the experiment's recorder received
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        from rimd_msgs.msg import ImpactEvent
+
+        self.event_stamps: list[int] = []   # stamps (ns) of the impact events heard, in order
+        self.node.create_subscription(
+            ImpactEvent, "/rig/impact/events",
+            lambda msg: self.event_stamps.append(int(msg.header.stamp.sec) * 1_000_000_000
+                                                 + int(msg.header.stamp.nanosec)),
+            QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+
+    def _on_diagnostics(self, msg) -> None:  # noqa: ANN001
+        for status in msg.status:
+            if RECORDER_NODE in status.name:
+                for kv in status.values:
+                    if kv.key.endswith(" last_stamp_ns"):
+                        self.recorder_stamps[kv.key[: -len(" last_stamp_ns")]] = int(kv.value)
 
     def _on_motor(self, msg) -> None:  # noqa: ANN001
         self.stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
@@ -168,20 +194,28 @@ def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
         if not rig.client.wait_for_service(timeout_sec=args.timeout):
             raise CommandError(f"no rig: service {SERVICE} not available after {args.timeout:g} s "
                                "(start it with `rimd rig`, on the same ROS_DOMAIN_ID)")
-        if not rig.spin_until(lambda: rig.stamp_ns is not None, args.timeout):
-            raise CommandError(f"no /rig/motor/state received in {args.timeout:g} s: is the rig paused?")
+        if args.start is None and not rig.spin_until(lambda: rig.stamp_ns is not None, args.timeout):
+            raise CommandError(f"no /rig/motor/state received in {args.timeout:g} s: is the rig paused? "
+                               "(--start schedules a paused rig)")
         if not args.no_record:
             recorder = _start_recorder(rig, record_dir, out / "recorder.log", args.timeout, log)
         dwell_ns = round(args.dwell * 1e9)
-        start_ns, first = _first_step(rig, freqs[0], args, len(freqs))
+        if args.start is None:
+            start_ns, first = _first_step(rig, freqs[0], args, len(freqs))
+        else:
+            start_ns = round(args.start * 1e9)
+            first = _request(rig, freqs[0], args, start_ns, 0, len(freqs))
         times = [start_ns + k * dwell_ns for k in range(len(freqs))]
         steps_done.append(_record_step(freqs[0], first, times[0], dwell_ns))
+        log(f"{len(freqs)} steps scheduled from t = {start_ns / 1e9:.9f} s, one every {args.dwell:g} s")
         for k, f in enumerate(freqs):
             _wait_for_stamp(rig, times[k], k, len(freqs), f, args, show=False)   # step k in force
             if k + 1 < len(freqs):   # scheduled while step k runs: a whole dwell of lead
                 response = _request(rig, freqs[k + 1], args, times[k + 1], k + 1, len(freqs))
                 steps_done.append(_record_step(freqs[k + 1], response, times[k + 1], dwell_ns))
             _wait_for_stamp(rig, times[k] + dwell_ns, k, len(freqs), f, args, show=True, origin=times[k])
+        if recorder is not None:   # everything up to the end of the last step has reached the recorder
+            _wait_for_recorder(rig, times[-1] + dwell_ns, args.timeout, log)
     finally:
         if recorder is not None:
             code = _stop_recorder(recorder)
@@ -244,6 +278,9 @@ def _start_recorder(rig: _Rig, directory: Path, log_path: Path, timeout: float, 
 
 #: First lead of the schedule (s of simulation time); doubled while the rig answers "already passed".
 FIRST_LEAD_S = 1.0
+#: Longest wait (wall s) for an impact event after the end of the last step, to know that every event
+#: before the end has arrived (none comes when the motion does not impact).
+EVENTS_GRACE_S = 5.0
 MAX_LEAD_DOUBLINGS = 10
 
 
@@ -286,6 +323,33 @@ def _request(rig: _Rig, f: float, args: argparse.Namespace, start_ns: int, i: in
         raise CommandError(f"setpoint {f:g} Hz (step {i + 1}/{n}) refused by the rig: {response.message}; "
                            f"the rig keeps running at its setpoint {response.frequency_hz:g} Hz")
     return response
+
+
+def _wait_for_recorder(rig: _Rig, end_ns: int, timeout: float, log) -> None:  # noqa: ANN001
+    """Wait until the recorder's /diagnostics say every rig stream it records has reached ``end_ns``.
+
+    A recorder lagging behind a fast rig on a loaded machine holds each topic's backlog apart; stopped as soon
+    as the rig passes the end, it would cut the topics at different times. The sampled topics and the motor
+    states are continuous, so their last stamps tell; the sparse impact events travel with them.
+    """
+    reached = rig.recorder_stamps
+    names = ("/rig/motor/state", "/rig/impact/force", "/rig/rimd/displacement", "/rig/cart/displacement",
+             "/rig/rimd/acceleration")
+    # The events: each topic arrives in order, so once this node has heard an event stamped at or after the
+    # end it has heard every event before it; a motion without impacts at the end gives none (bounded wait).
+    rig.spin_until(lambda: bool(rig.event_stamps) and rig.event_stamps[-1] >= end_ns, min(timeout, EVENTS_GRACE_S))
+    before = [s for s in rig.event_stamps if s < end_ns]
+    last_event = before[-1] if before else None
+
+    def caught_up() -> bool:
+        if not reached or any(reached.get(n, 0) < end_ns for n in names if n in reached):
+            return False
+        return last_event is None or reached.get("/rig/impact/events", 0) >= last_event
+
+    if not rig.spin_until(caught_up, timeout):
+        log(f"the recorder had not received everything up to the end of the last step within {timeout:g} s "
+            f"({ {n: reached.get(n) for n in (*names, '/rig/impact/events')} }); stopping it anyway: the analysis "
+            "ends where every stream ends")
 
 
 def _first_step(rig: _Rig, f: float, args: argparse.Namespace, n: int):  # noqa: ANN202
