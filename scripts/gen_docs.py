@@ -168,7 +168,7 @@ def render_channel_parameters() -> str:
 
 def _probe_rule(rule: Callable[[Any], Any]) -> str:
     """The words of a recorder rule (a predicate returning True or the rule), read by breaking it."""
-    for probe in (-math.inf, "", " ", None):
+    for probe in (-math.inf, "", " ", "a/b", None):
         try:
             verdict = rule(probe)
         except Exception:  # noqa: BLE001 - a probe of the wrong type: try the next one

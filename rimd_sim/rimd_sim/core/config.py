@@ -22,6 +22,7 @@ and the structural damping ratio 0.08, chosen so that the model reproduces Table
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -304,6 +305,11 @@ class ParameterSpec:
             value = float(value)
             if not math.isfinite(value):
                 raise ConfigError(key, value, "must be finite; " + self.rule)
+            if value != 0.0 and abs(value) < SMALLEST_NORMAL:
+                # A subnormal number has lost its precision, and the kernels' products of such values
+                # underflow to 0 (amplitude = 5e-324 divided by zero inside the integrator).
+                raise ConfigError(key, value, f"must be 0 or at least {SMALLEST_NORMAL:.3g} in magnitude "
+                                              f"(not a subnormal number); {self.rule}")
         elif self.kind == "int":
             if isinstance(value, bool) or not isinstance(value, int):
                 raise ConfigError(key, value, "must be an integer")
@@ -329,8 +335,9 @@ def _nonneg(desc: str, get: Callable[[SimConfig], Any], high: float | None = Non
     return ParameterSpec("float", f"must be >= 0 and <= {high:g}", desc, lambda v: 0 <= v <= high, get, 0.0, high)
 
 
-def _any_float(desc: str, get: Callable[[SimConfig], Any]) -> ParameterSpec:
-    return ParameterSpec("float", "must be finite", desc, lambda v: True, get)
+def _between(desc: str, get: Callable[[SimConfig], Any], low: float, high: float) -> ParameterSpec:
+    return ParameterSpec("float", f"must be >= {low:g} and <= {high:g}", desc, lambda v: low <= v <= high, get,
+                         low, high)
 
 
 def _channel_specs() -> Iterator[tuple[str, ParameterSpec]]:
@@ -341,11 +348,17 @@ def _channel_specs() -> Iterator[tuple[str, ParameterSpec]]:
 
         prefix = f"channels.{name}."
         yield prefix + "sample_rate", _positive("samples per second (Hz)", getter("sample_rate"), 1e6)
-        yield prefix + "range_min", _any_float("lower end of the measuring range (SI)", getter("range_min"))
-        yield prefix + "range_max", _any_float("upper end of the measuring range (SI)", getter("range_max"))
-        yield prefix + "noise_std", _nonneg("white noise standard deviation (SI)", getter("noise_std"))
-        yield prefix + "resolution", _nonneg("quantisation step (SI), 0 = none", getter("resolution"))
-        yield prefix + "bandwidth", _nonneg("-3 dB low-pass frequency (Hz), 0 = none", getter("bandwidth"))
+        # Upper bounds (here and below): far beyond any instrument or rig, they refuse the absurd (1e300), which
+        # was accepted and, for some parameters, stopped or hung the running rig's integrator.
+        yield prefix + "range_min", _between("lower end of the measuring range (SI)", getter("range_min"),
+                                             -MAX_SI_MAGNITUDE, MAX_SI_MAGNITUDE)
+        yield prefix + "range_max", _between("upper end of the measuring range (SI)", getter("range_max"),
+                                             -MAX_SI_MAGNITUDE, MAX_SI_MAGNITUDE)
+        yield prefix + "noise_std", _nonneg("white noise standard deviation (SI)", getter("noise_std"),
+                                            MAX_SI_MAGNITUDE)
+        yield prefix + "resolution", _nonneg("quantisation step (SI), 0 = none", getter("resolution"),
+                                             MAX_SI_MAGNITUDE)
+        yield prefix + "bandwidth", _nonneg("-3 dB low-pass frequency (Hz), 0 = none", getter("bandwidth"), 1e6)
         yield prefix + "highpass", _nonneg("-3 dB high-pass frequency (Hz), 0 = DC-coupled", getter("highpass"))
         yield prefix + "reliable", ParameterSpec(
             "bool", "must be true or false", "reliable QoS (else best effort)", lambda v: True, getter("reliable")
@@ -355,9 +368,20 @@ def _channel_specs() -> Iterator[tuple[str, ParameterSpec]]:
         )
 
 
+#: Largest magnitude of an instrument's range, noise or resolution (SI units).
+MAX_SI_MAGNITUDE = 1e9
+
+#: Largest motor ramp rate (Hz/s), of ``motor.ramp_rate`` and of a ``set_motor_frequency`` request.
+MAX_RAMP_RATE = 1e4
+
+#: Smallest positive normal float; smaller non-zero values (subnormal) are refused.
+SMALLEST_NORMAL = sys.float_info.min
+
 PARAMETERS: dict[str, ParameterSpec] = {
     "gap": _nonneg("gap between hammer at rest and force sensor (m)", lambda c: c.rig.gap, 0.05),
-    "mass": _positive("hammer mass (kg)", lambda c: c.rig.mass, 1000.0),
+    # At least 1 g: a lighter hammer (1e-9 kg) made the contact so stiff that the integrator hung.
+    "mass": ParameterSpec("float", "must be > 0 and <= 1000 (at least 0.001 kg)", "hammer mass (kg)",
+                          lambda v: 1e-3 <= v <= 1000.0, lambda c: c.rig.mass, 1e-3, 1000.0),
     "amplitude": _nonneg("cart displacement amplitude A0 (m)", lambda c: c.rig.amplitude, 0.05),
     "natural_frequency": _positive(
         "pendulum natural frequency without impact (Hz)", lambda c: c.rig.natural_frequency, 1000.0),
@@ -371,9 +395,11 @@ PARAMETERS: dict[str, ParameterSpec] = {
         lambda c: c.rig.contact.model,
         choices=tuple(CONTACT_LAWS),
     ),
-    "contact.stiffness": _positive("contact stiffness k (N/m^n)", lambda c: c.rig.contact.stiffness),
+    # k = 1e300 or c = 1e300 stopped the rig at its first contact (step size underflow, non-finite state); the
+    # bounds are well inside what the integrator was checked to handle (k = 1e14, c = 1e7 at the defaults).
+    "contact.stiffness": _positive("contact stiffness k (N/m^n)", lambda c: c.rig.contact.stiffness, 1e12),
     "contact.damping": _nonneg(
-        "contact damping c (N s/m, N s/m^(n+1) for Hunt-Crossley)", lambda c: c.rig.contact.damping),
+        "contact damping c (N s/m, N s/m^(n+1) for Hunt-Crossley)", lambda c: c.rig.contact.damping, 1e6),
     "contact.exponent": ParameterSpec(
         "float", "must be >= 1 and <= 3", "exponent n of the Hertz-type laws", lambda v: 1.0 <= v <= 3.0,
         lambda c: c.rig.contact.exponent, 1.0, 3.0,
@@ -382,11 +408,13 @@ PARAMETERS: dict[str, ParameterSpec] = {
         "float", "must be > 0 and <= 1", "restitution e of the Lankarani-Nikravesh law", lambda v: 0 < v <= 1,
         lambda c: c.rig.contact.restitution, 0.0, 1.0,
     ),
-    "contact.min_impact_velocity": _positive(
-        "floor of the Lankarani-Nikravesh impact velocity (m/s)", lambda c: c.rig.contact.min_impact_velocity
-    ),
+    # >= 1e-6 m/s: the floor divides the contact damping, and below ~1e-12 the integrator stalled or hung.
+    "contact.min_impact_velocity": _between(
+        "floor of the Lankarani-Nikravesh impact velocity (m/s)", lambda c: c.rig.contact.min_impact_velocity,
+        1e-6, 10.0),
     "motor.max_frequency": _positive("highest motor frequency accepted (Hz)", lambda c: c.motor.max_frequency, 1000.0),
-    "motor.ramp_rate": _positive("default ramp rate of the motor frequency (Hz/s)", lambda c: c.motor.ramp_rate),
+    "motor.ramp_rate": _positive("default ramp rate of the motor frequency (Hz/s)", lambda c: c.motor.ramp_rate,
+                                 MAX_RAMP_RATE),
     "motor.initial_frequency": _nonneg("motor frequency at start (Hz)", lambda c: c.motor.initial_frequency),
     "motor.initial_setpoint": _nonneg("motor setpoint at start (Hz)", lambda c: c.motor.initial_setpoint),
     "integrator.rtol": ParameterSpec(
@@ -394,7 +422,8 @@ PARAMETERS: dict[str, ParameterSpec] = {
         lambda c: c.integrator.rtol, 1e-13, 1e-3,
     ),
     "integrator.atol": _positive("absolute tolerance (rad, rad/s)", lambda c: c.integrator.atol, 1e-3),
-    "integrator.max_step": _positive("largest integration step (s)", lambda c: c.integrator.max_step, 0.05),
+    # >= 1 us: 1e-7 s already took 17 s of CPU per simulated second, smaller values hang the rig.
+    "integrator.max_step": _between("largest integration step (s)", lambda c: c.integrator.max_step, 1e-6, 0.05),
     "integrator.event_tolerance": _positive(
         "switch time tolerance (s)", lambda c: c.integrator.event_tolerance, 1e-6
     ),
@@ -402,7 +431,8 @@ PARAMETERS: dict[str, ParameterSpec] = {
         "float", "must be in [-1.5, 1.5] rad", "pendulum angle at start (rad)", lambda v: abs(v) <= 1.5,
         lambda c: c.initial_theta, -1.5, 1.5,
     ),
-    "initial.theta_dot": _any_float("pendulum angular velocity at start (rad/s)", lambda c: c.initial_theta_dot),
+    "initial.theta_dot": _between("pendulum angular velocity at start (rad/s)", lambda c: c.initial_theta_dot,
+                                  -1000.0, 1000.0),
     "truth.sample_rate": _positive("ground-truth sample rate (Hz)", lambda c: c.truth_rate, 1e6),
     "noise.enabled": ParameterSpec(
         "bool", "must be true or false", "add instrument noise", lambda v: True, lambda c: c.noise_enabled
@@ -411,8 +441,19 @@ PARAMETERS: dict[str, ParameterSpec] = {
         "int", "must be >= 0 and < 2**63", "seed of the noise streams", lambda v: 0 <= v < 2**63, lambda c: c.seed,
         0, 2**63 - 1,
     ),
-    "real_time_factor": _nonneg("pacing: 1 = real time, 0 = as fast as possible", lambda c: c.real_time_factor, 1e6),
-    "block_rate": _positive("sample blocks per second of simulation time", lambda c: c.block_rate, 10000.0),
+    # 0 or >= 1e-3: a tiny factor (1e-300) put one block a near-infinite wall time away, and the pacing thread
+    # died on the wait (OverflowError), leaving the rig silent.
+    "real_time_factor": ParameterSpec(
+        "float", "must be 0 (as fast as possible) or >= 0.001 and <= 1e+06",
+        "pacing: 1 = real time, 0 = as fast as possible", lambda v: v == 0 or 1e-3 <= v <= 1e6,
+        lambda c: c.real_time_factor, 0.0, 1e6,
+    ),
+    # At least 1 block/s: a tiny rate made one block of a near-infinite span, computed at once (memory, time).
+    "block_rate": ParameterSpec(
+        "float", "must be > 0 and <= 10000 (at least 1: a block spans at most 1 s)",
+        "sample blocks per second of simulation time", lambda v: 1.0 <= v <= 10000.0, lambda c: c.block_rate,
+        1.0, 10000.0,
+    ),
 }
 PARAMETERS.update(dict(_channel_specs()))
 

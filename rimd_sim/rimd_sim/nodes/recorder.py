@@ -15,12 +15,26 @@
   ``metadata.yaml`` is written; a SIGKILL loses at most the chunk in progress.
 * Metadata in every file: the software version and recorder settings (``rimd_recording``) and the rig's
   parameters read from ``rig_node`` (``rimd_rig_parameters``) once that node answers.
+* Write errors (disk full, file size limit, quota, I/O error): the first one stops the writing, never the
+  node. The file keeps every complete chunk written before the error (cut back to its last complete record,
+  no summary: it reads back up to there, see :mod:`rimd_sim.recording.bag`); the messages of the chunk in
+  progress and every later message are counted per topic as *not written*, which is loss like any other.
+  The log says it once, at ERROR, naming the path and the system's reason (and again every
+  ``FAILURE_REMINDER_S`` while it lasts); ``/diagnostics`` is at ERROR (``disk full: PATH: No space left on
+  device (errno 28, ENOSPC); not writing (N messages not written)``) until the writing resumes; the final
+  summary lists the incomplete file and the messages not written. Services keep answering, the other nodes
+  are not affected. Nothing is retried by itself (a full disk would be hammered): ``~/split``, or ``~/stop``
+  then ``~/start``, clears the error and the next message opens a new file; if the disk is still full, that
+  is reported the same way. SIGXFSZ is ignored, so a file size limit (``ulimit -f``) gives EFBIG, handled
+  as above, instead of killing the recorder with its file unfinished.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import socket
+import struct
 import sys
 import threading
 import time
@@ -33,21 +47,30 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
+from rimd_sim.nodes._params import refuse_unnamed
 from rimd_sim.nodes._run import run_node
-from rimd_sim.recording.bag import BagWriter
+from rimd_sim.recording.bag import BagWriter, WriteFailure
 from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
 from rimd_sim.recording.settings import PARAMETERS, RecorderConfigError, check_parameter, compile_patterns
 
 __all__ = ["RecorderNode", "main"]
 
+#: Message types whose first field is a std_msgs/Header: the recorder reads their stamp from the raw CDR
+#: bytes (no deserialisation) to report in /diagnostics how far each topic has reached it.
+STAMPED_TYPES = frozenset({"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState", "rimd_msgs/msg/MotorState",
+                           "rimd_msgs/msg/ImpactEvent", "diagnostic_msgs/msg/DiagnosticArray"})
+_STAMP_LE, _STAMP_BE = struct.Struct("<iI"), struct.Struct(">iI")
+
 NODE_NAME = "rimd_recorder"
+#: While the writing is stopped by a write error, the log reminds of it this often (s).
+FAILURE_REMINDER_S = 30.0
 
 def _duration_dict(duration: Duration) -> dict[str, int]:
     ns = duration.nanoseconds
@@ -115,13 +138,17 @@ class RecorderNode(Node):
         self._drains: dict[str, Any] = {}
         self._types: dict[str, str] = {}
         self._received: dict[str, int] = {}
+        self._last_stamp: dict[str, int] = {}   # header stamp (ns) of the last message received per topic
         self._dropped: dict[str, int] = {}  # queue overflow
         self._skipped_paused = 0
         self._unknown: dict[str, str] = {}
         # Writer-thread state.
         self._loss = LossCounter()
-        self._written: dict[str, int] = {}
-        self._write_errors = 0
+        self._sequence: dict[str, int] = {}   # MCAP sequence number per topic (messages given to the writer)
+        self._write_errors = 0                # unexpected exceptions (not OSError: the bag handles those)
+        self._reported_failure: WriteFailure | None = None   # the bag's write error, once logged
+        self._failure_logged_at = 0.0
+        self._retry_announced = False
         self._stop = threading.Event()
         self._writer = threading.Thread(target=self._write_loop, name="rimd_recorder_writer", daemon=True)
 
@@ -186,9 +213,14 @@ class RecorderNode(Node):
         clock = self.get_clock()
         received = self._received
         dropped = self._dropped
+        last_stamp = self._last_stamp
+        stamped = self._types.get(topic) in STAMPED_TYPES
 
         def accept(data: bytes, info: dict) -> None:
             received[topic] += 1
+            if stamped and len(data) >= 12:   # header.stamp: the CDR's first field after the 4-byte encapsulation
+                sec, nanosec = _STAMP_LE.unpack_from(data, 4) if data[1] == 1 else _STAMP_BE.unpack_from(data, 4)
+                last_stamp[topic] = sec * 1_000_000_000 + nanosec
             if len(queue) >= self._queue_size:
                 dropped[topic] = dropped.get(topic, 0) + 1
                 return
@@ -256,6 +288,7 @@ class RecorderNode(Node):
                 now = time.monotonic()
                 if now - last_flush >= interval:
                     self._safely(bag.flush)
+                    self._check_failure()
                     last_flush = now
                 time.sleep(0.002)
                 continue
@@ -270,11 +303,13 @@ class RecorderNode(Node):
                             self.get_logger().warning(f"{topic}: {missing} samples missing before index {first}")
                     except (ValueError, IndexError):
                         pass
-                self._written[topic] = self._written.get(topic, 0) + 1
-                self._safely(bag.write, topic, data, log_time, publish_time, self._written[topic])
+                sequence = self._sequence[topic] = self._sequence.get(topic, 0) + 1
+                # After a write error the bag only counts the message as not written (no I/O, no log line).
+                self._safely(bag.write, topic, data, log_time, publish_time, sequence)
                 now = time.monotonic()
                 if now - last_flush >= interval:
                     self._safely(bag.flush)
+                    self._check_failure()
                     last_flush = now
             elif kind == "topic":
                 _, topic, type_name, offered = item
@@ -292,15 +327,57 @@ class RecorderNode(Node):
                 except Exception as exc:  # noqa: BLE001 - reported to the service caller
                     result.append(exc)
                 done.set()
+            if bag.failure is not self._reported_failure:   # a new write error, or cleared by ~/split
+                self._check_failure()
         self._safely(bag.close)
+        self._check_failure()
 
     def _safely(self, function, *args) -> None:  # noqa: ANN001
+        """Run a writer call; an unexpected exception is counted and logged (the first 5), never fatal.
+
+        Write errors of the disk (``OSError``) do not come here: the bag handles them (see
+        :meth:`_check_failure`).
+        """
         try:
             function(*args)
-        except Exception as exc:  # noqa: BLE001 - a failing disk must not kill the writer silently
+        except Exception as exc:  # noqa: BLE001 - a bug must not kill the writer silently
             self._write_errors += 1
             if self._write_errors <= 5:
                 self.get_logger().error(f"writing the recording failed: {type(exc).__name__}: {exc}")
+
+    def _not_written(self) -> int:
+        return sum(self._bag.not_written.values())
+
+    def _check_failure(self) -> None:
+        """Log a new write error of the bag once, remind of it, and log when writing resumes (writer thread)."""
+        bag, reported = self._bag, self._reported_failure
+        failure = bag.failure
+        now = time.monotonic()
+        if failure is not None and failure is not reported:
+            self._reported_failure, self._failure_logged_at, self._retry_announced = failure, now, False
+            if failure.file is not None:
+                kept = (f"{failure.file.path.name} keeps the {failure.file.message_count} messages written before "
+                        "the error (it has no summary; it reads back up to there), "
+                        f"{failure.lost_in_chunk} messages of the chunk in progress are lost")
+            else:
+                kept = "no file was open (the new file held nothing and was deleted)"
+            self.get_logger().error(
+                f"{failure.describe()}: recording stopped, the node keeps running; {kept}, and every message "
+                "from now on is counted as not written. Free space, then call ~/split (or ~/stop and ~/start) "
+                "to record into a new file")
+        elif failure is None and reported is not None and bag.current_path is None:
+            if not self._retry_announced:   # ~/split or ~/stop cleared it
+                self._retry_announced = True
+                self.get_logger().info(f"the {reported.headline} error is cleared: the next message recorded opens a "
+                                       "new file")
+        elif failure is None and reported is not None:
+            self._reported_failure, self._retry_announced = None, False
+            self.get_logger().info(f"writing again after the {reported.headline}: recording into {bag.current_path} "
+                                   f"({self._not_written()} messages not written in all)")
+        elif failure is not None and now - self._failure_logged_at >= FAILURE_REMINDER_S:
+            self._failure_logged_at = now
+            self.get_logger().error(f"still not recording ({failure.describe()}): {self._not_written()} messages "
+                                    "not written so far; call ~/split once space is back")
 
     def _on_writer(self, function, timeout: float = 10.0):  # noqa: ANN001
         """Run ``function`` on the writer thread, after the messages queued before it; return its result."""
@@ -356,42 +433,69 @@ class RecorderNode(Node):
             response.success, response.message = True, "resumed"
         return response
 
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
+        refusal = refuse_unnamed(self, parameter_list)
+        return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
+
     def _on_set_parameters(self, params) -> SetParametersResult:  # noqa: ANN001
         for param in params:
-            if param.name in PARAMETERS:
+            # use_sim_time too: switching it would change the recording's log time base in the middle of a file.
+            if param.name in PARAMETERS or param.name == "use_sim_time":
                 return SetParametersResult(successful=False, reason=f"{param.name} is read at start only; "
                                            "restart the recorder to change it")
         return SetParametersResult(successful=True)
 
     # -- reporting --------------------------------------------------------------------------------------------
     def loss_report(self) -> dict[str, dict[str, int]]:
-        """Per topic: messages received, written, samples lost (first_index gaps) and queue drops."""
+        """Per topic: messages received, written, samples lost (first_index gaps), queue drops, not written.
+
+        ``not_written``: messages a write error (disk full...) kept out of the files.
+        """
         report = {}
+        bag = self._bag
         for topic in sorted(self._types):
-            report[topic] = {"received": self._received.get(topic, 0), "written": self._written.get(topic, 0),
+            report[topic] = {"received": self._received.get(topic, 0), "written": bag.written.get(topic, 0),
                              "lost_samples": self._loss.lost_samples.get(topic, 0),
                              "lost_blocks": self._loss.lost_blocks.get(topic, 0),
-                             "queue_dropped": self._dropped.get(topic, 0)}
+                             "queue_dropped": self._dropped.get(topic, 0),
+                             "not_written": bag.not_written.get(topic, 0)}
         return report
 
     def _publish_diagnostics(self) -> None:
         report = self.loss_report()
-        lost = sum(r["lost_samples"] + r["queue_dropped"] for r in report.values())
+        not_written = sum(r["not_written"] for r in report.values())
+        lost = sum(r["lost_samples"] + r["queue_dropped"] for r in report.values()) + not_written
         status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: recording",
                                   hardware_id="rimd_recorder")
-        status.level = DiagnosticStatus.WARN if lost or self._write_errors else DiagnosticStatus.OK
+        failure = self._bag.failure
+        failures = self._bag.failures
         state = "paused" if self._paused else ("recording" if self._recording else "stopped")
-        status.message = f"{state}; " + ("loss: see values" if lost else "no loss")
+        if failure is not None:
+            # The writing stopped: ERROR until ~/split (or ~/stop) clears it and a new file opens.
+            status.level = DiagnosticStatus.ERROR
+            state = "not writing" if state == "recording" else state
+            status.message = f"{failure.describe()}; {state} ({not_written} messages not written)"
+        else:
+            status.level = DiagnosticStatus.WARN if lost or self._write_errors else DiagnosticStatus.OK
+            status.message = f"{state}; " + ("loss: see values" if lost else "no loss")
+            if not_written:
+                status.message += f" ({not_written} messages not written after a {failures[-1].headline})"
         values = {"state": state, "file": str(self._bag.current_path or ""),
                   "queue": str(len(self._queue)), "write_errors": str(self._write_errors),
+                  "write_failure": failures[-1].describe() if failures else "",
                   "messages_written": str(sum(r["written"] for r in report.values())),
+                  "messages_not_written": str(not_written),
                   "not_recorded_while_paused_or_stopped": str(self._skipped_paused),
                   "topics_of_unknown_type": " ".join(sorted(self._unknown))}
+        for topic, stamp in list(self._last_stamp.items()):
+            values[f"{topic} last_stamp_ns"] = str(stamp)   # how far each topic has reached the recorder
         for topic, r in report.items():
             values[f"{topic} lost_samples"] = str(r["lost_samples"])
             values[f"{topic} queue_dropped"] = str(r["queue_dropped"])
+            values[f"{topic} not_written"] = str(r["not_written"])
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
-        msg = DiagnosticArray(statuses=[status])
+        msg = DiagnosticArray(status=[status])   # the field is `status` (an unknown keyword is ignored)
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(msg)
 
@@ -410,19 +514,32 @@ class RecorderNode(Node):
         self._recording = False
         self._stop.set()
         self._writer.join(timeout=60.0)
-        files = [f for f in self._bag.files if f.finished]
+        bag = self._bag
+        files = [f for f in bag.files if f.finished or f.error]
         lines = [f"recording finished: {len(files)} file(s) in {self.output_dir}"]
-        lines += [f"  {f.path.name}: {f.message_count} messages, {f.size} bytes" for f in files]
+        for f in files:
+            lines.append(f"  {f.path.name}: {f.message_count} messages, {f.size} bytes" + (
+                f"; INCOMPLETE: {f.error}; no summary, it reads back up to there" if f.error else ""))
+        for failure in bag.failures:
+            lines.append(f"  WRITE FAILED: {failure.describe()}; {failure.lost_in_chunk} messages of the chunk in "
+                         "progress lost, the messages after it not written")
+        if bag.metadata_error is not None:
+            lines.append(f"  metadata.yaml not updated: {bag.metadata_error}")
+        cause = bag.failures[0].headline if bag.failures else "write error"
         for topic, r in self.loss_report().items():
-            loss = r["lost_samples"] + r["queue_dropped"]
+            loss = r["lost_samples"] + r["queue_dropped"] + r["not_written"]
             lines.append(f"  {topic}: {r['written']} messages written; "
                          + (f"LOSS: {r['lost_samples']} samples missing (first_index gaps), "
-                            f"{r['queue_dropped']} messages dropped (queue full)" if loss else "no loss"))
+                            f"{r['queue_dropped']} messages dropped (queue full)"
+                            + (f", {r['not_written']} messages not written ({cause})" if r["not_written"] else "")
+                            if loss else "no loss"))
         print("\n".join(lines), flush=True)
 
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_recorder`` executable (also ``rimd node recorder``)."""
+    if hasattr(signal, "SIGXFSZ"):   # a file size limit then fails the write (EFBIG), reported, not fatal
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     return run_node("rimd_recorder", RecorderNode, (RecorderConfigError,), args=args,
                     refused_prefix="configuration refused: ", close=lambda node: node.shutdown())
 

@@ -18,6 +18,7 @@ node refuses to start and names them). Services ``~/pause`` and ``~/resume`` (``
 from __future__ import annotations
 
 import importlib
+import math
 import re
 import sys
 import threading
@@ -25,13 +26,15 @@ import time
 from typing import Any
 
 import yaml
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
+from rimd_sim.nodes._params import refuse_unnamed
 from rimd_sim.nodes._run import run_node, spin_until_stopped
 from rimd_sim.recording.reader import Recording, RecordingError, open_recording
 
@@ -93,6 +96,28 @@ def parse_remap(entries: list[str]) -> dict[str, str]:
     return remap
 
 
+#: name -> (rule, predicate) of the numbers, checked at start (every parameter is read-only afterwards). Each
+#: must be finite with an upper bound: rate = inf published a looping recording in a busy loop, and an
+#: infinite start_offset killed the replay thread (OverflowError) with a traceback.
+NUMBER_RULES: dict[str, tuple[str, Any]] = {
+    "rate": ("must be > 0 and <= 10000", lambda v: 0 < v <= 1e4),
+    "start_offset": ("must be >= 0 and <= 1e9 s", lambda v: 0 <= v <= 1e9),
+    "clock_frequency": ("must be > 0 and <= 1e6 Hz", lambda v: 0 < v <= 1e6),
+    "wait_for_subscribers": ("must be >= 0 and <= 1000", lambda v: 0 <= v <= 1000),
+}
+
+
+def check_parameters(p: dict[str, Any]) -> None:
+    """Check the replay's parameters at start; ReplayError names the first refused one and its rule."""
+    if not p["file"]:
+        raise ReplayError("file: no recording given (set -p file:=REC.mcap or a recording directory)")
+    for name, (rule, ok) in NUMBER_RULES.items():
+        value = p[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not ok(value):
+            raise ReplayError(f"{name}: {value!r} refused: {rule}")
+
+
 class ReplayNode(Node):
     """The replay node. See the module docstring."""
 
@@ -101,14 +126,7 @@ class ReplayNode(Node):
         for name, (default, description) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        if not p["file"]:
-            raise ReplayError("file: no recording given (set -p file:=REC.mcap or a recording directory)")
-        if not p["rate"] > 0:
-            raise ReplayError(f"rate: {p['rate']!r} refused: must be > 0")
-        if not p["start_offset"] >= 0:
-            raise ReplayError(f"start_offset: {p['start_offset']!r} refused: must be >= 0")
-        if not p["clock_frequency"] > 0:
-            raise ReplayError(f"clock_frequency: {p['clock_frequency']!r} refused: must be > 0")
+        check_parameters(p)
         try:
             patterns = [re.compile(x) for x in p["topics"] if x]
         except re.error as exc:
@@ -141,7 +159,10 @@ class ReplayNode(Node):
                                   "packages, leave the topics out with -p topics:=..., or set skip_unknown:=true")
             log.warning(f"not replaying topics of unknown types: {listing}")
         if not self._pubs:
-            raise ReplayError(f"nothing to replay: no topic of {p['file']} matches {p['topics']}")
+            # A damaged recording may have lost every topic with its first chunk: say so in the one line.
+            damage = "; ".join(r.describe() for r in self._recording.reports if not r.complete)
+            raise ReplayError(f"nothing to replay: no topic of {p['file']} matches {p['topics']}"
+                              + (f" (the recording is damaged: {damage})" if damage else ""))
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p["clock"] else None
         self._paused = threading.Event()
         if p["start_paused"]:
@@ -154,6 +175,11 @@ class ReplayNode(Node):
         self._thread = threading.Thread(target=self._run, name="rimd_replay", daemon=True)
         log.info(f"replaying {len(self._pubs)} topics of {p['file']} ({self._recording.message_count} "
                  f"messages) at {p['rate']:g}x" + (", looping" if p["loop"] else ""))
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
+        refusal = refuse_unnamed(self, parameter_list)
+        return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
 
     def start(self) -> None:
         """Start publishing (in a thread)."""

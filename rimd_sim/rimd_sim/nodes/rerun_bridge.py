@@ -15,11 +15,13 @@ import time
 from collections import deque
 from typing import Any
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
+from rimd_sim.nodes._params import refuse_unnamed
 from rimd_sim.nodes._run import run_node
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
 from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
@@ -95,6 +97,11 @@ class RerunBridgeNode(Node):
         self.get_logger().info(
             f"rerun bridge ready: sink {spec.kind} -> {self.stream.viewer_url}; topics under "
             f"{self.get_namespace()}; analytics {'per user config' if spec.analytics else 'off'}")
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
+        refusal = refuse_unnamed(self, parameter_list)
+        return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
 
     def _handler(self, topic: str):
         def on_message(msg: Any) -> None:

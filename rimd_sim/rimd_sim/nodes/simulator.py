@@ -24,6 +24,7 @@ import math
 import sys
 import threading
 import time
+import traceback
 from collections import deque
 from fractions import Fraction
 from typing import Any
@@ -33,6 +34,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
@@ -40,8 +42,9 @@ from std_srvs.srv import Trigger
 from rimd_msgs.msg import ImpactEvent, MotorState, RigState, SampleBlock
 from rimd_msgs.srv import Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
-from rimd_sim.core.config import PARAMETERS
+from rimd_sim.core.config import MAX_RAMP_RATE, PARAMETERS
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
+from rimd_sim.nodes._params import refuse_unnamed
 from rimd_sim.nodes._run import run_node, spin_until_stopped
 
 __all__ = ["SimulatorNode", "main"]
@@ -238,9 +241,11 @@ class SimulatorNode(Node):
         except IntegrationError as exc:  # the model cannot continue: say why, keep the services alive
             self._last_error = str(exc)
             self.get_logger().error(f"simulation stopped: {exc}")
-        except Exception:  # noqa: BLE001 - only at shutdown: the context went away while publishing
-            if self.context.ok():
-                raise
+        except Exception as exc:  # noqa: BLE001 - at shutdown the context goes away while publishing: not an error
+            if self.context.ok():   # a defect: say so where a user looks (log, /diagnostics ERROR), keep services
+                self._last_error = f"internal error {type(exc).__name__}: {exc}"
+                self.get_logger().error(f"simulation stopped by an internal error (please report it):\n"
+                                        f"{traceback.format_exc()}")
 
     def _refresh_static_fields(self) -> None:
         """Set the fields of the reused channel messages that only change with the configuration."""
@@ -363,6 +368,9 @@ class SimulatorNode(Node):
         Raises:
             CommandError: A stamp before the rig's start, already passed, or more than a day ahead.
         """
+        if stamp.nanosec >= 1_000_000_000:  # builtin_interfaces/Time: nanosec in [0, 1e9)
+            raise CommandError(f"start_stamp.nanosec = {stamp.nanosec} refused: must be < 1000000000 "
+                               "(the seconds go in start_stamp.sec)")
         ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
         if ns == 0:
             return None
@@ -382,6 +390,11 @@ class SimulatorNode(Node):
         with self._lock:
             try:
                 at = self._start_time(request.start_stamp)
+                # The core takes any finite ramp rate >= 0; the rig's bound is motor.ramp_rate's (a ramp of
+                # 1e300 Hz/s is a jump, which the motor cannot do).
+                if request.ramp_rate > MAX_RAMP_RATE:
+                    raise CommandError(f"ramp_rate = {request.ramp_rate!r} refused: must be <= {MAX_RAMP_RATE:g} "
+                                       "Hz/s (0 = motor.ramp_rate)")
                 when = self._sim.set_motor_frequency(request.frequency_hz, request.ramp_rate, at=at)
             except CommandError as exc:
                 response.success = False
@@ -454,11 +467,38 @@ class SimulatorNode(Node):
 
     # ---- parameters --------------------------------------------------------------------------------
 
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """Set parameters; rclpy's parameter services (set_parameters, set_parameters_atomically) come here.
+
+        Every refusal names the parameter and its rule (:func:`refuse_unnamed`), and a refusal leaves the
+        descriptors as they were: rclpy sets a dynamically typed parameter's descriptor type (every float
+        here) to the type of the value before the value is checked, so ``describe_parameters`` reported
+        ``gap`` as a string after ``gap := 'abc'`` was refused.
+        """
+        refusal = refuse_unnamed(self, parameter_list)
+        if refusal is not None:
+            return refusal
+        types = {p.name: self.describe_parameter(p.name).type for p in parameter_list}
+        result = super().set_parameters_atomically(parameter_list)
+        if not result.successful:
+            for name, kind in types.items():
+                self.describe_parameter(name).type = kind  # rclpy's own descriptor object
+        return result
+
     def _on_set_parameters(self, params) -> SetParametersResult:
         changes = {}
         for p in params:
             if p.name not in PARAMETERS:
-                return SetParametersResult(successful=False, reason=f"unknown parameter '{p.name}'")
+                # Only use_sim_time gets here (start_paused and start_type_description_service are read-only;
+                # undeclared names are refused before): the rig's stamps follow its own clock, always.
+                return SetParametersResult(successful=False, reason=(
+                    f"parameter '{p.name}' = {p.value!r} refused: read at start only, it cannot change while "
+                    "the rig runs"))
+            if p.name.endswith(".reliable"):
+                # The publishers' QoS is set when they are created: a change was accepted and had no effect.
+                return SetParametersResult(successful=False, reason=(
+                    f"parameter '{p.name}' = {p.value!r} refused: read at start only, the channel's QoS cannot "
+                    "change while the rig runs"))
             changes[p.name] = p.value
         with self._lock:
             try:
