@@ -45,6 +45,7 @@ setup(
     name=PACKAGE_NAME,
     version=_read_version(),
     packages=find_packages(exclude=["test", "tests"]),
+    package_data={"rimd_sim.nodes": ["fastdds_profiles.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),

@@ -126,3 +126,26 @@ def test_replay_stopped_at_random_moments_exits_0(ros_processes, tmp_path):
     _stop_at_random_moments(ros_processes, "rimd_replay",
                             ["--ros-args", "-p", f"file:={recording}", "-p", "rate:=20.0", "-p", "loop:=true"],
                             r"replaying", rng)
+
+
+def test_the_nodes_use_the_fast_dds_profile_with_a_short_heartbeat(tmp_path):
+    """The entry module points Fast DDS at the package's profile (unless the user chose one), and the profile
+    sets the reliable writers' heartbeat to 0.2 s (Fast DDS's default, 3 s, lost blocks under load)."""
+    import subprocess
+    import sys
+    import xml.etree.ElementTree as ET
+
+    code = "import os, rimd_sim.nodes._entry; print(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'])"
+    env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
+    path = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60,
+                          check=True).stdout.strip()
+    ns = {"p": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    writer = ET.parse(path).getroot().find("p:data_writer", ns)
+    assert writer is not None and writer.get("is_default_profile") == "true"
+    period = writer.find("p:times/p:heartbeatPeriod", ns)
+    assert (int(period.find("p:sec", ns).text), int(period.find("p:nanosec", ns).text)) == (0, 200_000_000)
+    mine = tmp_path / "mine.xml"
+    env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(mine)
+    chosen = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60,
+                            check=True).stdout.strip()
+    assert chosen == str(mine)   # the user's own profile wins
