@@ -82,7 +82,11 @@ def _assert_recording_is_the_core_run(recording: Path, gap: float, freqs: list[f
         core.set_motor_frequency(f, ramp, at=Fraction(start, 10**9))
     rate = Fraction(20000)
     last = int(force.index[-1])
-    blocks = core.advance_blocks([Fraction(k, 10) for k in range(1, (last + 1) // 2000 + 2)])
+    # Offline as far as the recording goes on any topic (the topics of a stopped recorder end at different
+    # times: the events may reach past the force channel's last sample).
+    until = max((last + 1) / 20000, float(data.events["time"][-1]) + data.origin_ns * 1e-9 if data.events["time"].size
+                else 0.0)
+    blocks = core.advance_blocks([Fraction(k, 10) for k in range(1, int(until * 10) + 3)])
     values = np.concatenate([b.channels["impact_force"].samples for b in blocks])
     first = int(force.index[0])
     assert force.rate == float(rate) and force.lost_samples == 0
