@@ -303,6 +303,25 @@ def trigger(executor: Any, node: Any, service: str) -> Any:
     return call_service(executor, node, client, Trigger.Request(), timeout=10)
 
 
+def pausing(paused: bool) -> Callable[[dict[str, bool]], bool]:
+    """A state-machine step of pause (True) or resume (False): False (refused) when already in that state."""
+    def step(state: dict[str, bool]) -> bool:
+        if state["paused"] == paused:
+            return False
+        state["paused"] = paused
+        return True
+    return step
+
+
+def resuming(resume: Callable[[], object]) -> Callable[[dict[str, bool]], None]:
+    """The clean-up of a state machine run: resume (through ``resume()``) when the model says paused."""
+    def step(state: dict[str, bool]) -> None:
+        if state["paused"]:
+            assert resume().success
+            state["paused"] = False
+    return step
+
+
 def check_state_machine(node_name: str, calls: dict[str, Callable[[dict[str, bool]], bool | None]],
                         call: Callable[[str], Any], restore: Callable[[dict[str, bool]], None],
                         alive: Callable[[dict[str, bool]], None], initial: dict[str, bool], examples: int) -> None:
@@ -529,23 +548,12 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
     assert len(applied.findall(rig.output())) == log_lines, "a refused command was applied"
 
     # pause / resume / reset in any order: a call in the wrong state is refused and changes nothing.
-    def pausing(paused: bool) -> Callable[[dict[str, bool]], bool]:
-        def step(state: dict[str, bool]) -> bool:
-            if state["paused"] == paused:
-                return False
-            state["paused"] = paused
-            return True
-        return step
-
     def rig_alive(state: dict[str, bool]) -> None:
         assert rig.is_running(), rig.tail()
         if not state["paused"]:
             assert motor.wait_more(), "the rig stopped publishing"
 
-    def resume_if_paused(state: dict[str, bool]) -> None:
-        if state["paused"]:
-            assert trigger(ros_executor, node, "/rig/resume").success
-            state["paused"] = False
+    resume_if_paused = resuming(lambda: trigger(ros_executor, node, "/rig/resume"))
 
     check_state_machine("simulator", {"pause": pausing(True), "resume": pausing(False), "reset": lambda s: None},
                         lambda name: trigger(ros_executor, node, f"/rig/{name}"), resume_if_paused, rig_alive,
@@ -751,23 +759,12 @@ def test_replay_refuses_bad_input_and_keeps_replaying(ros_processes, ros_executo
     check_valid_parameters(api, "replay", {"use_sim_time": st.booleans().map(lambda v: pv(T.PARAMETER_BOOL, v))},
                            alive, examples=2)
 
-    def pausing(paused: bool) -> Callable[[dict[str, bool]], bool]:
-        def step(state: dict[str, bool]) -> bool:
-            if state["paused"] == paused:
-                return False
-            state["paused"] = paused
-            return True
-        return step
-
     def replay_alive(state: dict[str, bool]) -> None:
         assert replay.is_running(), replay.tail()
         if not state["paused"]:
             assert motor.wait_more(), "the replay stopped publishing"
 
-    def resume_if_paused(state: dict[str, bool]) -> None:
-        if state["paused"]:
-            assert trigger(ros_executor, node, "/rimd_replay/resume").success
-            state["paused"] = False
+    resume_if_paused = resuming(lambda: trigger(ros_executor, node, "/rimd_replay/resume"))
 
     check_state_machine("replay", {"pause": pausing(True), "resume": pausing(False)},
                         lambda name: trigger(ros_executor, node, f"/rimd_replay/{name}"), resume_if_paused,
