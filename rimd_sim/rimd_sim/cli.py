@@ -62,6 +62,7 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.verbs.experiment"),
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
          "rimd_sim.verbs.analyze"),
+    Verb("identify", "identify the rig's parameters from a recording: a twin of that rig", "rimd_sim.verbs.identify"),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
          "rimd_sim.verbs.sweep"),
     Verb("bifurcation", "bifurcation diagram: stroboscopic l sin(theta)/A0 versus frequency ratio, up and down",
