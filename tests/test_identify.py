@@ -27,7 +27,7 @@ RTF = "8.0"
 START = 2.0          # s: first step (the rig starts paused, from rest, and is resumed once scheduled)
 DWELL = 4.0
 SETTLE = 1.5
-KICK_AT = 4.0        # s: a velocity kick of the hammer during the first step (free flight, then impacts)
+KICK_NEAR = 4.0      # s: a velocity kick of the hammer during the first step, in free flight
 
 #: The hidden rig: every physical value changed from config/rimd.yaml.
 CHANGED = {"mass": 0.2, "damping_ratio": 0.06, "natural_frequency": 1.95, "amplitude": 1.2e-3, "gap": 0.8e-3,
@@ -50,7 +50,20 @@ def _flat(tree: dict, prefix: str = "") -> dict:
     return out
 
 
-def _record(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: list[float], kick: float) -> Path:
+def _kick_time(rig: dict, freqs: list[float]) -> float:
+    """A stamp near KICK_NEAR far from any impact (the core's run of the rig from rest; the test knows the rig)."""
+    from rimd_sim.core import SimConfig
+    from rimd_sim.core.model import RigModel
+
+    config = SimConfig().with_parameters({**_flat(rig), "motor.initial_frequency": freqs[0],
+                                          "motor.initial_setpoint": freqs[0]})
+    starts = [i.t_start for i in RigModel(config, channels=False, truth=False).advance(KICK_NEAR + 1.0).impacts]
+    candidates = [KICK_NEAR + k * 1e-3 for k in range(-300, 301)]
+    return max(candidates, key=lambda t: min((abs(t - s) for s in starts), default=1.0))
+
+
+def _record(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: list[float], kick: float,
+            kick_at: float) -> Path:
     """Run the rig from ``rig`` (parameters over the defaults) and record the experiment; return its directory."""
     import rclpy
     from builtin_interfaces.msg import Time
@@ -72,7 +85,8 @@ def _record(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: list[
     node = rclpy.create_node("driver", context=ros_executor.context)
     ros_executor.add_node(node)
     client = node.create_client(Perturb, "/rig/perturb")
-    request = Perturb.Request(velocity=kick, start_stamp=Time(sec=int(KICK_AT), nanosec=0))
+    ns = round(kick_at * 1e9)
+    request = Perturb.Request(velocity=kick, start_stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9))
     response = call_service(ros_executor, node, client, request, 10)
     assert response.success, response.message
     assert trigger(ros_executor, node, "/rig/resume").success
@@ -80,7 +94,7 @@ def _record(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: list[
     return out
 
 
-def _rerun_peaks(identified: Path, freqs: list[float], out: Path, kick: float) -> dict[float, float]:
+def _rerun_peaks(identified: Path, freqs: list[float], out: Path, kick: float, kick_at: float) -> dict[float, float]:
     """The core re-run from identified.yaml under the experiment's schedule: steady peak per step."""
     from rimd_sim.core import load_config
     from rimd_sim.core.simulator import RigSimulator
@@ -90,13 +104,16 @@ def _rerun_peaks(identified: Path, freqs: list[float], out: Path, kick: float) -
     core = RigSimulator(config, truth=False)
     for f, step in zip(freqs, schedule, strict=True):
         core.set_motor_frequency(f, 2.0, at=Fraction(step["effective_stamp_ns"], 10**9))
-    core.perturb(kick, at=KICK_AT)
-    end = START + DWELL * len(freqs)
-    impacts = core.advance(end).impacts
+    core.perturb(kick, at=Fraction(round(kick_at * 1e9), 10**9))
+    # The steady windows of the recording's analysis (steps.csv), in the rig's time base.
+    origin = json.loads((out / "summary.json").read_text())["origin_ns"] * 1e-9
+    with open(out / "steps.csv") as fh:
+        windows = {float(r["frequency_hz"]): (float(r["steady_from_s"]) + origin, float(r["end_s"]) + origin)
+                   for r in csv.DictReader(fh) if r["steady_from_s"] not in ("", "None")}
+    impacts = core.advance(max(hi for _, hi in windows.values()) + 0.1).impacts
     peaks = {}
-    for k, f in enumerate(freqs):
-        lo = START + k * DWELL + SETTLE + 1.5   # after the ramp (at most 1.5 s at 2 Hz/s) and the settling time
-        hi = START + (k + 1) * DWELL
+    for f in freqs:
+        lo, hi = windows[f]
         sel = [i.peak_force for i in impacts if lo <= i.t_start < hi]
         peaks[f] = max(sel) if sel else 0.0
     return peaks
@@ -118,7 +135,8 @@ def _round_trip(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: l
     from rimd_sim.core import SimConfig
 
     truth = SimConfig().with_parameters(_flat(rig))
-    out = _record(ros_processes, ros_executor, tmp_path, rig, freqs, kick)
+    kick_at = _kick_time(rig, freqs)
+    out = _record(ros_processes, ros_executor, tmp_path, rig, freqs, kick, kick_at)
     ident_dir = tmp_path / "ident"
     run = _rimd(ros_processes, "identify", str(out / "recording"), "--out", str(ident_dir), name="identify")
     assert run.wait(180) == 0, run.tail()
@@ -146,7 +164,7 @@ def _round_trip(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: l
         assert (ident_dir / name).stat().st_size > 100
     # The twin from identified.yaml, re-run under the experiment's schedule, against the recording's peaks.
     recorded = _recorded_peaks(out, freqs)
-    twin = _rerun_peaks(ident_dir / "identified.yaml", freqs, out, kick)
+    twin = _rerun_peaks(ident_dir / "identified.yaml", freqs, out, kick, kick_at)
     print("steady peaks, recorded vs twin:", {f: (recorded.get(f), twin[f]) for f in freqs})
     for f in freqs:
         if recorded.get(f, 0.0) > 1.0:
