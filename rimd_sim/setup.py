@@ -25,12 +25,13 @@ def _read_version() -> str:
 
 
 def _config_files() -> list[str]:
-    """List the ROS parameter YAML files of config/, relative to this file.
+    """List the ROS parameter YAML files and the tables (CSV) of config/, relative to this file.
 
     ``rimd_sim/config`` is a relative symlink to the repository's ``config/`` directory, so the files are
     installed to ``share/rimd_sim/config`` while they live at the repository root.
     """
-    return sorted(str(path.relative_to(HERE)) for path in (HERE / "config").glob("*.yaml"))
+    return sorted(str(path.relative_to(HERE)) for pattern in ("*.yaml", "*.csv")
+                  for path in (HERE / "config").glob(pattern))
 
 
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.

@@ -178,3 +178,66 @@ def test_identify_recovers_a_changed_rig(ros_processes, ros_executor, tmp_path):
 
 def test_identify_recovers_the_defaults(ros_processes, ros_executor, tmp_path):
     _round_trip(ros_processes, ros_executor, tmp_path, {}, [3.25, 3.75, 4.25], -0.03)
+
+
+def _identify(tmp_path: Path, recording: Path, *extra: str) -> tuple[int, str, str]:
+    """``rimd identify`` in this process (no ROS needed): status, stdout, stderr."""
+    import contextlib
+    import io
+
+    from rimd_sim.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = main(["identify", str(recording), "--out", str(tmp_path / "id"), *extra])
+    return status, out.getvalue(), err.getvalue()
+
+
+def test_identify_refuses_what_the_recording_cannot_give(tmp_path):
+    from harness.rig_mcap import write_rig_mcap
+
+    # No force channel: the contact parameters, the mass and the gap cannot be identified; the line says which.
+    no_force = tmp_path / "no_force.mcap"
+    write_rig_mcap(no_force, 2.0, 3.75, skip=("/rig/impact/force",))
+    status, _, err = _identify(tmp_path, no_force)
+    line = err.strip().splitlines()[-1]
+    assert status == 1 and line.startswith("rimd identify: the recording lacks channels"), err
+    assert "gap, mass, contact.stiffness, contact.damping need /rig/impact/force" in line and "--fix" in line
+    # No impact (a gap the hammer never reaches): contact parameters refused, --fix suggested.
+    no_impact = tmp_path / "no_impact.mcap"
+    write_rig_mcap(no_impact, 3.0, 1.0, overrides={"gap": 0.01})
+    status, _, err = _identify(tmp_path, no_impact)
+    line = err.strip().splitlines()[-1]
+    assert status == 1 and "no impact in the recording" in line and "--fix gap=VALUE" in line, err
+    # A --fix that is not a parameter, or not a number: one line.
+    status, _, err = _identify(tmp_path, no_impact, "--fix", "colour=3")
+    assert status == 1 and "--fix 'colour=3' refused" in err.strip().splitlines()[-1]
+    # With the contact held fixed, the same recording gives A0, f_n and zeta (free flight from rest at 1 Hz).
+    fixes = ["--fix", "gap=0.01", "--fix", "mass=0.15", "--fix", "contact.stiffness=5.5e6",
+             "--fix", "contact.damping=1200"]
+    status, out, err = _identify(tmp_path, no_impact, *fixes)
+    assert status == 0, err
+    report = json.loads((tmp_path / "id" / "identification.json").read_text())
+    assert set(report["estimates"]) == {"amplitude", "natural_frequency", "damping_ratio"}
+    assert report["fixed"]["mass"] == 0.15
+    assert abs(report["estimates"]["amplitude"]["value"] / 1e-3 - 1) < 0.01
+    assert abs(report["estimates"]["natural_frequency"]["value"] / 1.82 - 1) < 0.01
+    assert abs(report["estimates"]["damping_ratio"]["value"] / 0.08 - 1) < 0.05
+
+
+def test_identify_uses_the_valid_part_of_a_damaged_recording(tmp_path):
+    from harness.rig_mcap import write_rig_mcap
+
+    full = tmp_path / "full.mcap"
+    write_rig_mcap(full, 6.0, 3.75)
+    cut = tmp_path / "cut.mcap"
+    data = full.read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.7)])
+    status, out, err = _identify(tmp_path, cut)
+    assert status == 0, err
+    assert out.startswith("LOSS: identified from the valid part"), out
+    report = json.loads((tmp_path / "id" / "identification.json").read_text())
+    assert not report["data"]["recording_loss"]["complete"]
+    est = {k: v["value"] for k, v in report["estimates"].items()}
+    assert abs(est["mass"] / 0.15 - 1) < 0.03 and abs(est["contact.stiffness"] / 5.5e6 - 1) < 0.03
+    assert abs(est["gap"]) < 0.05e-3

@@ -63,6 +63,8 @@ VERBS: tuple[Verb, ...] = (
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
          "rimd_sim.verbs.analyze"),
     Verb("identify", "identify the rig's parameters from a recording: a twin of that rig", "rimd_sim.verbs.identify"),
+    Verb("fit-table", "the parameter set that best reproduces a table of impact resonances (paper Table 1)",
+         "rimd_sim.verbs.fit_table"),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
          "rimd_sim.verbs.sweep"),
     Verb("bifurcation", "bifurcation diagram: stroboscopic l sin(theta)/A0 versus frequency ratio, up and down",

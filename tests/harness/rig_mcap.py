@@ -46,15 +46,19 @@ class WrittenRecording:
     motor_states: int = 0
 
 
-def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75) -> WrittenRecording:
-    """Run the core for ``seconds`` with the motor at ``frequency_hz`` from t = 0 and record it to ``path``."""
+def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75, *, overrides: dict | None = None,
+                   skip: tuple[str, ...] = ()) -> WrittenRecording:
+    """Run the core for ``seconds`` with the motor at ``frequency_hz`` from t = 0 and record it to ``path``.
+
+    ``overrides``: parameters over the defaults; ``skip``: topics not written.
+    """
     from mcap_ros2.writer import Writer
 
     from rimd_sim.core import SimConfig
     from rimd_sim.core.simulator import RigSimulator
 
     config = SimConfig().with_parameters({"motor.initial_frequency": frequency_hz,
-                                          "motor.initial_setpoint": frequency_hz})
+                                          "motor.initial_setpoint": frequency_hz, **(overrides or {})})
     sim = RigSimulator(config)
     blocks = sim.advance_blocks([Fraction(i + 1, 100) for i in range(round(seconds * 100))])
     rates = {ch.name: ch for ch in config.channels}
@@ -73,6 +77,8 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75)
                    for name in ("SampleBlock", "ImpactEvent", "MotorState", "RigState")}
         for block in blocks:
             for name, ch in block.channels.items():
+                if TOPIC_OF_CHANNEL[name] in skip:
+                    continue
                 cfg = rates[name]
                 ns = sample_ns(ch.first_index, cfg.sample_rate)
                 msg = {"header": {"stamp": stamp(ns), "frame_id": cfg.frame_id}, "first_index": ch.first_index,
@@ -82,7 +88,7 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75)
                                      publish_time=ns)
                 out.samples[name] = out.samples.get(name, 0) + ch.samples.size
                 out.first_index.setdefault(name, ch.first_index)
-            if block.truth is not None:
+            if block.truth is not None and "/rig/truth" not in skip:
                 first, rows = block.truth
                 ns = sample_ns(first, config.truth_rate)
                 msg = {"header": {"stamp": stamp(ns), "frame_id": "truth"}, "first_index": first,
@@ -90,7 +96,7 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75)
                        **{f: rows[i].tolist() for i, f in enumerate(TRUTH_FIELDS)}}
                 writer.write_message("/rig/truth", schemas["RigState"], msg, log_time=ns, publish_time=ns)
                 out.truth_blocks += 1
-            for imp in block.impacts:
+            for imp in ([] if "/rig/impact/events" in skip else block.impacts):
                 ns = round(imp.t_start * 1e9)
                 msg = {"header": {"stamp": stamp(ns), "frame_id": "impact_force_sensor"}, "duration": imp.duration,
                        "peak_force": imp.peak_force, "impulse": imp.impulse, "impact_velocity": imp.impact_velocity,
