@@ -47,10 +47,11 @@ class WrittenRecording:
 
 
 def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75, *, overrides: dict | None = None,
-                   skip: tuple[str, ...] = ()) -> WrittenRecording:
+                   skip: tuple[str, ...] = (), commands: tuple[tuple[float, float], ...] = ()) -> WrittenRecording:
     """Run the core for ``seconds`` with the motor at ``frequency_hz`` from t = 0 and record it to ``path``.
 
-    ``overrides``: parameters over the defaults; ``skip``: topics not written.
+    ``overrides``: parameters over the defaults; ``skip``: topics not written; ``commands``: motor setpoints
+    ``(time s, frequency Hz)`` at the configured ramp rate.
     """
     from mcap_ros2.writer import Writer
 
@@ -60,6 +61,8 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75,
     config = SimConfig().with_parameters({"motor.initial_frequency": frequency_hz,
                                           "motor.initial_setpoint": frequency_hz, **(overrides or {})})
     sim = RigSimulator(config)
+    for at, f in commands:
+        sim.set_motor_frequency(f, at=at)
     blocks = sim.advance_blocks([Fraction(i + 1, 100) for i in range(round(seconds * 100))])
     rates = {ch.name: ch for ch in config.channels}
     out = WrittenRecording(path)

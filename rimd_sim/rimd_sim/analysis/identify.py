@@ -843,6 +843,20 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
     return ident
 
 
+def _steady_peak(peaks: np.ndarray) -> float:
+    """Largest peak of a steady window, ignoring a lone outlier (a pulse fit caught in a local minimum).
+
+    Peaks further than 5 median absolute deviations plus 0.5 % from the median are left out; the two levels
+    of a period-doubled motion (alternating magnitudes) both stay.
+    """
+    if peaks.size == 0:
+        return 0.0
+    med = float(np.median(peaks))
+    mad = float(np.median(np.abs(peaks - med)))
+    keep = np.abs(peaks - med) <= 5 * mad + 0.005 * med
+    return float(peaks[keep].max())
+
+
 def _laser_noise(y: np.ndarray) -> float:
     """Noise of the relative displacement from its second differences (smooth motion cancels)."""
     d2 = np.diff(y, 2)
@@ -882,8 +896,7 @@ def validate(data: rec.RecordedData, ident: Identification, sim: Simulation | No
             ph = np.interp(times, motor["time"], phase_all)
             return float(np.angle(np.mean(np.exp(1j * ph))) % (2 * math.pi))
 
-        rp = float(r_peak[rsel].max()) if rsel.any() else 0.0
-        mp = float(m_peak[msel].max()) if msel.any() else 0.0
+        rp, mp = _steady_peak(r_peak[rsel]), _steady_peak(m_peak[msel])
         rows.append({
             "step": s.number, "frequency_hz": s.setpoint, "steady_from_s": lo, "end_s": hi,
             "peak_force_recorded_n": rp, "peak_force_twin_n": mp,
