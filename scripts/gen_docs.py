@@ -59,6 +59,8 @@ VERB_PAGES = {
     "basins": "docs/analyses.md",
     "experiment": "docs/analyses.md",
     "analyze": "docs/analyses.md",
+    "identify": "docs/identification.md",
+    "fit-table": "docs/identification.md",
     "info": "docs/development.md",
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.
