@@ -225,19 +225,24 @@ def test_identify_refuses_what_the_recording_cannot_give(tmp_path):
     assert abs(report["estimates"]["damping_ratio"]["value"] / 0.08 - 1) < 0.05
 
 
-def test_identify_uses_the_valid_part_of_a_damaged_recording(tmp_path):
+def test_identify_uses_the_valid_part_of_a_damaged_recording_without_motor_states(tmp_path):
+    """A file cut at 70 %, recorded without /rig/motor/state: the motor frequency comes from the cart laser."""
     from harness.rig_mcap import write_rig_mcap
 
     full = tmp_path / "full.mcap"
-    write_rig_mcap(full, 6.0, 3.75)
+    write_rig_mcap(full, 6.0, 3.75, skip=("/rig/motor/state",))
     cut = tmp_path / "cut.mcap"
     data = full.read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.7)])
     status, out, err = _identify(tmp_path, cut)
     assert status == 0, err
     assert out.startswith("LOSS: identified from the valid part"), out
+    assert "no /rig/motor/state: one constant motor frequency fitted to the cart laser, 3.7500" in err, err
     report = json.loads((tmp_path / "id" / "identification.json").read_text())
     assert not report["data"]["recording_loss"]["complete"]
     est = {k: v["value"] for k, v in report["estimates"].items()}
-    assert abs(est["mass"] / 0.15 - 1) < 0.03 and abs(est["contact.stiffness"] / 5.5e6 - 1) < 0.03
+    truth = {"amplitude": 1e-3, "natural_frequency": 1.82, "damping_ratio": 0.08, "mass": 0.15,
+             "contact.stiffness": 5.5e6, "contact.damping": 1.2e3}
+    for name, value in truth.items():
+        assert abs(est[name] / value - 1) < 0.03, (name, est[name], value)
     assert abs(est["gap"]) < 0.05e-3

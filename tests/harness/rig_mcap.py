@@ -114,7 +114,8 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75,
             msg = {"header": {"stamp": stamp(ns), "frame_id": "motor"}, "frequency_setpoint": m.frequency_setpoint,
                    "frequency": m.frequency, "phase": m.phase, "cycle_index": max(m.cycle_index, 0),
                    "ramp_rate": m.ramp_rate, "cart_position": m.cart_position}
-            writer.write_message("/rig/motor/state", schemas["MotorState"], msg, log_time=ns, publish_time=ns)
-            out.motor_states += 1
+            if "/rig/motor/state" not in skip:
+                writer.write_message("/rig/motor/state", schemas["MotorState"], msg, log_time=ns, publish_time=ns)
+                out.motor_states += 1
         writer.finish()
     return out

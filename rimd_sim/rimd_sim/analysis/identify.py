@@ -731,6 +731,15 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
     step = max(1, int(round(rimd.rate / FIT_RATE))) if rimd is not None else 1
     fit_t, fit_y = sel_t[keep][::step], sel_y[keep][::step]
     sigma_y = _laser_noise(sel_y)
+    # The cart laser too (it pins A0 in the joint fit), at the same decimated rate.
+    if cart is not None:
+        ck = (cart.time >= schedule.t0) & (cart.time <= schedule.t0 + t_end)
+        cstep = max(1, int(round(cart.rate / FIT_RATE)))
+        cart_t, cart_x = cart.time[ck][::cstep], cart.values[ck][::cstep]
+        sigma_c = _laser_noise(cart.values)
+    else:
+        cart_t = cart_x = np.empty(0)
+        sigma_c = 1.0
     feat_on = imp.onset if imp is not None else np.empty(0)
     feat_ok = (feat_on >= schedule.t0 + 1e-3) & (feat_on <= schedule.t0 + t_end - 0.01)
     f_on = feat_on[feat_ok]
@@ -763,9 +772,10 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
         try:
             sim, _ = forward(x)
         except Exception:  # noqa: BLE001 - a trial point where the integrator fails: a large residual
-            r = np.full(fit_y.size + 4 * f_on.size, 1e3)
+            r = np.full(fit_y.size + cart_x.size + 4 * f_on.size, 1e3)
             return (r, {}) if parts else r
         ry = (np.interp(fit_t, sim.t, sim.y) - fit_y) / sigma_y
+        rc = (np.interp(cart_t, sim.t, sim.cart) - cart_x) / sigma_c
         m_on = np.array([i.t_start for i in sim.impacts]) + schedule.t0
         rt = np.zeros(f_on.size)
         rp = np.zeros(f_on.size)
@@ -789,9 +799,9 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
             else:
                 rt = np.full(f_on.size, 5e-3 / SIGMA_ONSET)
                 rp, rd, ri = -f_peak / peak_sigma, -f_dur / SIGMA_DURATION, -f_imp / imp_sigma
-        r = np.concatenate([ry, rt, rp, rd, ri])
+        r = np.concatenate([ry, rc, rt, rp, rd, ri])
         if parts:
-            return r, {"sim": sim, "ry": ry, "rt": rt, "rp": rp, "rd": rd, "ri": ri}
+            return r, {"sim": sim, "ry": ry, "rc": rc, "rt": rt, "rp": rp, "rd": rd, "ri": ri}
         return r
 
     x0 = np.concatenate([x0_params, [initial[0] / 0.01, initial[1] / 0.1]]
@@ -809,7 +819,8 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
     values, init, ks = unpack(fit.x)
     for i, p in enumerate(names):
         e = estimates[p]
-        estimates[p] = Estimate(values[p], float(std[i] * SCALES[p]),
+        at_bound = p == "gap" and values[p] == 0.0
+        estimates[p] = Estimate(values[p], None if at_bound else float(std[i] * SCALES[p]),
                                 "joint refinement with the core's integrator (starting from: " + e.source + ")",
                                 e.local_value, e.local_std_error)
     final = base.with_parameters(values)
@@ -818,6 +829,7 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
     resid = {
         "displacement_rms_um": float(np.sqrt(np.mean((parts["ry"] * sigma_y) ** 2)) * 1e6) if sim else None,
         "laser_noise_um": sigma_y * 1e6,
+        "cart_rms_um": float(np.sqrt(np.mean((parts["rc"] * sigma_c) ** 2)) * 1e6) if sim and cart_x.size else None,
         "onset_rms_us": float(np.sqrt(np.mean((parts["rt"] * SIGMA_ONSET) ** 2)) * 1e6) if f_on.size and sim else None,
         "peak_rms_n": float(np.sqrt(np.mean((parts["rp"] * peak_sigma) ** 2))) if f_on.size and sim else None,
         "duration_rms_us": float(np.sqrt(np.mean((parts["rd"] * SIGMA_DURATION) ** 2)) * 1e6)
