@@ -162,6 +162,12 @@ def _round_trip(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: l
     assert loaded.rig.mass == pytest.approx(report["estimates"]["mass"]["value"])
     for name in ("validation.png", "validation.csv"):
         assert (ident_dir / name).stat().st_size > 100
+    # ... and the simulator node applies it as it is (--params-file, namespace /rig): its ready line shows the gap.
+    node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(ident_dir / "identified.yaml"),
+                                    "-r", "__ns:=/twin", "-p", "start_paused:=true", name="twin")
+    ready = node.wait_for_output(r"rig ready: gap ([0-9.e+-]+) mm", timeout=60)
+    assert float(ready.group(1)) == pytest.approx(loaded.rig.gap * 1e3, abs=1e-4)
+    node.stop()
     # The twin from identified.yaml, re-run under the experiment's schedule, against the recording's peaks.
     recorded = _recorded_peaks(out, freqs)
     twin = _rerun_peaks(ident_dir / "identified.yaml", freqs, out, kick, kick_at)

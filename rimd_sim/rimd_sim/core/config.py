@@ -552,7 +552,8 @@ def flatten_parameters(tree: Mapping[str, Any], prefix: str = "") -> dict[str, A
 def read_ros_parameters(path: str | Path, node: str = NODE_NAME) -> dict[str, Any]:
     """Read the flat ``ros__parameters`` of ``node`` from a ROS 2 parameter YAML file.
 
-    Sections named ``node``, ``/node`` and the wildcard ``/**`` are merged, the node's own last.
+    Sections named ``node``, ``/node`` and the wildcards ``/**`` and ``/**/node`` (the node in any namespace:
+    the form the nodes, in namespace ``/rig``, apply) are merged, the node's own last.
 
     Raises:
         ConfigError: When the file cannot be read or parsed, or has no section for the node.
@@ -570,7 +571,7 @@ def read_ros_parameters(path: str | Path, node: str = NODE_NAME) -> dict[str, An
         raise ConfigError("config file", str(path), "must be a mapping of node names to 'ros__parameters'")
     flat: dict[str, Any] = {}
     found = False
-    for section in ("/**", node, "/" + node):
+    for section in ("/**", "/**/" + node, node, "/" + node):
         body = doc.get(section)
         if body is None:
             continue

@@ -30,14 +30,12 @@ def main(args: argparse.Namespace) -> int:
     import json
     import time
 
-    import yaml
-
     from rimd_sim.analysis.fit_table import SCALES, TableError, fit_table, read_table
     from rimd_sim.cli import CommandError
-    from rimd_sim.core.config import NODE_NAME, find_config_file, load_config
+    from rimd_sim.core.config import find_config_file, load_config
     from rimd_sim.core.errors import ConfigError
     from rimd_sim.verbs._analysis_io import write_csv
-    from rimd_sim.verbs.identify import nest
+    from rimd_sim.verbs.identify import write_parameter_file
 
     for p in args.parameters:
         if p not in SCALES:
@@ -63,10 +61,9 @@ def main(args: argparse.Namespace) -> int:
                      "peak_force_residual_n": (r["twin_peak_force_n"] - r["peak_force_n"])
                      if r["peak_force_n"] and r["twin_peak_force_n"] is not None else None})
     write_csv(out / "fit_table.csv", rows)
-    doc = yaml.safe_load(Path(base_path).read_text()) or {}
-    doc[NODE_NAME] = {"ros__parameters": nest(result["config"].to_parameters())}
-    (out / "fitted.yaml").write_text(f"# Fitted by `rimd fit-table {table}` (parameters: {', '.join(args.parameters)})"
-                                     f"; base file {base_path}.\n" + yaml.safe_dump(doc, sort_keys=False))
+    write_parameter_file(out / "fitted.yaml", base_path, result["config"],
+                         f"# Fitted by `rimd fit-table {table}` (parameters: {', '.join(args.parameters)}); "
+                         f"base file {base_path}.\n")
     summary = {"table": str(table), "base_config": str(base_path), "fitted": result["values"],
                "natural_frequency_from_table": natural, "misfit": result["misfit"],
                "all_resonances_within_0.25_hz": result["all_within_grid_step"], "entries": rows,

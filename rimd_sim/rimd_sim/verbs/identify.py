@@ -115,22 +115,15 @@ def write_outputs(result, base_path: Path, out: Path, recording: Path, seconds: 
     """identified.yaml, identification.json, validation.csv and validation.png."""
     import json
 
-    import yaml
-
     from rimd_sim.analysis import identify_plots
-    from rimd_sim.core.config import NODE_NAME
     from rimd_sim.verbs._analysis_io import write_csv
 
     out.mkdir(parents=True, exist_ok=True)
-    doc = yaml.safe_load(Path(base_path).read_text()) or {}
-    for section in ("/" + NODE_NAME, "/**"):
-        doc.pop(section, None)   # merged into the node's own section below
-    doc[NODE_NAME] = {"ros__parameters": nest(result.config.to_parameters())}
-    header = (f"# Identified by `rimd identify {recording}` from that recording; base file {base_path}.\n"
-              "# Every value of the simulator is written out; identified: "
-              + ", ".join(result.estimates) + ("; fixed: " + ", ".join(result.fixed) if result.fixed else "")
-              + ".\n# Details: identification.json next to this file.\n")
-    (out / "identified.yaml").write_text(header + yaml.safe_dump(doc, sort_keys=False))
+    write_parameter_file(out / "identified.yaml", base_path, result.config,
+                         f"# Identified by `rimd identify {recording}` from that recording; base file {base_path}.\n"
+                         "# Every value of the simulator is written out; identified: " + ", ".join(result.estimates)
+                         + ("; fixed: " + ", ".join(result.fixed) if result.fixed else "")
+                         + ".\n# Details: identification.json next to this file.\n")
     report = {
         "recording": str(recording),
         "base_config": str(base_path),
@@ -161,6 +154,27 @@ DETERMINED_BY = {
     "contact.stiffness": "pulse duration ~ pi sqrt(m/k) and shape (k/m), times the mass",
     "contact.damping": "pulse decay and the force jump c v0 at the onset (c/m), times the mass",
 }
+
+
+def write_parameter_file(path: Path, base_path: Path, config, header: str) -> None:  # noqa: ANN001
+    """The base file with the simulator's section replaced by every value of ``config``.
+
+    The section is written as ``/**/rimd_simulator``: the node runs in namespace ``/rig`` and ROS applies a
+    section only to the fully qualified name or a wildcard (a plain ``rimd_simulator:`` key means
+    ``/rimd_simulator``, which the node is not); the core reads the same section.
+    """
+    import yaml
+
+    from rimd_sim.core.config import NODE_NAME
+
+    doc = yaml.safe_load(Path(base_path).read_text()) or {}
+    for section in (NODE_NAME, "/" + NODE_NAME, "/**/" + NODE_NAME):
+        doc.pop(section, None)
+    wildcard = doc.pop("/**", None)   # its simulator values are in the new section; other nodes keep it
+    if wildcard is not None:
+        doc["/**"] = wildcard
+    doc["/**/" + NODE_NAME] = {"ros__parameters": nest(config.to_parameters())}
+    path.write_text(header + yaml.safe_dump(doc, sort_keys=False))
 
 
 def _jsonable(value):  # noqa: ANN001
