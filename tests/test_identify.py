@@ -146,7 +146,7 @@ def _round_trip(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: l
     for name in ("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness",
                  "contact.damping"):
         est = report["estimates"][name]
-        lines.append(f"{name}: {est['value']:.6g} +- {est['std_error']:.2g} (true {expected[name]:.6g}; local "
+        lines.append(f"{name}: {est['value']:.6g} +- {est['std_error'] or 0.0:.2g} (true {expected[name]:.6g}; local "
                      f"{est['local_value']:.6g})")
     print("\n".join(lines))
     for name, line in zip(("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness",
