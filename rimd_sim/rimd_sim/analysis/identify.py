@@ -349,6 +349,7 @@ def fit_pulses(force: rec.Channel, detected: dict[str, np.ndarray], y_t: np.ndar
         if guesses else (1.0, 1.0)
     rows = []
     noise = float(np.median(np.abs(force.values[force.values < 1.0]))) * 1.4826 if force.values.size else 0.01
+    firsts = []
     for start, t, v, _dur in windows:
         # Laser: quadratic over the free flight just before the onset (at most 20 ms, after the last impact).
         prev = onsets_all[onsets_all < start - 1e-4]
@@ -360,12 +361,18 @@ def fit_pulses(force: rec.Channel, detected: dict[str, np.ndarray], y_t: np.ndar
             v_in, y_on = float(cq[1]), float(cq[2])
         eps = accel(start, v_in) / v_in if (accel is not None and v_in > 1e-3) else 0.0
         fit, om = _fit_one_pulse(t, v, start, dt, sigma0, omega0, eps)
-        if fit.cost > 25 * 0.5 * t.size * max(noise, 1e-6) ** 2:   # a local minimum: try the other starts
+        firsts.append((start, t, v, v_in, y_on, eps, fit, om))
+    # A fit far worse than the typical one is caught in a local minimum: try the other starts.
+    typical = float(np.percentile([f[6].cost / f[1].size for f in firsts], 10)) if firsts else 0.0
+    for k, (start, t, v, v_in, y_on, eps, fit, om) in enumerate(firsts):
+        if fit.cost > t.size * max(10 * typical, 12.5 * max(noise, 1e-6) ** 2):
             for zeta in PULSE_ZETA_STARTS:
                 w0 = math.hypot(sigma0, omega0)
                 trial, om2 = _fit_one_pulse(t, v, start, dt, zeta * w0, math.sqrt(1 - zeta ** 2) * w0, eps)
                 if trial.cost < fit.cost:
                     fit, om = trial, om2
+            firsts[k] = (start, t, v, v_in, y_on, eps, fit, om)
+    for _start, t, _v, v_in, y_on, eps, fit, om in firsts:
         onset = t[0] + fit.x[0] * dt
         scale, sg, omega = fit.x[1], fit.x[2] * om, fit.x[3] * om
         if not (scale > 0 and omega > 0 and sg >= 0):
