@@ -302,7 +302,7 @@ def _fit_one_pulse(t: np.ndarray, v: np.ndarray, start: float, dt: float, sigma:
 
 
 #: Most impacts whose pulses are fitted (evenly spread over the recording when there are more).
-MAX_PULSES = 150
+MAX_PULSES = 100
 
 #: Damping ratios of the contact tried as first guesses of the pulse fit (the shape has local minima).
 PULSE_ZETA_STARTS = (0.05, 0.2, 0.4, 0.6, 0.8, 0.95)
@@ -365,12 +365,15 @@ def fit_pulses(force: rec.Channel, detected: dict[str, np.ndarray], y_t: np.ndar
     # A fit whose residual is well above the sensor noise may be caught in a local minimum: try the other starts
     # and keep the best (a relative criterion, against the typical fit, let some through: 19 % on zeta).
     for k, (start, t, v, v_in, y_on, eps, fit, om) in enumerate(firsts):
-        if fit.cost > 25 * 0.5 * t.size * max(noise, 1e-6) ** 2:
+        good = 25 * 0.5 * t.size * max(noise, 1e-6) ** 2
+        if fit.cost > good:
             for zeta in PULSE_ZETA_STARTS:
                 w0 = math.hypot(sigma0, omega0)
                 trial, om2 = _fit_one_pulse(t, v, start, dt, zeta * w0, math.sqrt(1 - zeta ** 2) * w0, eps)
                 if trial.cost < fit.cost:
                     fit, om = trial, om2
+                if fit.cost <= good:
+                    break
             firsts[k] = (start, t, v, v_in, y_on, eps, fit, om)
     for _start, t, _v, v_in, y_on, eps, fit, om in firsts:
         onset = t[0] + fit.x[0] * dt
