@@ -58,8 +58,8 @@ def main(args: argparse.Namespace) -> int:
     for r in result["rows"]:
         rows.append({**r, "frequency_residual_hz": None if r["twin_grid_hz"] is None else
                      r["twin_grid_hz"] - r["frequency_hz"],
-                     "peak_force_residual_n": (r["twin_peak_force_n"] - r["peak_force_n"])
-                     if r["peak_force_n"] and r["twin_peak_force_n"] is not None else None})
+                     "peak_force_residual_n": (r["twin_grid_peak_force_n"] - r["peak_force_n"])
+                     if r["peak_force_n"] and r.get("twin_grid_peak_force_n") is not None else None})
     write_csv(out / "fit_table.csv", rows)
     write_parameter_file(out / "fitted.yaml", base_path, result["config"],
                          f"# Fitted by `rimd fit-table {table}` (parameters: {', '.join(args.parameters)}); "
