@@ -130,12 +130,14 @@ class Cluster:
             client.wait_for_workers(n, timeout=deadline_s)
 
     def stop(self) -> None:
+        """SIGTERM to every process group, SIGKILL to what still runs after 3 s."""
         for proc in reversed(self.procs):
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGTERM)
+        deadline = time.monotonic() + 3.0
         for proc in self.procs:
             try:
-                proc.wait(timeout=10)
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait(timeout=10)
@@ -208,7 +210,8 @@ def test_dask_sweep_bifurcation_basins_equal_local(cluster, tmp_path):
 @pytest.mark.parametrize("how", ["option", "environment"])
 def test_unreachable_scheduler_is_refused_within_10s(tmp_path, how):
     address = f"tcp://127.0.0.1:{_free_port()}"  # nothing listens there
-    argv = [sys.executable, "-m", "rimd_sim.cli", *PETERKA, "--out", str(tmp_path / "pk")]
+    argv = [sys.executable, "-c", "import sys; from rimd_sim.cli import main; sys.exit(main())", *PETERKA,
+            "--out", str(tmp_path / "pk")]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([SRC, os.environ.get("PYTHONPATH", "")])}
     if how == "option":
         argv[-2:-2] = ["--scheduler", address]

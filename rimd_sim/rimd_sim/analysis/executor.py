@@ -22,6 +22,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import os
 import re
+import socket
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -32,8 +33,8 @@ __all__ = ["CONNECT_TIMEOUT_S", "ENV_SCHEDULER", "SchedulerError", "TaskRunner",
 
 ENV_SCHEDULER = "RIMD_DASK_SCHEDULER"
 #: Seconds to connect to the scheduler, then again at most to wait for a first worker (refused within 10 s).
-CONNECT_TIMEOUT_S = 4.0
-WORKER_TIMEOUT_S = 4.0
+CONNECT_TIMEOUT_S = 3.0
+WORKER_TIMEOUT_S = 3.0
 _ADDRESS = re.compile(r"^(tcp|tls|ws|wss|inproc|ucx)://[^\s/]+(:\d+)?/?$")
 
 
@@ -96,8 +97,23 @@ def scheduler_address(scheduler: str | None) -> str | None:
     return address
 
 
+def _probe(address: str) -> None:
+    """Refuse at once a TCP scheduler that nothing listens on (before the seconds of importing Dask)."""
+    if not address.startswith("tcp://"):
+        return
+    host, _, port = address[len("tcp://"):].rstrip("/").rpartition(":")
+    if not port.isdigit():
+        raise SchedulerError(f"scheduler {address!r} refused: must look like tcp://HOST:PORT")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise SchedulerError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
+
+
 @contextmanager
 def _dask(address: str) -> Iterator[TaskRunner]:
+    _probe(address)
     try:
         from distributed import Client
     except ImportError as exc:  # pragma: no cover - dask is in the lock
