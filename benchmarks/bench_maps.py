@@ -21,6 +21,7 @@ the load average is printed with each figure):
    (tests/core/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
 
 Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
+[--sections 1,2,3,4,5]
 """
 
 from __future__ import annotations
@@ -232,16 +233,22 @@ def main() -> None:
     parser.add_argument("--skip-big", action="store_true", help="no map beyond 200 x 200")
     parser.add_argument("--skip-dask", action="store_true", help="no Dask scaling")
     parser.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
+    parser.add_argument("--sections", default="1,2,3,4,5", help="sections to run (default 1,2,3,4,5)")
     args = parser.parse_args()
+    sections = {int(x) for x in args.sections.split(",")}
     config = SimConfig()
     print(f"RIMD maps benchmark on {os.cpu_count()} core(s), {load()}")
     pk.peterka(config, *grid(2, 3), workers=1)  # JIT from cache
-    steps(config, args.steps_size, args.workers)
-    agreement(config, args.workers)
-    big(config, args.workers, args.big, args.skip_big)
-    if not args.skip_dask:
+    if 1 in sections:
+        steps(config, args.steps_size, args.workers)
+    if 2 in sections:
+        agreement(config, args.workers)
+    if 3 in sections:
+        big(config, args.workers, args.big, args.skip_big)
+    if 4 in sections and not args.skip_dask:
         dask_scaling(config, args.steps_size)
-    single_trajectory(config)
+    if 5 in sections:
+        single_trajectory(config)
 
 
 if __name__ == "__main__":
