@@ -114,8 +114,11 @@ def agreement(config, workers):
                    else "neither")
             right[who] += 1
             verdict = f"; {c['long_run_cycles']} cycles: {c['long_run']} ({who} right)"
+        cap = 192 if c["start"] != "continued" else 132
+        ran = (f"stopped at {c['early_stop_cycles']}" if c["early_stop_cycles"] <= cap
+               else "ran to the cap: a different start from its neighbour")
         print(f"    {c['start']:9s} gap {c['gap_mm']:.1f} mm {c['frequency_hz']:.3f} Hz: early {c['early_stop']} "
-              f"(stopped at {c['early_stop_cycles']}), fixed {c['fixed_length']}{verdict}")
+              f"({ran}), fixed {c['fixed_length']}{verdict}")
     print(f"  differing rest/kick cells, which a 10x longer run confirms: {right}")
 
 
