@@ -232,3 +232,30 @@ def test_malformed_scheduler_address_is_refused(tmp_path, capsys):
     assert cli.main([*PETERKA, "--scheduler", "localhost8786", "--out", str(tmp_path / "pk")]) == 1
     err = capsys.readouterr().err.strip()
     assert "localhost8786" in err and "tcp://HOST:PORT" in err
+
+
+def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path):
+    """A 600 x 700 map (classes drawn from a pattern, not simulated): the .npz holds the classes and codes that
+    give back the labels, and the PNG is drawn as an image with at least one pixel per cell."""
+    from matplotlib.image import imread
+
+    from rimd_sim.analysis.peterka import PeterkaResult, save_peterka_npz
+    from rimd_sim.analysis.plots import plot_peterka
+
+    rows, cols = 600, 700
+    names = np.array(["1/1", "1/2", "no impact", "chaotic/non-periodic", "2/6", "3/7"], dtype=object)
+    i, j = np.mgrid[0:rows, 0:cols]
+    labels = np.stack([names[(i // 40 + j // 50) % 6], names[(i // 40 + j // 50) % 6],
+                       names[(i // 20 + j // 25) % 6]])
+    result = PeterkaResult(np.linspace(0, 3, rows), np.linspace(1.82, 9.1, cols), np.linspace(0, 3, rows),
+                           np.linspace(1, 5, cols), labels, 0.0, 1, 192, np.full(labels.shape, 40), True)
+    save_peterka_npz(result, tmp_path / "pk.npz")
+    data = np.load(tmp_path / "pk.npz")
+    assert data["codes"].shape == (3, rows, cols) and data["codes"].dtype == np.int16
+    assert (data["classes"][data["codes"]] == labels.astype(str)).all()
+    assert data["coexisting"].sum() == result.coexisting.sum() > 0
+    plot_peterka(result, tmp_path / "pk.png", "dense")
+    image = imread(tmp_path / "pk.png")
+    # The axes' extent in pixels: the columns and rows that are not the white margin, legend and labels aside.
+    ink = (image[..., :3] < 0.99).any(axis=2)
+    assert ink.any(axis=1).sum() >= rows and image.shape[1] * 0.6 >= cols  # at least a pixel per cell

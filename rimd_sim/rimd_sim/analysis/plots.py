@@ -100,8 +100,12 @@ def _class_image(ax, x, y, labels, palette):
 
 
 def map_dpi(shape) -> int:
-    """Resolution that gives each cell of a map at least about one pixel (120 to 300 dpi)."""
-    return int(min(300, max(120, 1.3 * max(shape) / 8)))
+    """Resolution that gives each cell of a map at least about one pixel (120 to 300 dpi).
+
+    ``shape`` is ``(rows, columns)``; the axes of the map figures are about 4.5 in high and 6.5 in wide.
+    """
+    rows, cols = shape[-2], shape[-1]
+    return int(min(300, max(120, 1.1 * max(rows / 4.5, cols / 6.5))))
 
 
 def _class_legend(ax, palette, extra=()):
