@@ -218,11 +218,17 @@ def single_trajectory(config):
     ref_wall = time.perf_counter() - t0
     t0 = time.perf_counter()
     ours_sim = 0.0
+    steps = rejected = 0
     for f in sample:
         c = cfg.with_parameters({"motor.initial_frequency": float(f), "motor.initial_setpoint": float(f)})
-        RigModel(c, channels=False, truth=False).advance(300 / f)
+        model = RigModel(c, channels=False, truth=False)
+        model.advance(300 / f)
         ours_sim += 300 / f
+        steps += model.stats["steps"]
+        rejected += model.stats["rejected"]
     ours_wall = time.perf_counter() - t0
+    print(f"  the core at the default tolerances: {steps / (300 * len(sample)):.1f} accepted steps per cycle "
+          f"({100 * rejected / max(1, steps):.1f} % rejected), {ours_wall / steps * 1e6:.2f} us per step")
     print(f"  scipy solve_ivp reference on {len(sample)} of the points: {ref_sim / ref_wall:.1f}x real time; "
           f"the core on the same points {ours_sim / ours_wall:.0f}x: ratio "
           f"{ref_wall / ours_wall * ours_sim / ref_sim:.0f}x; the whole sweep "
