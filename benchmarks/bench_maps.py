@@ -96,9 +96,10 @@ def steps(config, size, workers):
     return ta, td, rd
 
 
-def agreement(config, workers):
-    gaps, freqs = grid(31, 61)
-    print(f"\n2. Default 31 x 61 map: early stop vs fixed length with twice the former cycles, {load()}")
+def agreement(config, workers, size=None):
+    rows, cols = (31, 61) if size is None else (size, size)
+    gaps, freqs = grid(rows, cols)
+    print(f"\n2. {rows} x {cols} map: early stop vs fixed length with twice the former cycles, {load()}")
     te, early = timed_map(config, gaps, freqs, workers=workers)
     tf, fixed = timed_map(config, gaps, freqs, early_stop=False, workers=workers)
     comp = pk.compare_maps(early, fixed, config, 72)
@@ -242,6 +243,8 @@ def main() -> None:
     parser.add_argument("--skip-big", action="store_true", help="no map beyond 200 x 200")
     parser.add_argument("--skip-dask", action="store_true", help="no Dask scaling")
     parser.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
+    parser.add_argument("--compare-size", type=int, default=None,
+                        help="section 2 on an N x N map instead of the default 31 x 61")
     parser.add_argument("--sections", default="1,2,3,4,5", help="sections to run (default 1,2,3,4,5)")
     args = parser.parse_args()
     sections = {int(x) for x in args.sections.split(",")}
@@ -251,7 +254,7 @@ def main() -> None:
     if 1 in sections:
         steps(config, args.steps_size, args.workers)
     if 2 in sections:
-        agreement(config, args.workers)
+        agreement(config, args.workers, args.compare_size)
     if 3 in sections:
         big(config, args.workers, args.big, args.skip_big)
     if 4 in sections and not args.skip_dask:
