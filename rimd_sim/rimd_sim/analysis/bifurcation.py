@@ -12,7 +12,6 @@ Both directions are independent runs: ``both`` runs them in two processes, one p
 from __future__ import annotations
 
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +20,7 @@ from rimd_sim.core import RigModel, SimConfig
 from rimd_sim.core.errors import ConfigError
 
 from .dynamics import classify, nondimensional
+from .executor import run_tasks
 
 __all__ = ["BifurcationBranch", "BifurcationPoint", "bifurcation"]
 
@@ -82,8 +82,8 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
 
 
 def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, transient_cycles: int = 100,
-                sample_cycles: int = 48, ramp_rate: float = 2.0, workers: int | None = None
-                ) -> tuple[list[BifurcationBranch], float, int]:
+                sample_cycles: int = 48, ramp_rate: float = 2.0, workers: int | None = None,
+                scheduler: str | None = None) -> tuple[list[BifurcationBranch], float, int]:
     """Run the up and/or down sweeps.
 
     Args:
@@ -93,7 +93,8 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
         transient_cycles: Cycles run at each frequency before sampling.
         sample_cycles: Cycles sampled at each frequency.
         ramp_rate: Motor ramp between frequencies (Hz/s).
-        workers: Processes for ``both`` (default 2: one per direction).
+        workers: Local processes for ``both`` (default 2: one per direction).
+        scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else local): each branch is a task.
 
     Returns:
         ``(branches, wall_seconds, processes)``.
@@ -114,12 +115,7 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
     start = time.perf_counter()
     dirs = ["up", "down"] if direction == "both" else [direction]
     jobs = [(config, freqs, d, transient_cycles, sample_cycles, ramp_rate) for d in dirs]
-    n = max(1, min(workers or 2, len(jobs)))
-    if n == 1:
-        branches = [_branch(j) for j in jobs]
-    else:
-        with ProcessPoolExecutor(n) as pool:
-            branches = list(pool.map(_branch, jobs))
+    branches, n, _ = run_tasks(_branch, jobs, workers=workers or 2, scheduler=scheduler)
     return branches, time.perf_counter() - start, n
 
 

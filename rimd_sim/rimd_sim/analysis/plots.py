@@ -78,14 +78,34 @@ def class_palette(labels) -> dict[str, str]:
     return palette
 
 
+#: Above this many cells along an axis a map is drawn as an image of one pixel block per cell (not a mesh of
+#: cells with edges) and coexisting attractors as a shaded overlay (not one marker per cell).
+DENSE_CELLS = 120
+
+
 def _class_image(ax, x, y, labels, palette):
     from matplotlib.colors import ListedColormap
 
     names = list(palette)
     index = {c: i for i, c in enumerate(names)}
-    grid = [[index[c] for c in row] for row in labels]
-    ax.pcolormesh(x, y, grid, cmap=ListedColormap([palette[c] for c in names]), vmin=-0.5,
-                  vmax=len(names) - 0.5, shading="nearest")
+    grid = np.array([[index[c] for c in row] for row in labels])
+    cmap = ListedColormap([palette[c] for c in names])
+    if max(grid.shape) > DENSE_CELLS and len(x) > 1 and len(y) > 1:
+        dx = (x[-1] - x[0]) / (len(x) - 1) / 2
+        dy = (y[-1] - y[0]) / (len(y) - 1) / 2
+        ax.imshow(grid, cmap=cmap, vmin=-0.5, vmax=len(names) - 0.5, origin="lower", aspect="auto",
+                  interpolation="nearest", extent=(x[0] - dx, x[-1] + dx, y[0] - dy, y[-1] + dy))
+        return
+    ax.pcolormesh(x, y, grid, cmap=cmap, vmin=-0.5, vmax=len(names) - 0.5, shading="nearest")
+
+
+def map_dpi(shape) -> int:
+    """Resolution that gives each cell of a map at least about one pixel (120 to 300 dpi).
+
+    ``shape`` is ``(rows, columns)``; the axes of the map figures are about 4.5 in high and 6.5 in wide.
+    """
+    rows, cols = shape[-2], shape[-1]
+    return int(min(300, max(120, 1.1 * max(rows / 4.5, cols / 6.5))))
 
 
 def _class_legend(ax, palette, extra=()):
@@ -149,14 +169,26 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
     _class_image(ax, result.frequency_ratio, result.gap_ratio, result.primary, palette)
     gi, fj = np.nonzero(result.coexisting)
     marks = []
-    if len(gi):
+    dense = max(result.primary.shape) > DENSE_CELLS
+    if len(gi) and dense:
+        from matplotlib.colors import ListedColormap
+        from matplotlib.patches import Patch
+
+        x, y = result.frequency_ratio, result.gap_ratio
+        dx = (x[-1] - x[0]) / (len(x) - 1) / 2
+        dy = (y[-1] - y[0]) / (len(y) - 1) / 2
+        ax.imshow(np.where(result.coexisting, 1.0, np.nan), cmap=ListedColormap(["black"]), alpha=0.3,
+                  origin="lower", aspect="auto", interpolation="nearest",
+                  extent=(x[0] - dx, x[-1] + dx, y[0] - dy, y[-1] + dy))
+        marks = [Patch(facecolor="black", alpha=0.3, label="coexisting attractors (shaded)")]
+    elif len(gi):
         ms = max(1.0, min(4.0, 400.0 / max(result.primary.shape)))
         ax.plot(result.frequency_ratio[fj], result.gap_ratio[gi], "x", color="0.25", ms=ms, mew=0.6)
         marks = [Line2D([], [], marker="x", ls="", color="0.25", label="coexisting attractors")]
     ax.set_xlabel("Omega / omega_n")
     ax.set_ylabel("gap / A0")
     _class_legend(ax, palette, marks)
-    return _save(fig, path, title, ax)
+    return _save(fig, path, title, ax, dpi=map_dpi(result.primary.shape))
 
 
 def plot_basins(result, path: Path, title: str = "") -> Path:
@@ -167,7 +199,7 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
     ax.set_xlabel("initial theta (mrad)")
     ax.set_ylabel("initial theta' (rad/s)")
     _class_legend(ax, palette)
-    return _save(fig, path, title, ax)
+    return _save(fig, path, title, ax, dpi=map_dpi(result.labels.shape))
 
 
 # ---- recorded analyses (rimd analyze) ---------------------------------------------------------------------

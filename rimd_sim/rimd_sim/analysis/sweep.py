@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Literal
 
@@ -26,6 +25,8 @@ import numpy as np
 
 from rimd_sim.core import RigModel, SimConfig
 from rimd_sim.core.errors import ConfigError
+
+from .executor import run_tasks, scheduler_address
 
 __all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
 
@@ -102,9 +103,33 @@ def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
     return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration)
 
 
+def _rest_chunk(jobs: list[tuple[SimConfig, float, int, int]]) -> list[SweepPoint]:
+    return [_from_rest(job) for job in jobs]
+
+
+def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=None) -> list[SweepPoint]:
+    """An up or down sweep: one run, the motor ramped from point to point."""
+    config, order, cycles, measure_cycles, ramp_rate = job
+    cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
+    model = RigModel(cfg, channels=False, truth=False)
+    points = []
+    for i, f in enumerate(order):
+        t0 = model.time
+        if i:
+            model.set_motor_frequency(f, ramp_rate)
+        ramp = abs(f - order[i - 1]) / ramp_rate if i else 0.0
+        out = model.advance(t0 + ramp + cycles / f)
+        t_end = float(model.time)
+        points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0)))
+        if progress:
+            progress(i + 1, len(order))
+    points.sort(key=lambda p: p.frequency_hz)
+    return points
+
+
 def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: Direction = "rest", *,
           cycles: int = 150, measure_cycles: int = 50, ramp_rate: float = 2.0, workers: int | None = None,
-          progress=None) -> SweepResult:
+          scheduler: str | None = None, progress=None) -> SweepResult:
     """Run a stepped sweep.
 
     Args:
@@ -114,7 +139,9 @@ def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: D
         cycles: Excitation cycles simulated per point (after the ramp).
         measure_cycles: Last cycles over which the steady state is read.
         ramp_rate: Ramp between steps of an ``up``/``down`` sweep (Hz/s).
-        workers: Processes for ``rest`` sweeps (default: all cores).
+        workers: Local processes for ``rest`` sweeps (default: all cores).
+        scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else local): ``rest`` points run
+            there as tasks, an ``up``/``down`` sweep as one task.
         progress: Optional callable ``progress(done, total)``.
 
     Raises:
@@ -131,34 +158,28 @@ def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: D
     points: list[SweepPoint] = []
     n_workers = 1
     if direction == "rest":
-        n_workers = max(1, min(workers or os.cpu_count() or 1, len(freqs)))
-        jobs = [(config, f, cycles, measure_cycles) for f in freqs]
-        if n_workers == 1:
-            for i, job in enumerate(jobs):
-                points.append(_from_rest(job))
-                if progress:
-                    progress(i + 1, len(jobs))
-        else:
-            with ProcessPoolExecutor(n_workers) as pool:
-                for i, p in enumerate(pool.map(_from_rest, jobs, chunksize=max(1, len(jobs) // (4 * n_workers)))):
-                    points.append(p)
-                    if progress:
-                        progress(i + 1, len(jobs))
+        # Chunks of points per task (interleaved, so each holds low and high frequencies): few enough that
+        # submitting them costs little, enough to balance the workers. On a cluster, one point per task.
+        local = scheduler_address(scheduler) is None
+        n_chunks = min(len(freqs), 4 * max(1, workers or os.cpu_count() or 1)) if local else len(freqs)
+        chunks = [list(range(len(freqs)))[i::n_chunks] for i in range(n_chunks)]
+        jobs = [[(config, freqs[i], cycles, measure_cycles) for i in chunk] for chunk in chunks]
+
+        def chunk_progress(done: int, total: int) -> None:
+            progress(min(len(freqs), round(done * len(freqs) / total)), len(freqs))
+
+        results, n_workers, _ = run_tasks(_rest_chunk, jobs, workers=workers, scheduler=scheduler,
+                                          progress=chunk_progress if progress else None)
+        by_index = {i: p for chunk, res in zip(chunks, results, strict=True) for i, p in zip(chunk, res, strict=True)}
+        points = [by_index[i] for i in range(len(freqs))]
     else:
         order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
-        cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
-        model = RigModel(cfg, channels=False, truth=False)
-        for i, f in enumerate(order):
-            t0 = model.time
-            if i:
-                model.set_motor_frequency(f, ramp_rate)
-            ramp = abs(f - order[i - 1]) / ramp_rate if i else 0.0
-            out = model.advance(t0 + ramp + cycles / f)
-            t_end = float(model.time)
-            points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0)))
-            if progress:
-                progress(i + 1, len(order))
-        points.sort(key=lambda p: p.frequency_hz)
+        job = (config, order, cycles, measure_cycles, ramp_rate)
+        if scheduler_address(scheduler) is None:
+            points = _continuous(job, progress)
+        else:
+            points = run_tasks(_continuous, [job], scheduler=scheduler, progress=progress and (
+                lambda d, t: progress(len(order), len(order))))[0][0]
     pts = tuple(points)
     return SweepResult(
         gap_mm=config.rig.gap * 1e3, direction=direction, points=pts, band_a=band_peak(pts, 1.0),

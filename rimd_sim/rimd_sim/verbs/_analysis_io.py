@@ -14,6 +14,13 @@ from typing import TextIO
 from rimd_sim.cli import CommandError
 
 
+def add_scheduler_argument(parser) -> None:
+    """``--scheduler tcp://HOST:PORT``: run the tasks on a Dask cluster (docs/analyses.md)."""
+    parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                        help="run the tasks on this Dask scheduler (default: $RIMD_DASK_SCHEDULER, else local "
+                             "processes)")
+
+
 def check_range(name: str, lo: float, hi: float, *, allow_zero: bool = False, unit: str = "") -> None:
     """Refuse a range unless ``0 < lo <= hi`` (``0 <= lo`` with ``allow_zero``), naming the options and values.
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from rimd_sim.cli import CommandError
 
-from ._analysis_io import check_positive, progress_printer, write_csv, write_summary
+from ._analysis_io import add_scheduler_argument, check_positive, progress_printer, write_csv, write_summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,10 +22,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--theta-max", type=float, default=None, help="largest initial angle (rad)")
     parser.add_argument("--theta-dot-min", type=float, default=None, help="smallest initial rate (rad/s)")
     parser.add_argument("--theta-dot-max", type=float, default=None, help="largest initial rate (rad/s)")
-    parser.add_argument("--transient-cycles", type=int, default=80, help="cycles dropped first, default 80")
-    parser.add_argument("--measure-cycles", type=int, default=36, help="cycles classified, default 36")
+    parser.add_argument("--transient-cycles", type=int, default=160,
+                        help="cycles dropped first at the cap, default 160 (a settled motion stops sooner)")
+    parser.add_argument("--measure-cycles", type=int, default=72, help="cycles classified at the cap, default 72")
+    parser.add_argument("--fixed-length", action="store_true",
+                        help="run every trajectory to the cap (no early stop)")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    add_scheduler_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("out/basins"), help="output directory")
 
 
@@ -49,7 +53,8 @@ def main(args: argparse.Namespace) -> int:
                    r_hi if args.theta_dot_max is None else args.theta_dot_max)
         result = basins(config, args.frequency, t_range, r_range, (args.size, args.size),
                         transient_cycles=args.transient_cycles, measure_cycles=args.measure_cycles,
-                        workers=args.workers, progress=progress_printer("basins", "rows"))
+                        early_stop=not args.fixed_length, workers=args.workers, scheduler=args.scheduler,
+                        progress=progress_printer("basins", "rows"))
     except RimdError as exc:
         raise CommandError(str(exc)) from None
     args.out.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from rimd_sim.cli import CommandError
 
-from ._analysis_io import check_positive, check_range, class_runs, write_csv, write_summary
+from ._analysis_io import add_scheduler_argument, check_positive, check_range, class_runs, write_csv, write_summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sample-cycles", type=int, default=48, help="cycles sampled per frequency, default 48")
     parser.add_argument("--ramp-rate", type=float, default=2.0, help="motor ramp between steps (Hz/s), default 2")
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    add_scheduler_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("out/bifurcation"), help="output directory")
 
 
@@ -50,7 +51,8 @@ def main(args: argparse.Namespace) -> int:
         freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
         print(f"rimd bifurcation: {len(freqs)} frequencies, sweep {args.direction}...", file=sys.stderr, flush=True)
         branches, wall, workers = bifurcation(config, freqs, args.direction, transient_cycles=args.transient_cycles,
-                                              sample_cycles=args.sample_cycles, ramp_rate=args.ramp_rate)
+                                              sample_cycles=args.sample_cycles, ramp_rate=args.ramp_rate,
+                                              scheduler=args.scheduler)
     except RimdError as exc:
         raise CommandError(str(exc)) from None
     args.out.mkdir(parents=True, exist_ok=True)

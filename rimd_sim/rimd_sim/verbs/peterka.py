@@ -2,7 +2,8 @@
 
 Each cell is classified ``p/n`` (p impacts in n cycles), ``no impact`` or ``chaotic/non-periodic`` from
 rest, from a kick and continuing from the neighbouring lower frequency; cells where these differ (coexisting
-attractors) are marked. Writes ``DIR/peterka.png``, ``DIR/peterka.csv`` and ``DIR/summary.json``.
+attractors) are marked. Each trajectory stops when its motion is known, or at the cap. Writes
+``DIR/peterka.png``, ``DIR/peterka.csv``, ``DIR/peterka.npz`` (the same as arrays) and ``DIR/summary.json``.
 """
 
 from __future__ import annotations
@@ -13,7 +14,14 @@ from pathlib import Path
 
 from rimd_sim.cli import CommandError
 
-from ._analysis_io import check_positive, check_range, progress_printer, write_csv, write_summary
+from ._analysis_io import (
+    add_scheduler_argument,
+    check_positive,
+    check_range,
+    progress_printer,
+    write_csv,
+    write_summary,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,10 +32,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--f-min", type=float, default=1.82, help="lowest frequency (Hz), default 1.82")
     parser.add_argument("--f-max", type=float, default=9.1, help="highest frequency (Hz), default 9.1")
     parser.add_argument("--freqs", type=int, default=61, help="frequency values, default 61")
-    parser.add_argument("--transient-cycles", type=int, default=60, help="cycles dropped first, default 60")
-    parser.add_argument("--measure-cycles", type=int, default=36, help="cycles classified, default 36")
+    parser.add_argument("--transient-cycles", type=int, default=120,
+                        help="cycles dropped first at the cap, default 120 (a settled motion stops sooner)")
+    parser.add_argument("--measure-cycles", type=int, default=72, help="cycles classified at the cap, default 72")
+    parser.add_argument("--fixed-length", action="store_true",
+                        help="run every trajectory to the cap (no early stop)")
+    parser.add_argument("--compare-fixed", action="store_true",
+                        help="also compute the map at fixed length (the cap) and list the differing cells in "
+                             "summary.json, each with the class of a 10x longer run")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    add_scheduler_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("out/peterka"), help="output directory")
 
 
@@ -35,7 +50,14 @@ def main(args: argparse.Namespace) -> int:
     """Compute the map and write its files."""
     import numpy as np
 
-    from rimd_sim.analysis.peterka import START_NAMES, peterka, peterka_table
+    from rimd_sim.analysis.peterka import (
+        START_NAMES,
+        compare_maps,
+        cycles_summary,
+        peterka,
+        peterka_table,
+        save_peterka_npz,
+    )
     from rimd_sim.analysis.plots import plot_peterka
     from rimd_sim.core import RimdError, load_config
 
@@ -52,21 +74,40 @@ def main(args: argparse.Namespace) -> int:
         gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3
         freqs = np.linspace(args.f_min, args.f_max, args.freqs)
         result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
-                         measure_cycles=args.measure_cycles, workers=args.workers,
+                         measure_cycles=args.measure_cycles, early_stop=not args.fixed_length,
+                         workers=args.workers, scheduler=args.scheduler,
                          progress=progress_printer("peterka", "gap rows"))
+        comparison = None
+        if args.compare_fixed and not args.fixed_length:
+            fixed = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
+                            measure_cycles=args.measure_cycles, early_stop=False, workers=args.workers,
+                            scheduler=args.scheduler, progress=progress_printer("peterka (fixed length)", "gap rows"))
+            comparison = compare_maps(result, fixed, config, args.measure_cycles)
     except RimdError as exc:
         raise CommandError(str(exc)) from None
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "peterka.csv", peterka_table(result))
+    save_peterka_npz(result, args.out / "peterka.npz")
     summary = {
         "gaps_mm": [args.gap_min_mm, args.gap_max_mm, args.gaps],
         "frequencies_hz": [args.f_min, args.f_max, args.freqs],
         "cells": int(result.primary.size), "starts": list(START_NAMES), "classes_from_rest": result.class_counts(),
         "coexisting_cells": int(result.coexisting.sum()), "transient_cycles": args.transient_cycles,
-        "measure_cycles": args.measure_cycles, "wall_seconds": result.wall_seconds, "workers": result.workers,
+        "measure_cycles": args.measure_cycles, "early_stop": result.early_stop,
+        "cycles_run": cycles_summary(result.cycles, result.cycles_per_start),
+        "wall_seconds": result.wall_seconds, "workers": result.workers, "where": result.where,
     }
+    if comparison is not None:
+        summary["comparison"] = comparison
     write_summary(args.out, summary)
     plot_peterka(result, args.out / "peterka.png", "RIMD model: Peterka map (class of the motion from rest)")
+    if comparison is not None:
+        differ = [c for c in comparison["differing_cells"] if c["start"] == "rest"]
+        print(f"early stop vs fixed length ({comparison['fixed_cycles']} cycles): "
+              f"{100 * comparison['agreement_from_rest']:.2f} % of the cells agree (class from rest); differing: "
+              + (", ".join(f"{c['gap_mm']:g} mm {c['frequency_hz']:.3f} Hz {c['early_stop']} vs {c['fixed_length']} "
+                           f"(long run: {c['long_run']})" for c in differ) or "none"))
+    on = "process(es)" if result.where == "local" else f"Dask worker thread(s) of {result.where}"
     print(f"{result.primary.size} cells, {summary['coexisting_cells']} with coexisting attractors, in "
-          f"{result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}", file=sys.stdout)
+          f"{result.wall_seconds:.1f} s on {result.workers} {on}; files in {args.out}", file=sys.stdout)
     return 0

@@ -15,7 +15,7 @@ import numpy as np
 
 from rimd_sim.core import ConfigError, load_config
 
-from ._analysis_io import progress_printer
+from ._analysis_io import add_scheduler_argument, progress_printer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,11 +30,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--measure-cycles", type=int, default=50, help="last cycles read as steady state")
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
     parser.add_argument("--workers", type=int, default=None, help="processes for rest sweeps (default: all cores)")
+    add_scheduler_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("out/sweep"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
+    from rimd_sim.analysis.executor import SchedulerError
     from rimd_sim.analysis.plots import plot_sweep
     from rimd_sim.analysis.sweep import points_table, sweep
 
@@ -46,8 +48,8 @@ def main(args: argparse.Namespace) -> int:
         freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
         with progress_printer("sweep", "frequencies") as progress:
             result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
-                           workers=args.workers, progress=progress)
-    except ConfigError as exc:
+                           workers=args.workers, scheduler=args.scheduler, progress=progress)
+    except (ConfigError, SchedulerError) as exc:
         print(f"rimd sweep: {exc}", file=sys.stderr)
         return 1
     args.out.mkdir(parents=True, exist_ok=True)

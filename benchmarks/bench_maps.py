@@ -1,0 +1,267 @@
+"""Benchmark of the maps at scale (issue 13): early stopping, batching, Dask workers, big maps.
+
+Prints, in one run (ratios are measured within the run; the machine is shared, so absolute times are noisy and
+the load average is printed with each figure):
+
+1. The steps, on an S x S Peterka map (default 60 x 60, 3 starts per cell), local pool on all cores:
+   a. before: one ``RigModel`` per trajectory through ``steady_orbit``, fixed 60 + 36 cycles (as before issue 13);
+   b. batching: the ensemble kernel (every trajectory of a gap row in one compiled call), same fixed cycles;
+   c. early stop: the ensemble kernel stopping each trajectory when its motion is known, cap 96 cycles;
+   d. the default now: early stop with the cap at twice the former cycles (120 + 72).
+   Speed-up of each step against the one before, and of d against a.
+2. The default 31 x 61 map: early stop (d) against the fixed-length run with twice the former cycles: agreement
+   per start and every differing cell, with a 10x longer run's class.
+3. 200 x 200 with the default (d) (target <= 30 s on 2 cores), and an N x N map (default 400) to project
+   1000 x 1000 (measured there if --big 1000).
+4. Scaling: the S x S map through a real Dask scheduler with 1 and then 2 ``dask worker`` processes (one thread
+   each) on loopback: efficiency t1 / (2 t2) (target >= 90 %); the time per cell-cycle against one
+   trajectory's own speed in the core.
+5. The single-trajectory core as users meet it: ``rimd sweep --workers 1`` (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300
+   cycles from rest) in real-time factor, and the scipy ``solve_ivp`` event-driven reference
+   (tests/core/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
+
+Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
+[--sections 1,2,3,4,5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "rimd_sim"))
+sys.path.insert(0, str(ROOT / "tests"))
+
+import numpy as np  # noqa: E402
+
+from rimd_sim.analysis import peterka as pk  # noqa: E402
+from rimd_sim.analysis.executor import run_tasks  # noqa: E402
+from rimd_sim.core import RigModel, SimConfig  # noqa: E402
+
+
+def load() -> str:
+    return f"load {os.getloadavg()[0]:.1f}"
+
+
+def grid(n: int, m: int | None = None):
+    return np.linspace(0, 3e-3, n), np.linspace(1.82, 9.1, m or n)
+
+
+def legacy_map(config, gaps, freqs, workers=None):
+    """Step a: the per-trajectory path, fixed 60 + 36 (continued 30 + 36) cycles."""
+    jobs = [(config, float(g), list(freqs), 60, 36, 30) for g in gaps]
+    t0 = time.perf_counter()
+    rows, n, _ = run_tasks(pk._row, jobs, workers=workers)
+    return time.perf_counter() - t0, np.array(rows, dtype=object).transpose(2, 0, 1)
+
+
+def timed_map(config, gaps, freqs, **kw):
+    t0 = time.perf_counter()
+    res = pk.peterka(config, gaps, freqs, **kw)
+    return time.perf_counter() - t0, res
+
+
+def cycles_of(res) -> float:
+    return float(res.cycles.sum())
+
+
+def steps(config, size, workers):
+    gaps, freqs = grid(size)
+    cells = size * size
+    print(f"\n1. Steps on a {size} x {size} map ({cells} cells x 3 starts), local pool, {load()}")
+    ta, la = legacy_map(config, gaps, freqs, workers)
+    print(f"  a. before (RigModel per trajectory, fixed 96 cycles):      {ta:7.1f} s   {load()}")
+    tb, rb = timed_map(config, gaps, freqs, transient_cycles=60, measure_cycles=36, continued_transient_cycles=30,
+                       early_stop=False, workers=workers)
+    same = float((rb.labels == la).mean())
+    print(f"  b. + batching (ensemble kernel, fixed 96 cycles):           {tb:7.1f} s   x{ta / tb:.2f} vs a "
+          f"(classes identical to a in {100 * same:.2f} % of cell-starts)   {load()}")
+    tc, rc = timed_map(config, gaps, freqs, transient_cycles=60, measure_cycles=36, continued_transient_cycles=30,
+                       workers=workers)
+    print(f"  c. + early stop (cap 96 cycles):                            {tc:7.1f} s   x{tb / tc:.2f} vs b; "
+          f"mean {rc.cycles.mean():.1f} cycles per trajectory, {100 * (rc.cycles <= 96).mean():.1f} % stopped "
+          f"early   {load()}")
+    td, rd = timed_map(config, gaps, freqs, workers=workers)
+    print(f"  d. default now (early stop, cap 192 = 2 x 96):              {td:7.1f} s   x{tc / td:.2f} vs c; "
+          f"x{ta / td:.2f} vs a; mean {rd.cycles.mean():.1f} cycles, {100 * (rd.cycles <= 192).mean():.1f} % "
+          f"stopped early   {load()}")
+    return ta, td, rd
+
+
+def agreement(config, workers, size=None):
+    rows, cols = (31, 61) if size is None else (size, size)
+    gaps, freqs = grid(rows, cols)
+    print(f"\n2. {rows} x {cols} map: early stop vs fixed length with twice the former cycles, {load()}")
+    te, early = timed_map(config, gaps, freqs, workers=workers)
+    tf, fixed = timed_map(config, gaps, freqs, early_stop=False, workers=workers)
+    comp = pk.compare_maps(early, fixed, config, 72)
+    print(f"  early stop {te:.1f} s (mean {early.cycles.mean():.1f} cycles), fixed 192 cycles {tf:.1f} s: "
+          f"x{tf / te:.2f}")
+    for name, a in comp["agreement_per_start"].items():
+        print(f"  agreement from {name}: {100 * a:.2f} %   (target >= 99 % from rest)")
+    right = {"early": 0, "fixed": 0, "neither": 0}
+    for c in comp["differing_cells"]:
+        verdict = ""
+        if c["long_run"] is not None:
+            who = ("early" if c["long_run"] == c["early_stop"] else "fixed" if c["long_run"] == c["fixed_length"]
+                   else "neither")
+            right[who] += 1
+            verdict = f"; {c['long_run_cycles']} cycles: {c['long_run']} ({who} right)"
+        cap = 192 if c["start"] != "continued" else 132
+        ran = (f"stopped at {c['early_stop_cycles']}" if c["early_stop_cycles"] <= cap
+               else "ran to the cap: a different start from its neighbour")
+        print(f"    {c['start']:9s} gap {c['gap_mm']:.1f} mm {c['frequency_hz']:.3f} Hz: early {c['early_stop']} "
+              f"({ran}), fixed {c['fixed_length']}{verdict}")
+    print(f"  differing rest/kick cells, which a 10x longer run confirms: {right}")
+
+
+def big(config, workers, n_big, skip_big):
+    gaps, freqs = grid(200)
+    print(f"\n3. Big maps (default: early stop, cap 192), local pool, {load()}")
+    t200, r200 = timed_map(config, gaps, freqs, workers=workers)
+    print(f"  200 x 200: {t200:.1f} s on {r200.workers} processes (target <= 30 s; before issue 13: 168 s idle), "
+          f"mean {r200.cycles.mean():.1f} cycles per trajectory   {load()}")
+    if skip_big:
+        return t200, r200
+    gaps, freqs = grid(n_big)
+    tb, rb = timed_map(config, gaps, freqs, workers=workers)
+    line = f"  {n_big} x {n_big}: {tb:.1f} s, mean {rb.cycles.mean():.1f} cycles   {load()}"
+    if n_big != 1000:
+        line += f"; 1000 x 1000 projected (x{(1000 / n_big) ** 2:.2f} cells): {tb * (1000 / n_big) ** 2 / 60:.1f} min"
+    print(line)
+    return t200, r200
+
+
+def _port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def dask_scaling(config, size):
+    gaps, freqs = grid(size)
+    port = _port()
+    address = f"tcp://127.0.0.1:{port}"
+    dask = str(Path(sys.executable).with_name("dask"))
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "rimd_sim")}
+    procs = []
+
+    def start(argv):
+        p = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                             start_new_session=True)
+        procs.append(p)
+        return p
+
+    from distributed import Client
+
+    print(f"\n4. Dask scaling on the {size} x {size} map (loopback scheduler, workers of one thread), {load()}")
+    try:
+        start([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard", "--no-show"])
+        times = {}
+        for n in (1, 2):
+            start([dask, "worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"])
+            with Client(address, timeout=60, set_as_default=False) as client:
+                client.wait_for_workers(n, timeout=60)
+            pk.peterka(config, gaps[:2], freqs[:4], scheduler=address)  # workers import and load the JIT cache
+            times[n], res = timed_map(config, gaps, freqs, scheduler=address)
+            print(f"  {n} worker(s): {times[n]:.1f} s   {load()}")
+        eff = times[1] / (2 * times[2])
+        print(f"  efficiency 1 -> 2 workers: {100 * eff:.0f} %   (target >= 90 %)")
+        per_cycle = times[2] * 2 / cycles_of(res)
+        # One trajectory's own speed in the core: 2000 cycles at gap 1 mm, 5 Hz, one RigModel.
+        cfg = config.with_parameters({"gap": 1e-3, "motor.initial_frequency": 5.0, "motor.initial_setpoint": 5.0})
+        RigModel(cfg, channels=False, truth=False).advance(1.0)
+        t0 = time.perf_counter()
+        RigModel(cfg, channels=False, truth=False).advance(2000 / 5.0)
+        core = (time.perf_counter() - t0) / 2000
+        print(f"  time per cell-cycle on the map: {per_cycle * 1e6:.1f} us per core; one long trajectory in the core "
+              f"(gap 1 mm, 5 Hz): {core * 1e6:.1f} us per cycle: the map runs at {100 * core / per_cycle:.0f} % of "
+              f"the core's own speed")
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+
+
+def single_trajectory(config):
+    from rimd_sim.analysis.sweep import sweep
+
+    print(f"\n5. rimd sweep --workers 1 (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300 cycles from rest), {load()}")
+    cfg = config.with_parameters({"gap": 1e-3})
+    freqs = np.round(np.arange(1.5, 9.0 + 0.025, 0.05), 6)
+    res = sweep(cfg, freqs[:2], "rest", cycles=300, workers=1)  # JIT from cache
+    t0 = time.perf_counter()
+    res = sweep(cfg, freqs, "rest", cycles=300, measure_cycles=50, workers=1)
+    wall = time.perf_counter() - t0
+    simulated = res.simulated_seconds
+    print(f"  {len(freqs)} points, {simulated:.0f} s simulated in {wall:.1f} s: {simulated / wall:.0f}x real time")
+    from core import reference
+
+    sample = freqs[:: max(1, len(freqs) // 6)][:6]
+    t0 = time.perf_counter()
+    ref_sim = 0.0
+    for f in sample:
+        reference.simulate(frequency=float(f), gap=1e-3, duration=300 / f, rtol=1e-7, atol=1e-9)
+        ref_sim += 300 / f
+    ref_wall = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ours_sim = 0.0
+    steps = rejected = 0
+    for f in sample:
+        c = cfg.with_parameters({"motor.initial_frequency": float(f), "motor.initial_setpoint": float(f)})
+        model = RigModel(c, channels=False, truth=False)
+        model.advance(300 / f)
+        ours_sim += 300 / f
+        steps += model.stats["steps"]
+        rejected += model.stats["rejected"]
+    ours_wall = time.perf_counter() - t0
+    print(f"  the core at the default tolerances: {steps / (300 * len(sample)):.1f} accepted steps per cycle "
+          f"({100 * rejected / max(1, steps):.1f} % rejected), {ours_wall / steps * 1e6:.2f} us per step")
+    print(f"  scipy solve_ivp reference on {len(sample)} of the points: {ref_sim / ref_wall:.1f}x real time; "
+          f"the core on the same points {ours_sim / ours_wall:.0f}x: ratio "
+          f"{ref_wall / ours_wall * ours_sim / ref_sim:.0f}x; the whole sweep "
+          f"{simulated / wall / (ref_sim / ref_wall):.0f}x the reference (goal >= 1,000x)   {load()}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps-size", type=int, default=60, help="map size of the step-by-step figures")
+    parser.add_argument("--big", type=int, default=400, help="map size for the 1000 x 1000 projection")
+    parser.add_argument("--skip-big", action="store_true", help="no map beyond 200 x 200")
+    parser.add_argument("--skip-dask", action="store_true", help="no Dask scaling")
+    parser.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
+    parser.add_argument("--compare-size", type=int, default=None,
+                        help="section 2 on an N x N map instead of the default 31 x 61")
+    parser.add_argument("--sections", default="1,2,3,4,5", help="sections to run (default 1,2,3,4,5)")
+    args = parser.parse_args()
+    sections = {int(x) for x in args.sections.split(",")}
+    config = SimConfig()
+    print(f"RIMD maps benchmark on {os.cpu_count()} core(s), {load()}")
+    pk.peterka(config, *grid(2, 3), workers=1)  # JIT from cache
+    if 1 in sections:
+        steps(config, args.steps_size, args.workers)
+    if 2 in sections:
+        agreement(config, args.workers, args.compare_size)
+    if 3 in sections:
+        big(config, args.workers, args.big, args.skip_big)
+    if 4 in sections and not args.skip_dask:
+        dask_scaling(config, args.steps_size)
+    if 5 in sections:
+        single_trajectory(config)
+
+
+if __name__ == "__main__":
+    main()

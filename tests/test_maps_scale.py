@@ -1,0 +1,261 @@
+"""Maps at scale (issue 13): early stopping, the ensemble kernel, and the Dask executor seam.
+
+* The ensemble kernel without early stopping is the fixed-length ``steady_orbit`` run, cell for cell (class
+  and final state), so the fixed-length reference of the agreement test is the same computation as before.
+* Early stopping classifies the Peterka map as the fixed-length run with twice the former cycles does, in
+  >= 99 % of the cells, every differing cell listed in ``summary.json`` with both classes and a much longer
+  run's. The test runs every third gap row of the default 31 x 61 map (11 x 61 = 671 cells, three starts
+  each), to stay fast; ``benchmarks/bench_maps.py`` runs the whole map.
+* Through a real ``dask scheduler`` and two ``dask worker`` processes on loopback (started here, always
+  stopped): ``peterka.csv`` equals the local one byte for byte, also when a worker is killed (SIGKILL) in the
+  middle of the map; ``sweep``, ``bifurcation`` and ``basins`` give the same files as locally; an
+  unreachable scheduler is refused within 10 s naming the address and the reason.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rimd_sim
+from rimd_sim import cli
+from rimd_sim.analysis.dynamics import steady_orbit
+from rimd_sim.core import load_config
+from rimd_sim.core.ensemble import StopRule, run_cells
+from rimd_sim.core.model import _params_vector
+
+SRC = str(Path(rimd_sim.__file__).resolve().parent.parent)
+DASK = str(Path(sys.executable).with_name("dask"))
+
+
+def test_ensemble_without_early_stop_is_the_fixed_length_run():
+    """Nine cells (three gaps x three frequencies, from rest and from a kick): same class and bit-identical
+    final stroboscopic state as ``steady_orbit`` with ``RigModel``."""
+    base = load_config(None)
+    gaps, freqs = [0.0, 1e-3, 2.4e-3], [3.75, 5.0, 7.25]
+    cfgs = [base.with_parameters({"gap": g}) for g in gaps]
+    params = np.array([_params_vector(c.rig, c) for c in cfgs])
+    gi = np.repeat(np.arange(3), 3)
+    ff = np.tile(freqs, 3)
+    for theta_dot0 in (0.0, 0.8):
+        res = run_cells(params, gi, ff, np.zeros(9), np.full(9, theta_dot0),
+                        StopRule(early=False, max_cycles=60 + 36, measure_cycles=36))
+        for i, label in enumerate(res.labels()):
+            orbit = steady_orbit(cfgs[gi[i]], ff[i], theta_dot0=theta_dot0, transient_cycles=60, measure_cycles=36)
+            assert label == orbit.label, (gaps[gi[i]], ff[i])
+            assert tuple(res.final[i]) == orbit.final_state
+            assert res.cycles[i] == 97  # ran to the cap
+
+
+def test_early_stop_stops_settled_motions_early_and_runs_chaos_to_the_cap():
+    """Gap 0: 3.75 Hz (1/1) stops at the first chance; 8.5 Hz (non-periodic) runs to the cap."""
+    cfg = load_config(None, {"gap": 0.0})
+    res = run_cells(_params_vector(cfg.rig, cfg)[None, :], np.zeros(2, dtype=np.int64), np.array([3.75, 8.5]),
+                    np.zeros(2), np.zeros(2), StopRule())
+    assert res.labels() == ["1/1", "chaotic/non-periodic"]
+    assert res.cycles[0] <= 40 and res.cycles[1] == 193
+
+
+def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
+    """Every third gap row of the default map: >= 99 % of the cells (class from rest) as the fixed-length run
+    with twice the former 96 cycles; every differing cell listed in the summary with both classes."""
+    out = tmp_path / "pk"
+    assert cli.main(["peterka", "--gaps", "11", "--compare-fixed", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    comp = summary["comparison"]
+    assert comp["fixed_cycles"] == 192 and summary["cells"] == 11 * 61
+    assert comp["agreement_from_rest"] >= 0.99, comp
+    listed = [c for c in comp["differing_cells"] if c["start"] == "rest"]
+    assert len(listed) == round((1 - comp["agreement_from_rest"]) * summary["cells"])
+    rows = {(round(float(r.split(",")[0]), 6), round(float(r.split(",")[2]), 6)): r.split(",")[4]
+            for r in (out / "peterka.csv").read_text().splitlines()[1:]}
+    for cell in listed:
+        assert cell["early_stop"] != cell["fixed_length"]
+        assert rows[(round(cell["gap_mm"], 6), round(cell["frequency_hz"], 6))] == cell["early_stop"]
+        assert cell["long_run"]  # the verdict of a 10x longer run is given
+    # Most trajectories stopped well before the cap.
+    assert summary["cycles_run"]["mean"] < 0.6 * 192
+
+
+# ---- Dask ---------------------------------------------------------------------------------------------
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Cluster:
+    """A ``dask scheduler`` and ``dask worker`` processes on loopback, each in its own process group."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.tmp = tmp
+        self.procs: list[subprocess.Popen] = []
+        self.workers: list[subprocess.Popen] = []
+        self.env = {**os.environ, "PYTHONPATH": os.pathsep.join([SRC, os.environ.get("PYTHONPATH", "")]),
+                    "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+        self.env.pop("RIMD_DASK_SCHEDULER", None)
+        port = _free_port()
+        self.address = f"tcp://127.0.0.1:{port}"
+        self._start("scheduler", [DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                                  "--no-dashboard", "--no-show"])
+
+    def _start(self, name: str, argv: list[str]) -> subprocess.Popen:
+        log = open(self.tmp / f"{name}-{len(self.procs)}.log", "wb")  # noqa: SIM115 - closed with the process
+        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=self.env, start_new_session=True,
+                                cwd=self.tmp)
+        self.procs.append(proc)
+        return proc
+
+    def add_worker(self) -> subprocess.Popen:
+        proc = self._start("worker", [DASK, "worker", self.address, "--nworkers", "1", "--nthreads", "1",
+                                      "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"])
+        self.workers.append(proc)
+        return proc
+
+    def wait_for_workers(self, n: int, deadline_s: float = 60.0) -> None:
+        from distributed import Client
+
+        with Client(self.address, timeout=deadline_s, set_as_default=False) as client:
+            client.wait_for_workers(n, timeout=deadline_s)
+
+    def stop(self) -> None:
+        """SIGTERM to every process group, SIGKILL to what still runs after 3 s."""
+        for proc in reversed(self.procs):
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGTERM)
+        deadline = time.monotonic() + 3.0
+        for proc in self.procs:
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=10)
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    c = Cluster(tmp_path)
+    try:
+        c.add_worker()
+        c.add_worker()
+        c.wait_for_workers(2)
+        yield c
+    finally:
+        c.stop()
+
+
+PETERKA = ["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "6", "--f-min", "3.5", "--f-max", "8.5",
+           "--freqs", "12", "--transient-cycles", "60", "--measure-cycles", "36"]
+
+
+def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path):
+    """``peterka.csv`` through the cluster equals the local one byte for byte; then again with one of the two
+    workers killed (SIGKILL) after the first row came back: Dask resubmits its tasks, the map is identical."""
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    assert cli.main([*PETERKA, "--out", str(local)]) == 0
+    assert cli.main([*PETERKA, "--scheduler", cluster.address, "--out", str(remote)]) == 0
+    assert (remote / "peterka.csv").read_bytes() == (local / "peterka.csv").read_bytes()
+    assert json.loads((remote / "summary.json").read_text())["where"] == cluster.address
+
+    from rimd_sim.analysis.peterka import peterka, peterka_table
+
+    config = load_config(None)
+    gaps = np.linspace(0, 2.4, 6) * 1e-3
+    freqs = np.linspace(3.5, 8.5, 12)
+    victim = cluster.workers[0]
+    killed_at = []
+
+    def progress(done: int, total: int) -> None:
+        if not killed_at:
+            os.killpg(victim.pid, signal.SIGKILL)
+            killed_at.append((done, total))
+
+    result = peterka(config, gaps, freqs, transient_cycles=60, measure_cycles=36, scheduler=cluster.address,
+                     progress=progress)
+    assert killed_at and killed_at[0][0] < killed_at[0][1]  # killed while rows were still to come
+    assert victim.wait(timeout=10) == -signal.SIGKILL
+    reference = peterka(config, gaps, freqs, transient_cycles=60, measure_cycles=36, workers=1)
+    assert peterka_table(result) == peterka_table(reference)
+
+
+def test_dask_sweep_bifurcation_basins_equal_local(cluster, tmp_path):
+    """The other three verbs accept --scheduler and write the same CSV as locally."""
+    cases = [
+        (["sweep", "--gap-mm", "1", "--f-min", "3", "--f-max", "7", "--f-step", "0.5", "--cycles", "40",
+          "--measure-cycles", "10"], "sweep.csv"),
+        (["sweep", "--gap-mm", "1", "--f-min", "3", "--f-max", "4", "--f-step", "0.5", "--cycles", "40",
+          "--measure-cycles", "10", "--direction", "up"], "sweep.csv"),
+        (["bifurcation", "--f-min", "4.8", "--f-max", "5.0", "--f-step", "0.1", "--transient-cycles", "30",
+          "--sample-cycles", "12"], "bifurcation.csv"),
+        (["basins", "--size", "5", "--transient-cycles", "60", "--measure-cycles", "24"], "basins.csv"),
+    ]
+    for i, (argv, name) in enumerate(cases):
+        local, remote = tmp_path / f"l{i}", tmp_path / f"r{i}"
+        assert cli.main([*argv, "--out", str(local)]) == 0
+        assert cli.main([*argv, "--scheduler", cluster.address, "--out", str(remote)]) == 0
+        assert (remote / name).read_bytes() == (local / name).read_bytes(), argv[0]
+
+
+@pytest.mark.parametrize("how", ["option", "environment"])
+def test_unreachable_scheduler_is_refused_within_10s(tmp_path, how):
+    address = f"tcp://127.0.0.1:{_free_port()}"  # nothing listens there
+    argv = [sys.executable, "-c", "import sys; from rimd_sim.cli import main; sys.exit(main())", *PETERKA,
+            "--out", str(tmp_path / "pk")]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([SRC, os.environ.get("PYTHONPATH", "")])}
+    if how == "option":
+        argv[-2:-2] = ["--scheduler", address]
+    else:
+        env["RIMD_DASK_SCHEDULER"] = address
+    start = time.monotonic()
+    proc = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=60)
+    elapsed = time.monotonic() - start
+    assert proc.returncode == 1
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and address in lines[0] and "cannot reach the Dask scheduler" in lines[0], proc.stderr
+    assert lines[0].split(address, 1)[1].strip(": ")  # a reason follows the address
+    assert elapsed < 10.0, elapsed
+    assert not (tmp_path / "pk").exists()
+
+
+def test_malformed_scheduler_address_is_refused(tmp_path, capsys):
+    assert cli.main([*PETERKA, "--scheduler", "localhost8786", "--out", str(tmp_path / "pk")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "localhost8786" in err and "tcp://HOST:PORT" in err
+
+
+def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path):
+    """A 600 x 700 map (classes drawn from a pattern, not simulated): the .npz holds the classes and codes that
+    give back the labels, and the PNG is drawn as an image with at least one pixel per cell."""
+    from matplotlib.image import imread
+
+    from rimd_sim.analysis.peterka import PeterkaResult, save_peterka_npz
+    from rimd_sim.analysis.plots import plot_peterka
+
+    rows, cols = 600, 700
+    names = np.array(["1/1", "1/2", "no impact", "chaotic/non-periodic", "2/6", "3/7"], dtype=object)
+    i, j = np.mgrid[0:rows, 0:cols]
+    labels = np.stack([names[(i // 40 + j // 50) % 6], names[(i // 40 + j // 50) % 6],
+                       names[(i // 20 + j // 25) % 6]])
+    result = PeterkaResult(np.linspace(0, 3, rows), np.linspace(1.82, 9.1, cols), np.linspace(0, 3, rows),
+                           np.linspace(1, 5, cols), labels, 0.0, 1, 192, np.full(labels.shape, 40), True)
+    save_peterka_npz(result, tmp_path / "pk.npz")
+    data = np.load(tmp_path / "pk.npz")
+    assert data["codes"].shape == (3, rows, cols) and data["codes"].dtype == np.int16
+    assert (data["classes"][data["codes"]] == labels.astype(str)).all()
+    assert data["coexisting"].sum() == result.coexisting.sum() > 0
+    plot_peterka(result, tmp_path / "pk.png", "dense")
+    image = imread(tmp_path / "pk.png")
+    # The axes' extent in pixels: the columns and rows that are not the white margin, legend and labels aside.
+    ink = (image[..., :3] < 0.99).any(axis=2)
+    assert ink.any(axis=1).sum() >= rows and image.shape[1] * 0.6 >= cols  # at least a pixel per cell
