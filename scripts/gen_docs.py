@@ -59,6 +59,7 @@ VERB_PAGES = {
     "basins": "docs/analyses.md",
     "experiment": "docs/analyses.md",
     "analyze": "docs/analyses.md",
+    "pulse": "docs/physics.md",
     "info": "docs/development.md",
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.

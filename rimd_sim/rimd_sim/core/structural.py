@@ -140,7 +140,7 @@ from .kernel import (
     sincos,
 )
 
-__all__ = ["N_STATE", "StructuralModel", "structural_params"]
+__all__ = ["N_STATE", "StructuralModel", "make_model", "structural_params"]
 
 # ---- extra parameters (after the paper kernel's 18) --------------------------------------------------
 (P_AX, P_R1, P_R2, P_M1, P_MU, P_KA, P_CA, P_WA, P_ZA,
@@ -1023,3 +1023,11 @@ def _self_module():
 StructuralModel._kernel = _self_module()
 
 assert N_ISTATE == k.N_ISTATE and N_RECORD == k.N_RECORD and N_TRUTH == k.N_TRUTH
+
+
+def make_model(config, **kwargs):
+    """The model ``structure.model`` selects: :class:`~rimd_sim.core.model.RigModel` (``rigid``, the paper's)
+    or :class:`StructuralModel` (``two_mass``). Keyword arguments go to the model."""
+    if config.rig.structure.model == "two_mass":
+        return StructuralModel(config, **kwargs)
+    return _model_base()(config, **kwargs)
