@@ -119,7 +119,10 @@ def pulse(config: SimConfig, velocity: float, rate: float = 1e6, span: float = P
     if len(peaks) > 1:  # the lowest force between the two largest peaks
         i0, i1 = sorted(sorted(peaks, key=lambda i: -force[i])[:2])
         valley = float(np.min(force[i0:i1 + 1]))
-    after = (t > imp.t_end - imp.t_start) & (t <= imp.t_end - imp.t_start + RING_WINDOW)
+    ring_end = imp.t_end - imp.t_start + RING_WINDOW
+    if len(out.impacts) > 1:  # the hammer can come back (gap 0, re-contact on the ring): stop before it
+        ring_end = min(ring_end, out.impacts[1].t_start - imp.t_start)
+    after = (t > imp.t_end - imp.t_start) & (t < ring_end)
     summary = {
         "velocity_m_s": float(velocity),
         "sample_rate_hz": rate,

@@ -153,8 +153,12 @@ N_FSTATE = k.N_FSTATE
 # Most samples of delta per step while a mode rings near the stop (8 per ringing period); a longer free
 # step is cut to this many samples.
 RING_SAMPLES_MAX = 512
-# A ring below this amplitude (m) cannot reach the stop in any way that matters: no sampling.
-RING_NEGLIGIBLE = 1e-13
+# A ring that moves delta by less than this (m) is not scanned for re-contacts: one it could cause would carry
+# less than k x 1e-10 m = 0.55 mN with the paper's contact stiffness.
+RING_NEGLIGIBLE = 1e-10
+# A mode whose amplitude has decayed below this (m) is set to exactly 0 at the start of a free step (its
+# reading: < 1e-6 N through the mount, < 1e-5 m/s^2 on the accelerometer), so that it costs nothing more.
+RING_SNAP = 1e-15
 
 
 # ======================================================================================================
@@ -190,9 +194,9 @@ def free_modes(y, tau, p):
     up = 0.0
     sm = 0.0
     smp = 0.0
-    if p[P_AX] != 0.0:
+    if p[P_AX] != 0.0 and (y[3] != 0.0 or y[4] != 0.0):
         u, up = ring(y[3], y[4], tau, p[P_WA], p[P_ZA])
-    if p[P_MT] != 0.0:
+    if p[P_MT] != 0.0 and (y[5] != 0.0 or y[6] != 0.0):
         sm, smp = ring(y[5], y[6], tau, p[P_WM], p[P_ZM])
     return u, up, sm, smp
 
@@ -424,16 +428,27 @@ def ring_amplitude(y, p):
 
 
 @_jit_inline
-def ring_period(p):
-    """Shortest period of the ringing modes (s), or inf."""
+def ring_period(p, y):
+    """Shortest period (s) of the modes still ringing by more than :data:`RING_NEGLIGIBLE`, or inf."""
     w = 0.0
-    if p[P_AX] != 0.0:
+    if p[P_AX] != 0.0 and abs(p[P_R2]) * ring_envelope(y[3], y[4], p[P_WA], p[P_ZA]) > RING_NEGLIGIBLE:
         w = p[P_WA]
-    if p[P_MT] != 0.0:
+    if p[P_MT] != 0.0 and ring_envelope(y[5], y[6], p[P_WM], p[P_ZM]) > RING_NEGLIGIBLE:
         w = max(w, p[P_WM])
     if w == 0.0:
         return np.inf
     return TWO_PI / w
+
+
+@_jit_inline
+def snap_quiet_modes(y, p):
+    """Set a mode that has decayed below :data:`RING_SNAP` to exactly 0 (free flight only)."""
+    if (y[3] != 0.0 or y[4] != 0.0) and ring_envelope(y[3], y[4], p[P_WA], p[P_ZA]) < RING_SNAP:
+        y[3] = 0.0
+        y[4] = 0.0
+    if (y[5] != 0.0 or y[6] != 0.0) and ring_envelope(y[5], y[6], p[P_WM], p[P_ZM]) < RING_SNAP:
+        y[5] = 0.0
+        y[6] = 0.0
 
 
 @_jit
@@ -461,18 +476,35 @@ def detect_event(mode, rec, ya, yb, h, Q, p, fs):
             p1 = lg * s1 - p[P_GAP]
             pm = lg * sh - p[P_GAP]
             if max(p0, p1, pm) + 0.5 * abs(p1 - p0) + amp >= 0.0:
-                scan = min(RING_SAMPLES_MAX, int(math.ceil(8.0 * h / ring_period(p))) + 1)
+                scan = min(RING_SAMPLES_MAX, int(math.ceil(8.0 * h / ring_period(p, ya))) + 1)
         if rec == 0:
             if scan > 0:
                 if da > 0.0:  # on the surface (rounding) and moving in
                     return min(1.0, p[P_EVTOL] / h), EV_ENTER
-                glo = da
-                for j in range(1, scan + 1):
-                    x = j / scan
-                    g = event_value(0, mode, ya, Q, h, x, p, fs)
-                    if g > 0.0:
-                        return find_root(0, mode, ya, Q, h, (j - 1) / scan, glo, x, g, p, fs), EV_ENTER
-                    glo = g
+                # Chunks of one ringing period; only a chunk the ring can reach from the pendulum's delta
+                # (bounded by its ends and their spread) is sampled, eight times.
+                nchunk = max(1, (scan + 7) // 8)
+                lg = p[P_L]
+                s0, _ = sincos(ya[0])
+                q0 = lg * s0 - p[P_GAP]
+                for j in range(nchunk):
+                    xa = j / nchunk
+                    xb = (j + 1) / nchunk
+                    thb, _ = dense_theta(ya, Q, h, xb)
+                    sb, _ = sincos(thb)
+                    q1 = lg * sb - p[P_GAP]
+                    if max(q0, q1) + 0.5 * abs(q1 - q0) + amp >= 0.0:
+                        glo = event_value(0, mode, ya, Q, h, xa, p, fs) if j > 0 else da
+                        if glo > 0.0:
+                            return xa, EV_ENTER
+                        for i in range(1, 9):
+                            x = xa + (xb - xa) * i / 8.0
+                            g = event_value(0, mode, ya, Q, h, x, p, fs)
+                            if g > 0.0:
+                                return find_root(0, mode, ya, Q, h, xa + (xb - xa) * (i - 1) / 8.0, glo, x, g,
+                                                 p, fs), EV_ENTER
+                            glo = g
+                    q0 = q1
                 return best, code
             if db > 0.0:
                 if da < 0.0:
@@ -801,7 +833,6 @@ def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
     hmax = p[P_HMAX]
     n_ch = ch_rate.shape[0]
     strobe = st_out.shape[0] > 0
-    hring = RING_SAMPLES_MAX / 8.0 * ring_period(p)
     while True:
         t_next = np.inf
         for c in range(n_ch):
@@ -835,12 +866,14 @@ def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
         if motor_phase(fs, t) > 2048.0:
             motor_rebase(fs, ist, t)
         mode = ist[I_MODE]
+        if mode == FREE:
+            snap_quiet_modes(ya, p)
         if ist[I_NEEDF] == 1:
             rhs(t, ya, mode, p, fs, fa)
             ist[I_NEEDF] = 0
         h = min(fs[F_H], hmax)
-        if mode == FREE and h > hring and ring_amplitude(ya, p) > RING_NEGLIGIBLE:
-            h = hring
+        if mode == FREE and ring_amplitude(ya, p) > RING_NEGLIGIBLE:
+            h = min(h, RING_SAMPLES_MAX / 8.0 * ring_period(p, ya))
         while True:
             limit = fs[F_MTEND] - t
             at_break = False
