@@ -614,24 +614,53 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
             while n < ch_stop[c] and n / rate < tb:
                 ch_out[c, n - ch_base[c]] = 0.0
                 n += 1
+        # Motor phase at the samples as in the paper kernel: exact sin/cos at anchor samples (every 16th index
+        # and the segment's first), a rotation by the fixed angle between samples in between.
         alpha_hz = fs[F_MALPHA]
+        rot_s = 0.0
+        rot_c = 1.0
+        sp = 0.0
+        cp = 1.0
+        if alpha_hz == 0.0 and n < ch_stop[c] and n / rate < tb:
+            rot_s = math.sin(TWO_PI * fs[F_MW0] / rate)
+            rot_c = math.cos(TWO_PI * fs[F_MW0] / rate)
+            seg_first = int(math.floor(fs[F_MT0] * rate)) - 1
+            while seg_first / rate < fs[F_MT0]:
+                seg_first += 1
+            anchor = max(n - n % 16, seg_first)
+            tau = anchor / rate - fs[F_MT0]
+            phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau)
+            sp = math.sin(phi)
+            cp = math.cos(phi)
+            for _ in range(n - anchor):
+                sp, cp = sp * rot_c + cp * rot_s, cp * rot_c - sp * rot_s
+            seg_first_n = seg_first
+        else:
+            seg_first_n = -1
+        started = False
         while n < ch_stop[c]:
             tn = n / rate
             if tn >= tb:
                 break
             tau = tn - fs[F_MT0]
-            phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha_hz * tau * tau)
+            if alpha_hz != 0.0 or (started and (n % 16 == 0 or n == seg_first_n)):
+                phi = TWO_PI * (fs[F_MPHI0] + fs[F_MW0] * tau + 0.5 * alpha_hz * tau * tau)
+                sp = math.sin(phi)
+                cp = math.cos(phi)
+            elif started:
+                sp, cp = sp * rot_c + cp * rot_s, cp * rot_c - sp * rot_s
+            started = True
             w = TWO_PI * (fs[F_MW0] + alpha_hz * tau)
             if qty == Q_CART:
-                ch_out[c, n - ch_base[c]] = p[P_A0] * math.sin(phi)
+                ch_out[c, n - ch_base[c]] = p[P_A0] * sp
             elif qty == Q_RIMD:
                 th, om = dense_theta(ya, Q, h, (tn - ta) / h)
                 s_, _ = sincos(th)
-                ch_out[c, n - ch_base[c]] = p[P_L] * s_ + p[P_A0] * math.sin(phi)
+                ch_out[c, n - ch_base[c]] = p[P_L] * s_ + p[P_A0] * sp
             else:
                 th, om, u, up, sm, smp = state_at(mode, ya, Q, h, (tn - ta) / h, p)
                 ch_out[c, n - ch_base[c]] = sample_quantity(qty, mode, th, om, u, up, sm, smp, p, fs, tn, w,
-                                                            TWO_PI * alpha_hz, math.sin(phi), math.cos(phi))
+                                                            TWO_PI * alpha_hz, sp, cp)
             n += 1
         ch_next[c] = n
     n = tr_next[0]
