@@ -119,10 +119,13 @@ def pulse(config: SimConfig, velocity: float, rate: float = 1e6, span: float = P
     if len(peaks) > 1:  # the lowest force between the two largest peaks
         i0, i1 = sorted(sorted(peaks, key=lambda i: -force[i])[:2])
         valley = float(np.min(force[i0:i1 + 1]))
-    ring_end = imp.t_end - imp.t_start + RING_WINDOW
-    if len(out.impacts) > 1:  # the hammer can come back (gap 0, re-contact on the ring): stop before it
-        ring_end = min(ring_end, out.impacts[1].t_start - imp.t_start)
-    after = (t > imp.t_end - imp.t_start) & (t < ring_end)
+    # The ringing after the impact: RING_WINDOW from its end. The ring itself can push the front mass back
+    # onto the sensor (small re-contacts at gap 0); the window starts after the last of those within it.
+    ring_start = imp.t_end
+    for later in out.impacts[1:]:
+        if later.t_start < ring_start + RING_WINDOW:
+            ring_start = later.t_end
+    after = (t > ring_start - imp.t_start) & (t <= ring_start - imp.t_start + RING_WINDOW)
     summary = {
         "velocity_m_s": float(velocity),
         "sample_rate_hz": rate,

@@ -479,8 +479,9 @@ def detect_event(mode, rec, ya, yb, h, Q, p, fs):
                 scan = min(RING_SAMPLES_MAX, int(math.ceil(8.0 * h / ring_period(p, ya))) + 1)
         if rec == 0:
             if scan > 0:
-                if da > 0.0:  # on the surface (rounding) and moving in
+                if da > 0.0 and dda > 0.0:  # on the surface (rounding) and moving in
                     return min(1.0, p[P_EVTOL] / h), EV_ENTER
+                da = min(da, 0.0)  # on the surface (rounding) but moving out: not a contact
                 # Chunks of one ringing period; only a chunk the ring can reach from the pendulum's delta
                 # (bounded by its ends and their spread) is sampled, eight times.
                 nchunk = max(1, (scan + 7) // 8)
