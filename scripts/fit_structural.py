@@ -31,6 +31,7 @@ RESTITUTION_TARGET = 0.2242
 
 
 def steady(cfg, f: float, seconds: float = 20.0):
+    """Largest peak force and median impact velocity over the last 5 s of ``seconds`` from rest at ``f``."""
     c = cfg.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
     impacts = make_model(c, channels=False, truth=False).advance(seconds).impacts
     last = [i for i in impacts if i.t_start > seconds - 5.0]
@@ -38,6 +39,7 @@ def steady(cfg, f: float, seconds: float = 20.0):
 
 
 def evaluate(cfg, ka: float, km: float, extra: dict | None = None) -> dict:
+    """The fitted figures for one parameter set."""
     c = cfg.with_parameters({"structure.axial_stiffness": ka, "structure.mount_stiffness": km, **(extra or {})})
     fa, va = steady(c, 3.75)
     fb, _ = steady(c, 7.25)
@@ -50,6 +52,7 @@ def evaluate(cfg, ka: float, km: float, extra: dict | None = None) -> dict:
 
 
 def main() -> None:
+    """Run the fit and print every evaluation and the best."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default=None, help="start from this preset (default config/structural.yaml)")
     ap.add_argument("--maxiter", type=int, default=60)
@@ -78,7 +81,7 @@ def main() -> None:
         targets["e"] = RESTITUTION_TARGET
 
     def extra(x):
-        return {name: 10 ** v for name, v in zip(names, x[2:])}
+        return {name: 10 ** v for name, v in zip(names, x[2:], strict=True)}
 
     def cost(x):
         try:
@@ -90,7 +93,8 @@ def main() -> None:
         if args.dip is not None:
             c += max(0.0, r["dip"] - args.dip) ** 2
         print(f"  ka={r['ka']:.4g} km={r['km']:.4g}  F_A={r['F_A']:.1f} F_B={r['F_B']:.1f} "
-              f"ratio={r['ratio']:.3f} e={r['e']:.3f} dip={r['dip']:.2f} ring={r['ring_hz']:.0f} Hz {extra(x)} cost={c:.4g}", flush=True)
+              f"ratio={r['ratio']:.3f} e={r['e']:.3f} dip={r['dip']:.2f} ring={r['ring_hz']:.0f} Hz {extra(x)} "
+              f"cost={c:.4g}", flush=True)
         return c
 
     simplex = [list(x0)] + [[v + (0.3 if i == j else 0.0) for j, v in enumerate(x0)] for i in range(len(x0))]

@@ -336,9 +336,10 @@ class RigModel:
         while True:
             self._is[k.I_IMPOUT] = 0
             self._is[k.I_STROUT] = 0
-            status = self._kernel.advance(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q, float(t_stop),
-                               self._ch_rate, self._ch_qty, self._ch_next, stops, first, ch_out,
-                               float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
+            status = self._kernel.advance(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q,
+                                          float(t_stop), self._ch_rate, self._ch_qty, self._ch_next, stops, first,
+                                          ch_out, float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out,
+                                          imp_out, st_out)
             impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
             strobe.extend(StroboPoint(float(r[0]), float(r[1]), float(r[2]), int(r[3]))
                           for r in st_out[: self._is[k.I_STROUT]])
@@ -364,7 +365,8 @@ class RigModel:
         """End the current step at the current time; returns an impact completed exactly now, if any."""
         buf = np.empty((2, k.N_RECORD))
         self._is[k.I_IMPOUT] = 0
-        if not self._kernel.truncate(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q, float(self._time), buf):
+        if not self._kernel.truncate(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q,
+                                     float(self._time), buf):
             raise IntegrationError(f"at t = {float(self._time):.9f} s: {_STATUS_MESSAGES[k.ST_ZENO]}")
         return [Impact(*_record(r)) for r in buf[: self._is[k.I_IMPOUT]]]
 

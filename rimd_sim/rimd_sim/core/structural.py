@@ -45,6 +45,8 @@ import numpy as np
 
 from . import kernel as k
 from .kernel import (
+    _E,
+    _P,
     CONTACT,
     EV_CLOSE,
     EV_ENTER,
@@ -123,9 +125,7 @@ from .kernel import (
     TWO_PI,
     ZENO_MAX_EVENTS,
     ZENO_WINDOW,
-    _E,
     _jit,
-    _P,
     _jit_inline,
     cart_accel,
     cart_kinematics,
@@ -1089,8 +1089,11 @@ assert N_ISTATE == k.N_ISTATE and N_RECORD == k.N_RECORD and N_TRUTH == k.N_TRUT
 
 
 def make_model(config, **kwargs):
-    """The model ``structure.model`` selects: :class:`~rimd_sim.core.model.RigModel` (``rigid``, the paper's)
-    or :class:`StructuralModel` (``two_mass``). Keyword arguments go to the model."""
+    """The model ``structure.model`` selects.
+
+    :class:`~rimd_sim.core.model.RigModel` for ``rigid`` (the paper's), :class:`StructuralModel` for
+    ``two_mass``; keyword arguments go to the model.
+    """
     if config.rig.structure.model == "two_mass":
         return StructuralModel(config, **kwargs)
     return _model_base()(config, **kwargs)

@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd pulse``."""
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
     parser.add_argument("--velocity", type=float, required=True,
-                        help="impact velocity (m/s, > 0, <= 10); 0.066 m/s is the structural preset's at 3.75 Hz, gap 0")
+                        help="impact velocity (m/s, > 0, <= 10); the structural preset's at 3.75 Hz, gap 0: 0.066")
     parser.add_argument("--rate", type=float, default=1e6, help="sample rate (Hz), default 1e6 (1 MHz)")
     parser.add_argument("--out", type=Path, default=Path("out/pulse"), help="output directory")
 
