@@ -52,6 +52,31 @@ def test_rigid_two_mass_reduces_to_the_paper_model(freq, gap):
     np.testing.assert_allclose(np.array(got, dtype=float), np.array(ref, dtype=float), rtol=1e-6, atol=1e-9)
 
 
+def test_rigid_two_mass_samples_the_paper_models_channels():
+    """In the rigid special case the four channels and the truth are the paper model's too (5 s, 3.75 Hz)."""
+    cfg = at_frequency(SimConfig(), 3.75)
+    ref = RigModel(cfg).advance(5.0)
+    got = StructuralModel(cfg.with_parameters({"structure.model": "two_mass"})).advance(5.0)
+    for name, (first, samples) in ref.channels.items():
+        assert got.channels[name][0] == first
+        np.testing.assert_allclose(got.channels[name][1], samples, rtol=1e-9, atol=1e-9 * np.abs(samples).max())
+    np.testing.assert_allclose(got.truth[1], ref.truth[1], rtol=1e-9, atol=1e-9)
+
+
+def test_reconfigured_to_rigid_while_ringing_runs_on(structural):
+    """Changing the link and the mount to rigid right after an impact (modes still ringing) keeps the model
+    running, with the axial and mount states at exactly 0 from the next free step on."""
+    model = StructuralModel(at_frequency(structural, 3.75), channels=False, truth=False)
+    t = Fraction(0)
+    while not model.advance(t := t + Fraction(1, 1000)).impacts:  # stop within 1 ms of the first impact's end
+        assert t < 2
+    assert np.any(model._ya[3:] != 0.0)
+    model.reconfigure(model.config.with_parameters({"structure.axial_stiffness": 0.0,
+                                                    "structure.mount_stiffness": 0.0}))
+    later = model.advance(t + 2).impacts
+    assert len(later) >= 5 and np.all(model._ya[3:] == 0.0)
+
+
 def test_stiff_link_and_mount_tend_to_the_paper_model():
     """The rigid case is also the limit: with the link and the mount 1e10 N/m the pulse's contact impulse
     and duration come within 2 % of the rigid model's (the peak differs more: the dashpot's jump of c v at

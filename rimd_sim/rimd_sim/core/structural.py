@@ -442,11 +442,14 @@ def ring_period(p, y):
 
 @_jit_inline
 def snap_quiet_modes(y, p):
-    """Set a mode that has decayed below :data:`RING_SNAP` to exactly 0 (free flight only)."""
-    if (y[3] != 0.0 or y[4] != 0.0) and ring_envelope(y[3], y[4], p[P_WA], p[P_ZA]) < RING_SNAP:
+    """Set a mode that has decayed below :data:`RING_SNAP` to exactly 0 (free flight only).
+
+    A rigid link or mount (after a reconfiguration) has its component at 0 too.
+    """
+    if (y[3] != 0.0 or y[4] != 0.0) and (p[P_AX] == 0.0 or ring_envelope(y[3], y[4], p[P_WA], p[P_ZA]) < RING_SNAP):
         y[3] = 0.0
         y[4] = 0.0
-    if (y[5] != 0.0 or y[6] != 0.0) and ring_envelope(y[5], y[6], p[P_WM], p[P_ZM]) < RING_SNAP:
+    if (y[5] != 0.0 or y[6] != 0.0) and (p[P_MT] == 0.0 or ring_envelope(y[5], y[6], p[P_WM], p[P_ZM]) < RING_SNAP):
         y[5] = 0.0
         y[6] = 0.0
 
