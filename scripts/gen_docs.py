@@ -61,6 +61,7 @@ VERB_PAGES = {
     "analyze": "docs/analyses.md",
     "identify": "docs/identification.md",
     "fit-table": "docs/identification.md",
+    "pulse": "docs/physics.md",
     "info": "docs/development.md",
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.

@@ -39,6 +39,7 @@ __all__ = [
     "MotorParams",
     "RigParams",
     "SimConfig",
+    "StructureParams",
     "find_config_file",
     "flatten_parameters",
     "load_config",
@@ -75,6 +76,38 @@ class ContactParams:
 
 
 @dataclass(frozen=True)
+class StructureParams:
+    """Optional structural contact model (issue 15, docs/physics.md "Structural model").
+
+    ``model = "rigid"`` is the paper's single-mass hammer (the default). ``"two_mass"`` splits the hammer
+    into the impact device (front, ``impactor_mass``) and the aluminium coupling that carries the
+    accelerometer (rear, the rest of ``mass``), joined by the hammer's axial stiffness and damping, and puts
+    the force sensor's top (``sensor_mass``) on a compliant mount. A stiffness of 0 means rigid.
+
+    Attributes:
+        model: ``rigid`` or ``two_mass``.
+        impactor_mass: Front mass (kg), less than ``mass``.
+        axial_stiffness: Axial stiffness of the hammer between its two masses (N/m); 0 = rigid link.
+        axial_damping_ratio: Damping ratio of the hammer's axial mode (< 1).
+        sensor_mass: Moving mass of the force sensor's top and impact cap (kg).
+        mount_stiffness: Stiffness of the force sensor and its mount on the cart (N/m); 0 = rigid mount.
+        mount_damping_ratio: Damping ratio of the sensor-on-mount mode (< 1).
+    """
+
+    model: str = "rigid"
+    impactor_mass: float = 0.06
+    axial_stiffness: float = 0.0
+    axial_damping_ratio: float = 0.05
+    sensor_mass: float = 0.01
+    mount_stiffness: float = 0.0
+    mount_damping_ratio: float = 0.05
+
+
+#: Names of the contact models (``structure.model``).
+STRUCTURE_MODELS = ("rigid", "two_mass")
+
+
+@dataclass(frozen=True)
 class RigParams:
     """Mechanical parameters of the RIMD on its cart (SI units).
 
@@ -95,6 +128,7 @@ class RigParams:
     damping_ratio: float = 0.08
     gravity: float = 9.81
     contact: ContactParams = field(default_factory=ContactParams)
+    structure: StructureParams = field(default_factory=StructureParams)
 
     @property
     def length(self) -> float:
@@ -412,6 +446,29 @@ PARAMETERS: dict[str, ParameterSpec] = {
     "contact.min_impact_velocity": _between(
         "floor of the Lankarani-Nikravesh impact velocity (m/s)", lambda c: c.rig.contact.min_impact_velocity,
         1e-6, 10.0),
+    # Structural contact model (issue 15). Stiffness 0 = rigid; the upper bounds keep the fast modes within
+    # what the integrator resolves affordably (a 1e12 N/m link on 1 g would need sub-ns steps).
+    "structure.model": ParameterSpec(
+        "str", "must be one of: " + ", ".join(STRUCTURE_MODELS),
+        "contact model: rigid (the paper's single-mass hammer) or two_mass (axial mode and sensor mount)",
+        lambda v: v in STRUCTURE_MODELS, lambda c: c.rig.structure.model, choices=STRUCTURE_MODELS),
+    "structure.impactor_mass": _between(
+        "front (impact device) mass of the two-mass hammer (kg), < mass", lambda c: c.rig.structure.impactor_mass,
+        1e-3, 1000.0),
+    "structure.axial_stiffness": ParameterSpec(
+        "float", "must be 0 (rigid) or >= 1000 and <= 1e+10", "axial stiffness of the hammer (N/m), 0 = rigid",
+        lambda v: v == 0.0 or 1e3 <= v <= 1e10, lambda c: c.rig.structure.axial_stiffness, 0.0, 1e10),
+    "structure.axial_damping_ratio": ParameterSpec(
+        "float", "must be >= 0 and < 1", "damping ratio of the hammer's axial mode", lambda v: 0.0 <= v < 1.0,
+        lambda c: c.rig.structure.axial_damping_ratio, 0.0, 0.999),
+    "structure.sensor_mass": _between(
+        "moving mass of the force sensor's top (kg)", lambda c: c.rig.structure.sensor_mass, 1e-4, 10.0),
+    "structure.mount_stiffness": ParameterSpec(
+        "float", "must be 0 (rigid) or >= 1000 and <= 1e+10", "stiffness of the force sensor on its mount (N/m), "
+        "0 = rigid", lambda v: v == 0.0 or 1e3 <= v <= 1e10, lambda c: c.rig.structure.mount_stiffness, 0.0, 1e10),
+    "structure.mount_damping_ratio": ParameterSpec(
+        "float", "must be >= 0 and < 1", "damping ratio of the sensor-on-mount mode", lambda v: 0.0 <= v < 1.0,
+        lambda c: c.rig.structure.mount_damping_ratio, 0.0, 0.999),
     "motor.max_frequency": _positive("highest motor frequency accepted (Hz)", lambda c: c.motor.max_frequency, 1000.0),
     "motor.ramp_rate": _positive("default ramp rate of the motor frequency (Hz/s)", lambda c: c.motor.ramp_rate,
                                  MAX_RAMP_RATE),
@@ -468,6 +525,15 @@ def _build(v: Mapping[str, Any]) -> SimConfig:
         restitution=v["contact.restitution"],
         min_impact_velocity=v["contact.min_impact_velocity"],
     )
+    structure = StructureParams(
+        model=v["structure.model"],
+        impactor_mass=v["structure.impactor_mass"],
+        axial_stiffness=v["structure.axial_stiffness"],
+        axial_damping_ratio=v["structure.axial_damping_ratio"],
+        sensor_mass=v["structure.sensor_mass"],
+        mount_stiffness=v["structure.mount_stiffness"],
+        mount_damping_ratio=v["structure.mount_damping_ratio"],
+    )
     rig = RigParams(
         gap=v["gap"],
         mass=v["mass"],
@@ -476,7 +542,11 @@ def _build(v: Mapping[str, Any]) -> SimConfig:
         damping_ratio=v["damping_ratio"],
         gravity=v["gravity"],
         contact=contact,
+        structure=structure,
     )
+    if structure.model == "two_mass" and structure.axial_stiffness > 0.0 and structure.impactor_mass >= rig.mass:
+        raise ConfigError("structure.impactor_mass", structure.impactor_mass,
+                          f"must be < mass = {rig.mass:g} kg (the rest of the hammer is the rear mass)")
     if rig.gap >= 0.5 * rig.length:
         raise ConfigError("gap", rig.gap, f"must be < half the pendulum length l/2 = {0.5 * rig.length:.6g} m")
     motor = MotorParams(

@@ -194,15 +194,24 @@ class RigModel:
         True
     """
 
+    #: The compiled kernel (a module with ``advance``, ``truncate`` and ``resync``) and its state size; the
+    #: structural model (:mod:`rimd_sim.core.structural`) subclasses with its own.
+    _kernel = k
+    _n_state = 3
+    _n_fstate = k.N_FSTATE
+
+    def _params(self, config: SimConfig) -> np.ndarray:
+        return _params_vector(config.rig, config)
+
     def __init__(self, config: SimConfig, *, channels: bool = True, truth: bool = True, strobe: bool = False):
         self._config = config
-        self._p = _params_vector(config.rig, config)
-        self._fs = np.zeros(k.N_FSTATE)
+        self._p = self._params(config)
+        self._fs = np.zeros(self._n_fstate)
         self._is = np.zeros(k.N_ISTATE, dtype=np.int64)
-        self._ya = np.zeros(3)
-        self._yb = np.zeros(3)
-        self._fa = np.zeros(3)
-        self._Q = np.zeros((3, 4))
+        self._ya = np.zeros(self._n_state)
+        self._yb = np.zeros(self._n_state)
+        self._fa = np.zeros(self._n_state)
+        self._Q = np.zeros((self._n_state, 4))
         self._time = Fraction(0)
         self._want_channels = channels
         self._want_truth = truth
@@ -224,7 +233,8 @@ class RigModel:
         fs, ist = self._fs, self._is
         fs[:] = 0.0
         ist[:] = 0
-        self._ya[:] = (cfg.initial_theta, cfg.initial_theta_dot, 0.0)
+        self._ya[:] = 0.0
+        self._ya[:3] = (cfg.initial_theta, cfg.initial_theta_dot, 0.0)
         self._yb[:] = self._ya
         fs[k.F_H] = min(1e-4, cfg.integrator.max_step)
         fs[k.F_HFREE] = cfg.integrator.max_step
@@ -240,7 +250,7 @@ class RigModel:
             k.motor_command(fs, ist, 0.0, cfg.motor.initial_setpoint, cfg.motor.ramp_rate)
         ist[k.I_STRK] = 0  # phase starts at 0: the first crossing is at t = 0
         buf = np.zeros((1, k.N_RECORD))
-        k.resync(self._p, fs, ist, self._ya, self._yb, buf)
+        self._kernel.resync(self._p, fs, ist, self._ya, self._yb, buf)
 
     @property
     def config(self) -> SimConfig:
@@ -326,9 +336,10 @@ class RigModel:
         while True:
             self._is[k.I_IMPOUT] = 0
             self._is[k.I_STROUT] = 0
-            status = k.advance(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q, float(t_stop),
-                               self._ch_rate, self._ch_qty, self._ch_next, stops, first, ch_out,
-                               float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
+            status = self._kernel.advance(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q,
+                                          float(t_stop), self._ch_rate, self._ch_qty, self._ch_next, stops, first,
+                                          ch_out, float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out,
+                                          imp_out, st_out)
             impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
             strobe.extend(StroboPoint(float(r[0]), float(r[1]), float(r[2]), int(r[3]))
                           for r in st_out[: self._is[k.I_STROUT]])
@@ -354,14 +365,15 @@ class RigModel:
         """End the current step at the current time; returns an impact completed exactly now, if any."""
         buf = np.empty((2, k.N_RECORD))
         self._is[k.I_IMPOUT] = 0
-        if not k.truncate(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q, float(self._time), buf):
+        if not self._kernel.truncate(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q,
+                                     float(self._time), buf):
             raise IntegrationError(f"at t = {float(self._time):.9f} s: {_STATUS_MESSAGES[k.ST_ZENO]}")
         return [Impact(*_record(r)) for r in buf[: self._is[k.I_IMPOUT]]]
 
     def _resync(self) -> list[Impact]:
         buf = np.empty((2, k.N_RECORD))
         self._is[k.I_IMPOUT] = 0
-        k.resync(self._p, self._fs, self._is, self._ya, self._yb, buf)
+        self._kernel.resync(self._p, self._fs, self._is, self._ya, self._yb, buf)
         return [Impact(*_record(r)) for r in buf[: self._is[k.I_IMPOUT]]]
 
     def set_motor_frequency(self, frequency_hz: float, ramp_rate: float | None = None) -> list[Impact]:
@@ -432,7 +444,7 @@ class RigModel:
             raise CommandError("sample rates cannot change while the model runs; restart it with the new rates")
         done = self._truncate()
         self._config = config
-        self._p = _params_vector(config.rig, config)
+        self._p = self._params(config)
         return done + self._resync()
 
 

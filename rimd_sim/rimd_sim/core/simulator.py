@@ -83,7 +83,9 @@ class RigSimulator:
 
     def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False) -> None:
         self._config = config
-        self._model = RigModel(config, channels=True, truth=truth, strobe=strobe)
+        from .structural import make_model  # the model structure.model selects (issue 15)
+
+        self._model = make_model(config, channels=True, truth=truth, strobe=strobe)
         self._instruments = {ch.name: Instrument(ch, noise=config.noise_enabled, seed=config.seed)
                              for ch in config.channels}
         self._queue: list[tuple[Fraction, int, str, Any]] = []
@@ -155,6 +157,9 @@ class RigSimulator:
         for key in params:
             if key.endswith(".sample_rate"):
                 raise CommandError(f"parameter '{key}' cannot change while the rig runs; restart with the new rate")
+            if key == "structure.model" and params[key] != self._config.rig.structure.model:
+                raise CommandError("parameter 'structure.model' cannot change while the rig runs; restart with "
+                                   "the other model")
             if key == "seed":
                 raise CommandError("parameter 'seed' cannot change while the rig runs; restart with the new seed")
         del config
