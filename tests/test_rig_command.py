@@ -74,3 +74,28 @@ def test_rig_refuses_a_bad_rerun_section(ros_processes, tmp_path, repo_root):
     rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--config", str(bad), name="rimd_rig_badrerun")
     assert rig.wait(30) == 1
     assert "unknown sink 'hologram'" in rig.output() and "running" not in rig.output()
+
+
+def test_a_section_ros_would_not_apply_is_refused_and_a_wildcard_one_is_applied(ros_processes, tmp_path):
+    """Hypothesis: ROS applies a parameter-file section only to the node whose fully qualified name it matches,
+    and says nothing otherwise; a plain ``rimd_simulator:`` key is ``/rimd_simulator``, not the simulator in
+    ``/rig``. Before this test the presets used that key and the node silently ran with its defaults. Now the
+    node and ``rimd rig`` refuse such a file naming the section and the key that works, and the presets'
+    ``/**/rimd_simulator`` key is applied (the node reports the file's gap)."""
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n")
+    node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(plain))
+    assert node.wait(60) == 2, node.tail()
+    assert (f"parameter file {plain}: section 'rimd_simulator' is meant for rimd_simulator but ROS applies it only "
+            "to a node named /rimd_simulator, not to /rig/rimd_simulator; name the section '/**/rimd_simulator'"
+            in node.output()), node.tail()
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--config", str(plain), "--no-record", "--no-rerun",
+                                     name="rimd_rig_plain")
+    assert rig.wait(30) == 1
+    assert "section 'rimd_simulator' is meant for rimd_simulator" in rig.output() and "running" not in rig.output()
+
+    wildcard = tmp_path / "wildcard.yaml"
+    wildcard.write_text("/**/rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n")
+    node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(wildcard),
+                                    "-p", "start_paused:=true")
+    node.wait_for_output(r"rig ready: gap 1 mm", timeout=60)

@@ -2,7 +2,7 @@
 
 The configuration is read from the same ROS 2 parameter YAML the simulator node reads::
 
-    rimd_simulator:
+    /**/rimd_simulator:
       ros__parameters:
         gap: 0.0
         contact:
@@ -43,6 +43,8 @@ __all__ = [
     "find_config_file",
     "flatten_parameters",
     "load_config",
+    "misapplied_section",
+    "misapplied_section_message",
     "read_ros_parameters",
 ]
 
@@ -653,6 +655,32 @@ def read_ros_parameters(path: str | Path, node: str = NODE_NAME) -> dict[str, An
     if not found:
         raise ConfigError("config file", str(path), f"has no '{node}: ros__parameters:' section")
     return flat
+
+
+def misapplied_section(doc: Any, node: str, fqn: str) -> str | None:
+    """The key of a section of a parameter-file document meant for ``node`` that ROS does not apply to ``fqn``.
+
+    ROS applies a section to the node whose fully qualified name it matches (``/**``, ``/**/NAME``,
+    ``/NS/NAME``); a key without a leading slash is in the root namespace. So a plain ``rimd_simulator:``
+    section does not reach the simulator node, which runs in ``/rig``, and ROS says nothing: the node would run
+    with its defaults. Keys with wildcards are not judged. Returns the first such key, or None.
+    """
+    if not isinstance(doc, Mapping):
+        return None
+    for key in doc:
+        if not isinstance(key, str) or "*" in key:
+            continue
+        full = key if key.startswith("/") else "/" + key
+        if full.rsplit("/", 1)[-1] == node and full != fqn:
+            return key
+    return None
+
+
+def misapplied_section_message(path: str | Path, key: str, node: str, fqn: str) -> str:
+    """The refusal for :func:`misapplied_section`: what is wrong and the two keys that work."""
+    full = key if key.startswith("/") else "/" + key
+    return (f"parameter file {path}: section '{key}' is meant for {node} but ROS applies it only to a node "
+            f"named {full}, not to {fqn}; name the section '/**/{node}' (any namespace) or '{fqn}'")
 
 
 def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> SimConfig:

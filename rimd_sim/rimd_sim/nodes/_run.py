@@ -17,13 +17,16 @@ while the node is still loading also ends in a clean exit.
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import rclpy
+import yaml
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from rimd_sim.core.config import misapplied_section, misapplied_section_message
 from rimd_sim.nodes._stop import StopRequest, install_stop_handlers
 
 #: Longest time between a stop request and the loop noticing it (s). rcl_wait cannot be interrupted by a
@@ -35,6 +38,24 @@ def spin_until_stopped(executor: Executor, stop: StopRequest, done: Callable[[],
     context = executor.context
     while not stop.is_set() and context.ok() and not (done is not None and done()):
         executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+
+
+def params_file_problem(node: Node, args: Sequence[str]) -> str | None:
+    """Why a ``--params-file`` of ``args`` has a section meant for ``node`` that ROS does not apply to it, or None.
+
+    ROS says nothing then and the node would run with its defaults: it refuses to start instead
+    (:func:`rimd_sim.core.config.misapplied_section`).
+    """
+    fqn, base = node.get_fully_qualified_name(), node.get_name()
+    for path in [args[i + 1] for i, arg in enumerate(args[:-1]) if arg == "--params-file"]:
+        try:
+            doc = yaml.safe_load(Path(path).read_text())
+        except (OSError, yaml.YAMLError):
+            continue   # rcl read it (or refused it) when the node was made
+        key = misapplied_section(doc, base, fqn)
+        if key is not None:
+            return misapplied_section_message(path, key, base, fqn)
+    return None
 
 
 def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseException], ...], *,
@@ -68,6 +89,10 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
             node = make_node()
         except (*refused, rclpy.exceptions.ParameterException) as exc:
             print(f"{name}: {refused_prefix}{exc}", file=sys.stderr)
+            return refused_status
+        problem = params_file_problem(node, sys.argv if args is None else args)
+        if problem:
+            print(f"{name}: {problem}", file=sys.stderr)
             return refused_status
         runner.add_node(node)
         if not stop.is_set():

@@ -19,8 +19,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from rimd_sim.cli import CommandError
 from rimd_sim.core import ConfigError, load_config
-from rimd_sim.core.config import find_config_file, read_ros_parameters
+from rimd_sim.core.config import (find_config_file, misapplied_section, misapplied_section_message,
+                                  read_ros_parameters)
 
 
 @dataclass(frozen=True)
@@ -30,6 +32,12 @@ class RigNode:
     name: str
     entry: str
     consumer: bool
+    namespace: str = "/"
+
+    @property
+    def fqn(self) -> str:
+        """The node's fully qualified name, which a section of the parameter file must match (or a wildcard)."""
+        return self.namespace.rstrip("/") + "/" + self.name
 
 
 #: The nodes in start order (stopped in reverse). Consumers start before the simulator.
@@ -37,8 +45,8 @@ class RigNode:
 #: subscribe to every rig topic; it may miss the first blocks (it reports gaps).
 RIG_NODES = (
     RigNode("rimd_recorder", "recorder", consumer=True),
-    RigNode("rimd_rerun", "rerun", consumer=False),
-    RigNode("rimd_simulator", "simulator", consumer=False),
+    RigNode("rimd_rerun", "rerun", consumer=False, namespace="/rig"),
+    RigNode("rimd_simulator", "simulator", consumer=False, namespace="/rig"),
 )
 
 #: Topics every consumer subscribes to before the simulator is resumed.
@@ -83,8 +91,14 @@ def _section(config_path: Path, name: str) -> dict | None:
 def _plan(args: argparse.Namespace, config_path: Path) -> list[tuple[RigNode, list[str]]]:
     """The nodes to start with their extra ROS arguments; raises ConfigError for a bad recorder section."""
     plan = []
+    import yaml
+
+    doc = yaml.safe_load(config_path.read_text())
     for node in RIG_NODES:
         extra: list[str] = []
+        key = misapplied_section(doc, node.name, node.fqn)
+        if key is not None:
+            raise CommandError(misapplied_section_message(config_path, key, node.name, node.fqn))
         if node.name == "rimd_recorder":
             section = _section(config_path, node.name)
             if args.no_record or section is None or not section.get("enabled", True):
