@@ -21,8 +21,7 @@ from pathlib import Path
 
 from rimd_sim.cli import CommandError
 from rimd_sim.core import ConfigError, load_config
-from rimd_sim.core.config import (find_config_file, misapplied_section, misapplied_section_message,
-                                  read_ros_parameters)
+from rimd_sim.core.config import find_config_file, misapplied_section, misapplied_section_message, read_ros_parameters
 
 
 @dataclass(frozen=True)
