@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core import SimConfig
+from rimd_sim.core.structural import make_model
 from rimd_sim.core.errors import ConfigError
 
 from .dynamics import classify, nondimensional
@@ -58,7 +59,7 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
     order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
     rig = cfg.rig
-    model = RigModel(cfg, channels=False, truth=False, strobe=True)
+    model = make_model(cfg, channels=False, truth=False, strobe=True)
     points = []
     for i, f in enumerate(order):
         if i:

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core import SimConfig
+from rimd_sim.core.structural import make_model
 from rimd_sim.core.errors import ConfigError
 
 __all__ = [
@@ -116,6 +117,19 @@ def classify(u: np.ndarray, v: np.ndarray, impacts_per_cycle: np.ndarray, *, max
     return CHAOTIC, 0, 0, spread
 
 
+def require_rigid(config: SimConfig, what: str) -> None:
+    """Refuse the structural model (``structure.model: two_mass``) in an analysis built on the paper's kernel.
+
+    Raises:
+        ConfigError: Naming ``structure.model`` and the analysis.
+    """
+    if config.rig.structure.model != "rigid":
+        raise ConfigError("structure.model", config.rig.structure.model,
+                          f"not supported by {what}, which integrates the paper's (rigid) model; use "
+                          "structure.model: rigid, or rimd sweep / bifurcation / poincare (without --lyapunov), "
+                          "which run the structural model")
+
+
 def constant_frequency(config: SimConfig, frequency_hz: float, theta0: float = 0.0, theta_dot0: float = 0.0
                        ) -> SimConfig:
     """``config`` with the motor at ``frequency_hz`` from t = 0 (no ramp) and the hammer at the given state."""
@@ -148,7 +162,7 @@ def steady_orbit(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0,
                           "need transient_cycles >= 0 and measure_cycles >= 3")
     f = float(frequency_hz)
     cfg = constant_frequency(config, f, theta0, theta_dot0)
-    model = RigModel(cfg, channels=False, truth=False, strobe=True)
+    model = make_model(cfg, channels=False, truth=False, strobe=True)
     if transient_cycles:
         model.advance((transient_cycles + 0.5) / f)
     # The stroboscopic point of cycle c is the state at t = c / f, when cycle c starts. Window: the points of

@@ -49,7 +49,7 @@ import numpy as np
 from rimd_sim.core import RigModel, SimConfig
 from rimd_sim.core.errors import ConfigError
 
-from .dynamics import CHAOTIC, constant_frequency, steady_orbit
+from .dynamics import CHAOTIC, constant_frequency, require_rigid, steady_orbit
 
 __all__ = ["CHAOS_THRESHOLD", "LyapunovResult", "is_chaotic", "largest_lyapunov"]
 
@@ -110,6 +110,7 @@ def largest_lyapunov(config: SimConfig, frequency_hz: float, *, theta0: float = 
         raise ConfigError("cycles", cycles, "must be >= 1 (and transient_cycles >= 0)")
     if not 0 < d0 < 1e-3:
         raise ConfigError("d0", d0, "must be in (0, 1e-3)")
+    require_rigid(config, "the Lyapunov exponent (a two-dimensional stroboscopic map)")
     f = float(frequency_hz)
     omega = 2.0 * math.pi * f
     cfg = config.with_parameters(LYAPUNOV_TOLERANCES)

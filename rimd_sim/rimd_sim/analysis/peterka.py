@@ -39,7 +39,7 @@ from rimd_sim.core.ensemble import StopRule, run_cells
 from rimd_sim.core.errors import ConfigError, IntegrationError
 from rimd_sim.core.model import _params_vector
 
-from .dynamics import steady_orbit
+from .dynamics import require_rigid, steady_orbit
 from .executor import run_tasks
 
 __all__ = ["BasinsResult", "PeterkaResult", "START_NAMES", "basins", "peterka"]
@@ -185,6 +185,7 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
     _check_cycles(transient_cycles, measure_cycles)
     _check_cycles(continued_transient_cycles, measure_cycles)
     start = time.perf_counter()
+    require_rigid(config, "the Peterka map (its ensemble kernel)")
     rule = stop_rule(transient_cycles, measure_cycles, early_stop)
     continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop)
     rig = config.rig
@@ -351,6 +352,7 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
         ConfigError: For a bad frequency, range, size or cycle count.
         SchedulerError: For an unusable scheduler.
     """
+    require_rigid(config, "the basins map (its ensemble kernel)")
     if not (math.isfinite(frequency_hz) and 0 < frequency_hz <= config.motor.max_frequency):
         raise ConfigError("frequency", frequency_hz, f"must be > 0 and <= {config.motor.max_frequency} Hz")
     for name, (lo, hi) in (("theta_range", theta_range), ("theta_dot_range", theta_dot_range)):

@@ -23,7 +23,8 @@ from typing import Literal
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core import SimConfig
+from rimd_sim.core.structural import make_model
 from rimd_sim.core.errors import ConfigError
 
 from .executor import run_tasks, scheduler_address
@@ -99,7 +100,7 @@ def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
     base, f, cycles, measure_cycles = args
     cfg = base.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
     duration = cycles / f
-    impacts = RigModel(cfg, channels=False, truth=False).advance(duration).impacts
+    impacts = make_model(cfg, channels=False, truth=False).advance(duration).impacts
     return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration)
 
 
@@ -111,7 +112,7 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
     """An up or down sweep: one run, the motor ramped from point to point."""
     config, order, cycles, measure_cycles, ramp_rate = job
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
-    model = RigModel(cfg, channels=False, truth=False)
+    model = make_model(cfg, channels=False, truth=False)
     points = []
     for i, f in enumerate(order):
         t0 = model.time
