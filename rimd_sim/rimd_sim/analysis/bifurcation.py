@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rimd_sim.core import SimConfig
-from rimd_sim.core.structural import make_model
 from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.structural import make_model
 
 from .dynamics import classify, nondimensional
 from .executor import run_tasks

@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rimd_sim.core import SimConfig
-from rimd_sim.core.structural import make_model
 from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.structural import make_model
 
 __all__ = [
     "CHAOTIC", "NO_IMPACT", "Orbit", "classify", "class_label", "constant_frequency", "steady_orbit",

@@ -24,8 +24,8 @@ from typing import Literal
 import numpy as np
 
 from rimd_sim.core import SimConfig
-from rimd_sim.core.structural import make_model
 from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.structural import make_model
 
 from .executor import run_tasks, scheduler_address
 

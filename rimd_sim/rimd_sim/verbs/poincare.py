@@ -39,8 +39,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.plots import plot_poincare
     from rimd_sim.core import RimdError, load_config
-    from rimd_sim.core.structural import make_model
     from rimd_sim.core.model import TRUTH_FIELDS
+    from rimd_sim.core.structural import make_model
 
     if args.frequency is not None and args.ratio is not None:
         raise CommandError("give --frequency or --ratio, not both")
