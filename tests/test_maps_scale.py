@@ -208,21 +208,21 @@ def test_dask_sweep_bifurcation_basins_equal_local(cluster, tmp_path):
 
 
 @pytest.mark.parametrize("how", ["option", "environment"])
-def test_unreachable_scheduler_is_refused_within_10s(tmp_path, how):
+def test_unreachable_scheduler_is_refused_within_10s(tmp_path, how, capsys, monkeypatch):
+    """The refusal is timed in this process (imports done), so the 10 s bound judges the probe of the scheduler
+    and not the start-up of an interpreter on a loaded machine (the probe itself gives up after 3 s)."""
     address = f"tcp://127.0.0.1:{_free_port()}"  # nothing listens there
-    argv = [sys.executable, "-c", "import sys; from rimd_sim.cli import main; sys.exit(main())", *PETERKA,
-            "--out", str(tmp_path / "pk")]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([SRC, os.environ.get("PYTHONPATH", "")])}
+    argv = [*PETERKA, "--out", str(tmp_path / "pk")]
     if how == "option":
         argv[-2:-2] = ["--scheduler", address]
     else:
-        env["RIMD_DASK_SCHEDULER"] = address
+        monkeypatch.setenv("RIMD_DASK_SCHEDULER", address)
     start = time.monotonic()
-    proc = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=60)
+    status = cli.main(argv)
     elapsed = time.monotonic() - start
-    assert proc.returncode == 1
-    lines = [line for line in proc.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and address in lines[0] and "cannot reach the Dask scheduler" in lines[0], proc.stderr
+    assert status == 1
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and address in lines[0] and "cannot reach the Dask scheduler" in lines[0], lines
     assert lines[0].split(address, 1)[1].strip(": ")  # a reason follows the address
     assert elapsed < 10.0, elapsed
     assert not (tmp_path / "pk").exists()
