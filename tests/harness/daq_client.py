@@ -10,8 +10,8 @@ after every channel has delivered samples up to ``--until`` s of simulation time
   ``real_time_factor 0`` topics arrive in bursts, so this is only a rough clock) and the wall-clock time
   of arrival (ns);
 * ``impacts``: per channel only the indices of the samples whose magnitude reaches a threshold (the
-  impacts), plus counts of holes in ``first_index`` and of stamps off the nominal grid ``first_index /
-  sample_rate``: enough for a 600 s run without keeping 24 million samples.
+  impacts), plus the holes in ``first_index`` (expected, received) and the count of stamps off the nominal
+  grid ``first_index / sample_rate``: enough for a 600 s run without keeping 24 million samples.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def main() -> int:
     state = {"now": 0.0}
     stored: dict[str, list] = {t: [] for t in [*args.topics, *args.extra]}
     reached = {t: 0.0 for t in args.topics}
-    summary = {t: {"above": [], "blocks": 0, "gaps": 0, "bad_stamps": 0, "next": None} for t in args.topics}
+    summary = {t: {"above": [], "blocks": 0, "gaps": [], "bad_stamps": 0, "next": None} for t in args.topics}
     qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
     latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -69,7 +69,7 @@ def main() -> int:
         s = summary[topic]
         s["blocks"] += 1
         if s["next"] is not None and msg.first_index != s["next"]:
-            s["gaps"] += 1
+            s["gaps"].append((s["next"], msg.first_index))
         s["next"] = msg.first_index + n
         nominal = (msg.first_index * 1_000_000_000 * 2 + round(msg.sample_rate)) // (2 * round(msg.sample_rate))
         if msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec != nominal:
