@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .config import CHANNEL_NAMES, SimConfig
+from .capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig, CaptureRecord, TriggeredCapture
 from .errors import CommandError, ConfigError
 from .faults import FaultEvent, FaultLayer, FaultSpec, validate_fault
 from .model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, samples_before
@@ -76,6 +77,8 @@ class SimBlock:
     deliveries: dict[str, list[ChannelBlock]] = field(default_factory=dict)
     #: Faults that started or ended in this block.
     fault_events: list[FaultEvent] = field(default_factory=list)
+    #: Triggered captures completed in this block.
+    captures: list[CaptureRecord] = field(default_factory=list)
 
 
 class RigSimulator:
@@ -87,9 +90,15 @@ class RigSimulator:
         strobe: Produce stroboscopic points.
     """
 
-    def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False) -> None:
+    def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False,
+                 capture: CaptureConfig | None = None) -> None:
         self._config = config
-        self._model = RigModel(config, channels=True, truth=truth, strobe=strobe)
+        capture = capture if capture is not None and capture.enabled else None
+        self._model = RigModel(config, channels=True, truth=truth, strobe=strobe,
+                               extra_channels=capture.extra_channels() if capture else ())
+        self._capture = (TriggeredCapture(capture, config.channel("impact_force"),
+                                          config.channel("rimd_acceleration"), config.seed,
+                                          noise=config.noise_enabled) if capture else None)
         self._instruments = {ch.name: Instrument(ch, noise=config.noise_enabled, seed=config.seed)
                              for ch in config.channels}
         self._queue: list[tuple[Fraction, int, str, Any]] = []
@@ -275,6 +284,12 @@ class RigSimulator:
             reading = [((lo, hi), x[lo:hi], int(np.count_nonzero(clipped[lo:hi])) if clipped is not None else 0)
                        for lo, hi in _split_index(first, raw.size, [samples_before(b, rate) for b in bounds])]
             readings[name] = (first, rate, reading)
+        captures: list[CaptureRecord] = []
+        if self._capture is not None:
+            captures = self._capture.process(parts[0].channels[FORCE_CHANNEL][0],
+                                             np.concatenate([p.channels[FORCE_CHANNEL][1] for p in parts]),
+                                             np.concatenate([p.channels[ACC_CHANNEL][1] for p in parts]))
+            cap_rate = Fraction(repr(self._capture.config.sample_rate))
         truth_all = None
         if parts[0].truth is not None:
             truth_all = (parts[0].truth[0], np.concatenate([p.truth[1] for p in parts], axis=1))
@@ -304,6 +319,9 @@ class RigSimulator:
                 [c for c in applied if prev <= c.time < b],
                 deliveries,
                 self._faults.events(prev, b),
+                [c for c in captures
+                 if (j == 0 or prev < Fraction(c.trigger_index + c.force.size - c.pre_trigger_samples, 1) / cap_rate)
+                 and Fraction(c.trigger_index + c.force.size - c.pre_trigger_samples) / cap_rate <= b],
             ))
             prev = b
         return blocks

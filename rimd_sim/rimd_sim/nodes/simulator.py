@@ -39,10 +39,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from rimd_msgs.msg import FaultEvent, ImpactEvent, MotorState, RigState, SampleBlock
+from rimd_msgs.msg import Capture, FaultEvent, ImpactEvent, MotorState, RigState, SampleBlock
 from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
 from rimd_sim.core.config import MAX_RAMP_RATE, PARAMETERS
+from rimd_sim.core.capture import CAPTURE_PARAMETERS, CaptureConfig
 from rimd_sim.core.faults import parse_fault_entry
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.nodes._params import refuse_unnamed
@@ -110,10 +111,16 @@ class SimulatorNode(Node):
             self.declare_parameter(name, defaults[name], _descriptor(name))
         values = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._config = SimConfig.from_parameters(values)  # ConfigError: caught in main()
+        # Node-only, read at start: the triggered capture (rimd_sim.core.capture).
+        for name, (default, description) in CAPTURE_PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(
+                name=name, type=_ROS_TYPES["bool" if isinstance(default, bool) else "float"], read_only=True,
+                description=description, dynamic_typing=not isinstance(default, bool)))
+        self._capture = CaptureConfig.from_parameters({n: self.get_parameter(n).value for n in CAPTURE_PARAMETERS})
         self._lock = threading.Lock()
         # Load the compiled kernels now (a throwaway pass), so the first published block is not late.
-        RigSimulator(self._config).advance_blocks([Fraction(1, 100)])
-        self._sim = RigSimulator(self._config)
+        RigSimulator(self._config, capture=self._capture).advance_blocks([Fraction(1, 100)])
+        self._sim = RigSimulator(self._config, capture=self._capture)
         self._block = 0  # blocks published
         self._rtf = self._config.real_time_factor
         self._block_rate = Fraction(repr(self._config.block_rate))
@@ -176,6 +183,11 @@ class SimulatorNode(Node):
             history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._fault_events = 0
+        self._pub_captures = {}
+        if self._capture.enabled:
+            cap_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.RELIABLE)
+            self._pub_captures = {"force": self.create_publisher(Capture, "capture/force", cap_qos),
+                                  "acceleration": self.create_publisher(Capture, "capture/acceleration", cap_qos)}
 
         self.create_service(SetMotorFrequency, "set_motor_frequency", self._on_set_motor_frequency)
         self.create_service(Perturb, "perturb", self._on_perturb)
@@ -288,6 +300,22 @@ class SimulatorNode(Node):
                 msg.samples = samples
                 msg.saturated_count = ch.saturated
                 self._pubs[name].publish(msg)
+        for cap in block.captures:
+            stamp = to_time(stamp_ns(t0, cap.trigger_time))
+            for which, values, channel in (("force", cap.force, "impact_force"),
+                                           ("acceleration", cap.acceleration, "rimd_acceleration")):
+                cm = Capture()
+                cm.header.stamp = stamp
+                cm.header.frame_id = self._config.channel(channel).frame_id
+                cm.index = cap.number
+                cm.sample_rate = cap.sample_rate
+                cm.pre_trigger_samples = cap.pre_trigger_samples
+                a = array.array("d")
+                a.frombytes(values.tobytes())
+                cm.samples = a
+                cm.unit = self._config.channel(channel).unit
+                cm.trigger_level = cap.threshold
+                self._pub_captures[which].publish(cm)
         for event in block.fault_events:
             spec = event.fault
             fe = FaultEvent()
