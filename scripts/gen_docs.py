@@ -60,6 +60,7 @@ VERB_PAGES = {
     "experiment": "docs/analyses.md",
     "analyze": "docs/analyses.md",
     "info": "docs/development.md",
+    "faults": "docs/faults.md",
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.
 DEFAULT_VERB_PAGE = "docs/analyses.md"
