@@ -49,20 +49,22 @@ def load_scenario(path: Path) -> list[dict]:
     if not isinstance(doc, dict) or not isinstance(doc.get("faults"), list):
         raise CommandError(f"{path}: 'faults' refused: the file must hold a 'faults:' list")
     try:
-        return [parse_fault_entry(e, f"faults[{i}]") for i, e in enumerate(doc["faults"])]
+        entries = [parse_fault_entry(e, f"faults[{i}]") for i, e in enumerate(doc["faults"])]
     except CoreCommandError as exc:
         raise CommandError(f"{path}: {exc}") from None
+    for i, e in enumerate(entries):
+        for key in ("start", "duration", "magnitude"):
+            if isinstance(e[key], bool) or not isinstance(e[key], (int, float)):
+                raise CommandError(f"{path}: faults[{i}].{key} = {e[key]!r} refused: must be a number")
+        for key in ("channel", "kind"):
+            if not isinstance(e[key], str):
+                raise CommandError(f"{path}: faults[{i}].{key} = {e[key]!r} refused: must be a string")
+    return entries
 
 
 def main(args: argparse.Namespace) -> int:
     """Send the scenario to the rig."""
     entries = load_scenario(args.scenario)
-    for i, e in enumerate(entries):
-        for key in ("start", "duration", "magnitude"):
-            if isinstance(e[key], bool) or not isinstance(e[key], (int, float)):
-                raise CommandError(f"{args.scenario}: faults[{i}].{key} = {e[key]!r} refused: must be a number")
-        if not isinstance(e["channel"], str) or not isinstance(e["kind"], str):
-            raise CommandError(f"{args.scenario}: faults[{i}] refused: channel and kind must be strings")
     import time
 
     import rclpy
