@@ -55,7 +55,8 @@ def main() -> int:
     reached = {t: 0.0 for t in args.topics}
     summary = {t: {"above": [], "blocks": 0, "gaps": [], "bad_stamps": 0, "next": None} for t in args.topics}
     qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
-    latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
     def on_block(data, topic):  # noqa: ANN001
         msg = deserialize_message(data, msgs.SampleBlock)

@@ -12,9 +12,9 @@
 * ``saturated``: blocks with some samples counted saturated (clipping);
 * ``outliers``: isolated samples further than ``outlier_fraction`` of the range span from the median of
   their 5 neighbours;
-* ``level``: blocks whose median is off the reference median by more than ``level_sigmas`` noise
-  standard deviations (offsets; meant for channels with a steady baseline, such as the force sensor
-  between impacts);
+* ``level``: blocks whose median is off the median of all block medians by more than ``level_sigmas``
+  noise standard deviations and 6 robust spreads of the block medians (offsets; sensitive on channels with
+  a steady baseline, such as the force sensor between impacts; on a moving signal only large offsets show);
 * ``noise``: blocks whose noise (robust, from the second differences) exceeds ``noise_ratio`` times the
   reference (noise bursts, gain errors).
 
@@ -36,7 +36,8 @@ __all__ = ["Block", "Finding", "drift_fit", "drift_window", "impact_times", "sca
 @dataclass(frozen=True)
 class Block:
     """One received block: ``first_index``, readings, ``saturated_count`` and, when the DAQ knows it, the
-    simulation time it arrived at (``arrival``, s; NaN = unknown)."""
+    simulation time it arrived at (``arrival``, s; NaN = unknown).
+    """
 
     first_index: int
     samples: np.ndarray
@@ -87,7 +88,7 @@ def _noise(x: np.ndarray) -> float:
 def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_max: float, *,
                  reference_s: float = 0.4, stuck_min: int = 10, outlier_fraction: float = 0.1,
                  level_sigmas: float = 20.0, noise_ratio: float = 1.6, merge: int = 3,
-                 late_blocks: float = 3.0) -> list[Finding]:
+                 late_blocks: float = 3.0, chunk_min: int = 200) -> list[Finding]:
     """Findings of one channel, blocks in arrival order (see the module docstring)."""
     if not blocks:
         return []
@@ -111,7 +112,7 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
         seen = max(seen, b.first_index)
     findings += _windows(late, rate, merge_samples, "late", "block(s) late or out of order")
     # per-block reading checks
-    ref_blocks = [b for b in ordered if b.first_index < reference_s * rate and len(b.samples)]
+    ref_blocks = [b for b in ordered if b.first_index < reference_s * rate and len(b.samples) and b.saturated == 0]
     ref = np.concatenate([np.asarray(b.samples, float) for b in ref_blocks]) if ref_blocks else np.zeros(0)
     ref_median = float(np.median(ref)) if ref.size else 0.0
     ref_noise = _noise(ref) if ref.size else 0.0
@@ -124,14 +125,32 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
         r = (b.first_index, b.first_index + x.size)
         if b.saturated == x.size and np.all(x == range_max):
             rail.append(r)
-            continue
-        if b.saturated:
+        elif b.saturated:
             sat.append(r)
-        if ref_noise > 0:
-            if abs(float(np.median(x)) - ref_median) > level_sigmas * ref_noise:
-                level.append(r)
+    # Level and noise over chunks of at least chunk_min samples (whole blocks; a 2 kHz channel's 20-sample
+    # blocks are too short for a robust noise estimate), rail blocks left out.
+    chunks: list[tuple[int, int, np.ndarray]] = []
+    acc: list[Block] = []
+    for b in ordered:
+        if not len(b.samples) or (b.saturated == len(b.samples) and np.all(np.asarray(b.samples) == range_max)):
+            continue
+        acc.append(b)
+        if sum(len(a.samples) for a in acc) >= chunk_min:
+            chunks.append((acc[0].first_index, acc[-1].first_index + len(acc[-1].samples),
+                           np.concatenate([np.asarray(a.samples, float) for a in acc])))
+            acc = []
+    # Level: against the median of all chunk medians, beyond the larger of level_sigmas noise deviations and
+    # 6 robust spreads of the chunk medians (a moving signal, such as a displacement, spreads them).
+    medians = np.array([float(np.median(x)) for _, _, x in chunks])
+    center = float(np.median(medians)) if medians.size else ref_median
+    spread = float(np.median(np.abs(medians - center))) * 1.4826 if medians.size else 0.0
+    level_limit = max(level_sigmas * ref_noise, 6.0 * spread)
+    if ref_noise > 0:
+        for (a, b, x), med in zip(chunks, medians, strict=True):
+            if abs(med - center) > level_limit:
+                level.append((a, b))
             if _noise(x) > noise_ratio * ref_noise:
-                noisy.append(r)
+                noisy.append((a, b))
     findings += _windows(rail, rate, merge_samples, "rail", "block(s) on the rail")
     findings += _windows(sat, rate, merge_samples, "saturated", "block(s) with clipped samples")
     findings += _windows(level, rate, merge_samples, "level", "block(s) off the reference level")
@@ -168,7 +187,8 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
 
 def impact_times(blocks: Sequence[Block], rate: float, threshold: float, *, absolute: bool = False) -> np.ndarray:
     """Times (s, ``index / rate``) of the upward crossings of ``threshold`` (``|x|`` when ``absolute``)
-    after at least 2 ms below it, over the contiguous stretches of the stream."""
+    after at least 2 ms below it, over the contiguous stretches of the stream.
+    """
     idx, val = stream(blocks)
     if not val.size:
         return np.zeros(0)
@@ -209,7 +229,8 @@ def drift_window(t: np.ndarray, lag: np.ndarray, rate: float) -> tuple[float, fl
 
 def drift_fit(t_ref: np.ndarray, t_other: np.ndarray, tolerance: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """Pair each impact of ``t_ref`` with the nearest of ``t_other`` within ``tolerance`` s; returns
-    ``(t_ref_paired, t_other - t_ref)``: how far the other channel's clock has drifted at each impact."""
+    ``(t_ref_paired, t_other - t_ref)``: how far the other channel's clock has drifted at each impact.
+    """
     if not t_ref.size or not t_other.size:
         return np.zeros(0), np.zeros(0)
     j = np.clip(np.searchsorted(t_other, t_ref), 1, t_other.size - 1) if t_other.size > 1 else np.zeros(

@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import CHANNEL_NAMES, SimConfig
 from .capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig, CaptureRecord, TriggeredCapture
+from .config import CHANNEL_NAMES, SimConfig
 from .errors import CommandError, ConfigError
 from .faults import FaultEvent, FaultLayer, FaultSpec, validate_fault
 from .model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, samples_before

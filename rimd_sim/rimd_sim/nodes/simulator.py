@@ -42,8 +42,8 @@ from std_srvs.srv import Trigger
 from rimd_msgs.msg import Capture, FaultEvent, ImpactEvent, MotorState, RigState, SampleBlock
 from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
-from rimd_sim.core.config import MAX_RAMP_RATE, PARAMETERS
 from rimd_sim.core.capture import CAPTURE_PARAMETERS, CaptureConfig
+from rimd_sim.core.config import MAX_RAMP_RATE, PARAMETERS
 from rimd_sim.core.faults import parse_fault_entry
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.nodes._params import refuse_unnamed
