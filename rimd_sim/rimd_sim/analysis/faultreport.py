@@ -77,7 +77,8 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
         window = drift_window(t, lag, meta[force][0])
         if window is not None:
             report["drift"] = {"channel": "impact_force", "against": "rimd_acceleration", "start_s": window[0],
-                               "end_s": window[1] if np.isfinite(window[1]) else None, "ppm": window[2] * 1e6, "impacts_paired": int(t.size)}
+                               "end_s": window[1] if np.isfinite(window[1]) else None, "ppm": window[2] * 1e6,
+                               "impacts_paired": int(t.size)}
         elif t.size:
             report["drift"] = {"channel": "impact_force", "against": "rimd_acceleration", "start_s": None,
                                "end_s": None, "ppm": 0.0, "impacts_paired": int(t.size),

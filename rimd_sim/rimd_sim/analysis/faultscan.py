@@ -35,8 +35,10 @@ __all__ = ["Block", "Finding", "drift_fit", "drift_window", "impact_times", "sca
 
 @dataclass(frozen=True)
 class Block:
-    """One received block: ``first_index``, readings, ``saturated_count`` and, when the DAQ knows it, the
-    simulation time it arrived at (``arrival``, s; NaN = unknown).
+    """One received block.
+
+    ``first_index``, readings, ``saturated_count`` and, when the DAQ knows it, the simulation time it arrived
+    at (``arrival``, s; NaN = unknown).
     """
 
     first_index: int
@@ -186,8 +188,9 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
 
 
 def impact_times(blocks: Sequence[Block], rate: float, threshold: float, *, absolute: bool = False) -> np.ndarray:
-    """Times (s, ``index / rate``) of the upward crossings of ``threshold`` (``|x|`` when ``absolute``)
-    after at least 2 ms below it, over the contiguous stretches of the stream.
+    """Times (s, ``index / rate``) of the upward crossings of ``threshold``.
+
+    ``|x|`` when ``absolute``; a crossing counts after at least 2 ms below the threshold, contiguous samples.
     """
     idx, val = stream(blocks)
     if not val.size:
@@ -228,8 +231,9 @@ def drift_window(t: np.ndarray, lag: np.ndarray, rate: float) -> tuple[float, fl
 
 
 def drift_fit(t_ref: np.ndarray, t_other: np.ndarray, tolerance: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """Pair each impact of ``t_ref`` with the nearest of ``t_other`` within ``tolerance`` s; returns
-    ``(t_ref_paired, t_other - t_ref)``: how far the other channel's clock has drifted at each impact.
+    """Pair each impact of ``t_ref`` with the nearest of ``t_other`` within ``tolerance`` s.
+
+    Returns ``(t_ref_paired, t_other - t_ref)``: how far the other channel's clock has drifted at each impact.
     """
     if not t_ref.size or not t_other.size:
         return np.zeros(0), np.zeros(0)
