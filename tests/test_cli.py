@@ -11,7 +11,7 @@ import pytest
 
 from rimd_sim import cli
 
-SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka", "poincare", "basins",
+SPEC_VERBS = ("rig", "experiment", "analyze", "sweep", "bifurcation", "peterka", "poincare", "basins", "faults",
               "rerun", "node", "info")
 #: Verbs whose issue has not landed: none left (the Rerun verb, issue 6, was the last).
 NOT_IMPLEMENTED: dict[str, tuple[int, str]] = {}
