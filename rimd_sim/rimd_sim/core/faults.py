@@ -405,10 +405,13 @@ class FaultLayer:
             elif kind == "noise_burst":
                 x[a:b] += m * f.rng.standard_normal(b - a)
             elif kind == "spike":
+                # One uniform per sample (so the draws do not depend on how passes cut the time): a spike
+                # where u < p, negative in its lower half.
+                p = m / float(st.rate)
                 u = f.rng.random(b - a)
-                where = np.flatnonzero(u < m / float(st.rate))
+                where = np.flatnonzero(u < p)
                 if where.size:
-                    signs = np.where(f.rng.random(where.size) < 0.5, -1.0, 1.0)
+                    signs = np.where(u[where] < 0.5 * p, -1.0, 1.0)
                     x[a + where] += signs * 0.25 * (hi_range - lo_range)
             elif kind == "saturate":
                 np.maximum(lim_lo[a:b], -m, out=lim_lo[a:b])
