@@ -33,7 +33,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
 
@@ -321,10 +321,6 @@ class FaultLayer:
         """Faults known and not yet ended."""
         return sum(1 for f in self._faults if not f.ended)
 
-    def motor_slip(self, t: Fraction) -> float:
-        """Fraction of the motor frequency lost while impacts load it, in force at ``t`` (0 = none)."""
-        return max((s.magnitude for s in self.active(t) if s.kind == "motor_slip"), default=0.0)
-
     @property
     def empty(self) -> bool:
         """No fault known and no delayed block held (the data path can skip the layer)."""
@@ -491,7 +487,3 @@ def _describe(spec: FaultSpec) -> str:
         what += f", {rule.magnitude} {spec.magnitude:g}"
     return what
 
-
-def replace_end(spec: FaultSpec, end: Fraction) -> FaultSpec:
-    """The spec with its duration cut to end at ``end``."""
-    return replace(spec, duration=end - spec.start)
