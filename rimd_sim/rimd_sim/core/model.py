@@ -215,7 +215,7 @@ class RigModel:
         for name, rate, like in extra_channels:
             self._names.append(name)
             self._rates.append(Fraction(rate))
-            qty.append(CHANNEL_QUANTITY[like])
+            qty.append(k.Q_ACC_CONTACT if like == "rimd_acceleration_in_contact" else CHANNEL_QUANTITY[like])
         self._ch_rate = np.array([float(r) for r in self._rates], dtype=np.float64)
         self._ch_qty = np.array(qty, dtype=np.int64)
         self._ch_next = np.zeros(len(self._rates), dtype=np.int64)

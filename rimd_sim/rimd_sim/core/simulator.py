@@ -288,7 +288,15 @@ class RigSimulator:
         if self._capture is not None:
             captures = self._capture.process(parts[0].channels[FORCE_CHANNEL][0],
                                              np.concatenate([p.channels[FORCE_CHANNEL][1] for p in parts]),
-                                             np.concatenate([p.channels[ACC_CHANNEL][1] for p in parts]))
+                                             np.concatenate([p.channels[ACC_CHANNEL][1] for p in parts]),
+                                             parts[0].channels["rimd_acceleration"][0],
+                                             self._config.channel("rimd_acceleration").sample_rate,
+                                             np.concatenate([p.channels["rimd_acceleration"][1] for p in parts]),
+                                             np.concatenate([p.channels["impact_force"][1] for p in parts])
+                                             if self._config.channel("impact_force").sample_rate
+                                             == self._config.channel("rimd_acceleration").sample_rate
+                                             else np.zeros(sum(p.channels["rimd_acceleration"][1].size
+                                                               for p in parts)))
             cap_rate = Fraction(repr(self._capture.config.sample_rate))
         truth_all = None
         if parts[0].truth is not None:
