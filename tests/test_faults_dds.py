@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import pickle
+import re
 import sys
 from pathlib import Path
 

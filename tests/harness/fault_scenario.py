@@ -32,7 +32,8 @@ def entries() -> list[str]:
 
 def parameters(with_faults: bool) -> list[str]:
     """``--ros-args`` of the simulator for a run at real_time_factor 0 from sample 0, with the capture."""
-    args = ["-p", "real_time_factor:=0.0", "-p", "start_paused:=true", "-p", f"seed:={SEED}", "-p", "capture.enabled:=true",
+    args = ["-p", "real_time_factor:=0.0", "-p", "start_paused:=true", "-p", f"seed:={SEED}",
+            "-p", "capture.enabled:=true",
             "-p", "motor.initial_frequency:=3.75", "-p", "motor.initial_setpoint:=3.75"]
     if with_faults:
         args += ["-p", "faults:=[" + ",".join(f"'{e}'" for e in entries()) + "]"]
