@@ -322,6 +322,16 @@ def test_bad_fault_requests_are_refused_and_the_rig_keeps_running(ros_processes,
     assert spin_until(ros_executor, lambda: blocks[-1].header.stamp.sec * 10**9 + blocks[-1].header.stamp.nanosec
                       >= effective_ns, timeout=30)
     assert min(blocks[-1].samples) > 2.0   # the offset of 3 N shows
+    # the active fault appears in /diagnostics (a WARN status of its own)
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    statuses = []
+    node.create_subscription(DiagnosticArray, "/diagnostics",
+                             lambda m: statuses.extend(st for st in m.status if st.name.endswith(": faults")), 10)
+    assert spin_until(ros_executor, lambda: any("offset on impact_force" in st.message for st in statuses),
+                      timeout=10), [st.message for st in statuses]
+    status = next(st for st in statuses if "offset on impact_force" in st.message)
+    assert status.level == DiagnosticStatus.WARN and status.message.startswith("1 fault(s) active")
     cleared = call_service(ros_executor, node, node.create_client(Trigger, "/rig/clear_faults"),
                            Trigger.Request(), timeout=10)
     assert cleared.success and "1 ended" in cleared.message, cleared.message
