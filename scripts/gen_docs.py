@@ -63,6 +63,7 @@ VERB_PAGES = {
     "fit-table": "docs/identification.md",
     "pulse": "docs/physics.md",
     "info": "docs/development.md",
+    "faults": "docs/faults.md",
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.
 DEFAULT_VERB_PAGE = "docs/analyses.md"
@@ -195,6 +196,19 @@ def render_recorder_parameters() -> str:
     return _table(["parameter", "default", "type", "rule", "description"], rows)
 
 
+def render_fault_parameters() -> str:
+    """The simulator's capture and fault-scenario parameters (rimd_sim.core.capture, node-only)."""
+    capture = importlib.import_module("rimd_sim.core.capture")
+    rows = []
+    for name, (default, description) in capture.CAPTURE_PARAMETERS.items():
+        what, _, rule = description.partition("; ")
+        rows.append([f"`{name}`", _value(default), _type_name(default), _cell(rule or "true or false"), _cell(what)])
+    rows.append(["`faults`", "`['']`", "string[]", _cell("each entry 'channel=... kind=... start=... duration=... "
+                                                          "magnitude=...' ('' ignored), checked as the service does"),
+                 _cell("fault scenario scheduled at start")])
+    return _table(["parameter", "default", "type", "rule", "description"], rows)
+
+
 def render_replay_parameters() -> str:
     """The replay's parameters (rimd_sim.nodes.replay)."""
     replay = importlib.import_module("rimd_sim.nodes.replay")
@@ -310,6 +324,7 @@ def sections() -> list[Section]:
         Section("recorder-parameters", "docs/recording.md", render_recorder_parameters, "Recorder parameters"),
         Section("replay-parameters", "docs/recording.md", render_replay_parameters, "Replay parameters"),
         Section("rerun-parameters", "docs/rerun.md", render_rerun_parameters, "Rerun bridge parameters"),
+        Section("fault-parameters", "docs/faults.md", render_fault_parameters, "Parameters"),
     ]
     for verb in cli.VERBS:
         if verb.module is None:

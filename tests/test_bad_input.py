@@ -423,7 +423,8 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
         assert motor.wait_more(), "the rig stopped publishing"
 
     check_services(ros_executor, node, "rimd_simulator", "/rig", {
-        "/rig/set_motor_frequency", "/rig/perturb", "/rig/reset", "/rig/pause", "/rig/resume"})
+        "/rig/set_motor_frequency", "/rig/perturb", "/rig/reset", "/rig/pause", "/rig/resume",
+        "/rig/inject_fault", "/rig/clear_faults"})
     api = ParameterApi(ros_executor, node, "/rig/rimd_simulator")
 
     def fixed(name: str, descriptor: Any) -> bool:
@@ -546,6 +547,40 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
     perturb_refused()
     alive()
     assert len(applied.findall(rig.output())) == log_lines, "a refused command was applied"
+
+    # Faults (issue 12): every wrong field of /rig/inject_fault is refused naming it; nothing is scheduled.
+    from rimd_msgs.srv import InjectFault
+    from rimd_sim.core.config import CHANNEL_NAMES
+    from rimd_sim.core.faults import FAULT_KINDS
+
+    inject = node.create_client(InjectFault, "/rig/inject_fault")
+    not_finite = st.sampled_from([math.nan, math.inf, -math.inf])
+    negative = st.floats(max_value=-1e-9, allow_infinity=False, allow_nan=False)
+
+    @_settings(25)
+    @example(("channel", "nope"))
+    @example(("kind", "melt"))
+    @example(("duration", -1.0))
+    @example(("magnitude", math.nan))
+    @example(("start", 1e-3))   # already passed
+    @given(st.one_of(st.tuples(st.just("channel"), _TEXT.filter(lambda t: t not in CHANNEL_NAMES)),
+                     st.tuples(st.just("kind"), _TEXT.filter(lambda t: t not in FAULT_KINDS)),
+                     st.tuples(st.just("duration"), st.one_of(not_finite, negative)),
+                     st.tuples(st.just("magnitude"), not_finite),
+                     st.tuples(st.just("start"), st.one_of(not_finite, negative))))
+    def inject_refused(case: tuple[str, Any]) -> None:
+        _count("simulator")
+        field, value = case
+        request = InjectFault.Request(channel="impact_force", kind="offset", start=0.0, duration=0.1, magnitude=1.0)
+        setattr(request, field, value)
+        response = call_service(ros_executor, node, inject, request, timeout=10)
+        assert not response.success, f"inject_fault {field} = {value!r} accepted: {response.message}"
+        assert f"{field} = " in response.message and "must" in response.message, response.message
+        alive()
+
+    inject_refused()
+    assert "fault 0 start" not in rig.output(), "a refused fault was applied"
+    assert trigger(ros_executor, node, "/rig/clear_faults").success
 
     # pause / resume / reset in any order: a call in the wrong state is refused and changes nothing.
     def rig_alive(state: dict[str, bool]) -> None:

@@ -77,6 +77,8 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.verbs.basins"),
     Verb("pulse", "one impact at a given velocity: force and acceleration at 1 MHz, double peak and ringing",
          "rimd_sim.verbs.pulse"),
+    Verb("faults", "run a fault scenario (SCENARIO.yaml) against a running rig through /rig/inject_fault",
+         "rimd_sim.verbs.faults"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),

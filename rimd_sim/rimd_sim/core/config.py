@@ -51,6 +51,10 @@ __all__ = [
 #: Node name whose ``ros__parameters`` section holds the rig configuration.
 NODE_NAME = "rimd_simulator"
 
+#: Parameters of the simulator node's own (read at start by the node, not part of the model's configuration),
+#: besides ``capture.*`` (rimd_sim.core.capture).
+NODE_PARAMETERS = frozenset({"start_paused", "faults"})
+
 #: The four DAQ channels, in publication order.
 CHANNEL_NAMES = ("cart_displacement", "rimd_displacement", "rimd_acceleration", "impact_force")
 
@@ -289,8 +293,13 @@ class SimConfig:
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> SimConfig:
-        """Build a configuration from flat ROS parameters over the defaults (see :meth:`with_parameters`)."""
-        return cls().with_parameters(params)
+        """Build a configuration from flat ROS parameters over the defaults (see :meth:`with_parameters`).
+
+        The simulator node's own parameters (:data:`NODE_PARAMETERS`: ``start_paused``, the fault scenario
+        ``faults``, the capture's ``capture.*``) may stand in the same file; the node reads and checks them.
+        """
+        return cls().with_parameters({k: v for k, v in params.items()
+                                      if k not in NODE_PARAMETERS and not k.startswith("capture.")})
 
 
 # --------------------------------------------------------------------------------------------------

@@ -86,6 +86,8 @@ ST_OK, ST_IMPACTS_FULL, ST_STROBE_FULL, ST_STEP_UNDERFLOW, ST_ZENO, ST_NONFINITE
 
 # Channel quantities.
 Q_CART, Q_RIMD, Q_ACC, Q_FORCE = range(4)
+# The acceleration only in contact (NaN outside): the triggered capture's fast channel (rimd_sim.core.capture).
+Q_ACC_CONTACT = 4
 # Rows of the truth block.
 T_THETA, T_OMEGA, T_XC, T_X, T_V, T_A, T_DELTA, T_F, T_PHASE, T_FREQ, T_CONTACT = range(11)
 N_TRUTH = 11
@@ -577,6 +579,10 @@ def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, 
         if qty == Q_FORCE and mode != CONTACT:
             while n < ch_stop[c] and n / rate < tb:  # no contact in this step: the force is 0
                 ch_out[c, n - ch_base[c]] = 0.0
+                n += 1
+        elif qty == Q_ACC_CONTACT and mode != CONTACT:
+            while n < ch_stop[c] and n / rate < tb:  # not wanted outside contact
+                ch_out[c, n - ch_base[c]] = math.nan
                 n += 1
         # Motor phase at the samples: at constant motor speed, sin/cos of the phase are computed exactly at
         # anchor samples (every 16th index, and the segment's first sample) and advanced between them by a

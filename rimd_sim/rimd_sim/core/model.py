@@ -203,7 +203,8 @@ class RigModel:
     def _params(self, config: SimConfig) -> np.ndarray:
         return _params_vector(config.rig, config)
 
-    def __init__(self, config: SimConfig, *, channels: bool = True, truth: bool = True, strobe: bool = False):
+    def __init__(self, config: SimConfig, *, channels: bool = True, truth: bool = True, strobe: bool = False,
+                 extra_channels: tuple[tuple[str, Fraction, str], ...] = ()):
         self._config = config
         self._p = self._params(config)
         self._fs = np.zeros(self._n_fstate)
@@ -217,9 +218,15 @@ class RigModel:
         self._want_truth = truth
         self._want_strobe = strobe
         self._rates = [Fraction(ch.sample_rate) for ch in config.channels] if channels else []
+        qty = [CHANNEL_QUANTITY[ch.name] for ch in config.channels][: len(self._rates)]
+        self._names = list(CHANNEL_NAMES[: len(self._rates)])
+        # Extra channels (name, rate, quantity of the channel named): the triggered capture's fast signals.
+        for name, rate, like in extra_channels:
+            self._names.append(name)
+            self._rates.append(Fraction(rate))
+            qty.append(k.Q_ACC_CONTACT if like == "rimd_acceleration_in_contact" else CHANNEL_QUANTITY[like])
         self._ch_rate = np.array([float(r) for r in self._rates], dtype=np.float64)
-        self._ch_qty = np.array([CHANNEL_QUANTITY[ch.name] for ch in config.channels][: len(self._rates)],
-                                dtype=np.int64)
+        self._ch_qty = np.array(qty, dtype=np.int64)
         self._ch_next = np.zeros(len(self._rates), dtype=np.int64)
         self._truth_rate = Fraction(config.truth_rate)
         self._tr_next = np.zeros(1, dtype=np.int64)
@@ -354,7 +361,7 @@ class RigModel:
         self._time = t_stop
         channels = {
             name: (int(first[i]), ch_out[i, : int(stops[i] - first[i])].copy())
-            for i, name in enumerate(CHANNEL_NAMES[: len(self._rates)])
+            for i, name in enumerate(self._names)
         }
         truth = (tr_first, tr_out) if self._want_truth else None
         return ModelOutput(float(t_start), float(t_stop), channels, truth, impacts, strobe)

@@ -115,6 +115,10 @@ class Instrument:
         x, clipped = self._measure(values)
         return Reading(x, int(np.count_nonzero(clipped)) if clipped is not None else 0)
 
+    def measure_mask(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Readings of a stretch and the mask of clipped samples (None: none clipped)."""
+        return self._measure(values)
+
     def _measure(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         ch = self._channel
         x = np.array(values, dtype=np.float64)

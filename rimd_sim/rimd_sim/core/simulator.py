@@ -19,8 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from .capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig, CaptureRecord, TriggeredCapture
 from .config import CHANNEL_NAMES, SimConfig
 from .errors import CommandError, ConfigError
+from .faults import FaultEvent, FaultLayer, FaultSpec, validate_fault
 from .model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, samples_before
 from .sensors import Instrument
 
@@ -70,6 +72,13 @@ class SimBlock:
     strobe: list[StroboPoint]
     motor: MotorState
     commands: list[AppliedCommand] = field(default_factory=list)
+    #: Channel -> the blocks the DAQ receives at the end of this block, after the block-level faults
+    #: (dropout, block_loss, delay); without faults ``[channels[name]]``.
+    deliveries: dict[str, list[ChannelBlock]] = field(default_factory=dict)
+    #: Faults that started or ended in this block.
+    fault_events: list[FaultEvent] = field(default_factory=list)
+    #: Triggered captures completed in this block.
+    captures: list[CaptureRecord] = field(default_factory=list)
 
 
 class RigSimulator:
@@ -81,15 +90,26 @@ class RigSimulator:
         strobe: Produce stroboscopic points.
     """
 
-    def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False) -> None:
+    def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False,
+                 capture: CaptureConfig | None = None) -> None:
         self._config = config
         from .structural import make_model  # the model structure.model selects (issue 15)
 
-        self._model = make_model(config, channels=True, truth=truth, strobe=strobe)
+        capture = capture if capture is not None and capture.enabled else None
+        if capture is not None and config.rig.structure.model != "rigid":
+            raise ConfigError("capture.enabled", True, "not supported with structure.model "
+                              f"'{config.rig.structure.model}' yet (the triggered capture samples the paper "
+                              "kernel's contact acceleration); use structure.model: rigid")
+        self._model = make_model(config, channels=True, truth=truth, strobe=strobe,
+                                 extra_channels=capture.extra_channels() if capture else ())
+        self._capture = (TriggeredCapture(capture, config.channel("impact_force"),
+                                          config.channel("rimd_acceleration"), config.seed,
+                                          noise=config.noise_enabled) if capture else None)
         self._instruments = {ch.name: Instrument(ch, noise=config.noise_enabled, seed=config.seed)
                              for ch in config.channels}
         self._queue: list[tuple[Fraction, int, str, Any]] = []
         self._counter = itertools.count()
+        self._faults = FaultLayer(config.channels, config.seed)
 
     @property
     def config(self) -> SimConfig:
@@ -165,6 +185,28 @@ class RigSimulator:
         del config
         return self._push(when, "set_parameters", dict(params))
 
+    def inject_fault(self, channel: str, kind: str, start: float = 0.0, duration: float = 0.0,
+                     magnitude: float = 0.0) -> FaultSpec:
+        """Schedule a fault (see :mod:`rimd_sim.core.faults`); ``start`` 0 = now (the next block boundary).
+
+        Raises:
+            CommandError: Naming the field and its rule; nothing is scheduled.
+        """
+        channel, kind, t_start, duration_t, magnitude = validate_fault(
+            channel, kind, start, duration, magnitude, now=self.time,
+            channels={c.name: c for c in self._config.channels})
+        if kind == "motor_slip":
+            raise CommandError("kind = 'motor_slip' refused: not implemented in this version (the sensor faults are)")
+        return self._faults.add(channel, kind, t_start, duration_t, magnitude)
+
+    def clear_faults(self) -> tuple[int, int]:
+        """End every fault in force now and cancel the scheduled ones; returns ``(ended, cancelled)``."""
+        return self._faults.clear(self.time)
+
+    def active_faults(self) -> list[FaultSpec]:
+        """Faults in force now."""
+        return self._faults.active(self.time)
+
     def pending_commands(self) -> int:
         """Number of commands scheduled but not applied yet."""
         return len(self._queue)
@@ -185,6 +227,7 @@ class RigSimulator:
         done = model.reconfigure(config)
         for ch in config.channels:
             self._instruments[ch.name].reconfigure(ch, noise=config.noise_enabled)
+        self._faults.configure(config.channels)
         self._config = config
         return done, ", ".join(f"{k}={v!r}" for k, v in arg.items())
 
@@ -245,9 +288,25 @@ class RigSimulator:
             first = parts[0].channels[name][0]
             raw = np.concatenate([p.channels[name][1] for p in parts])
             rate = Fraction(repr(self._config.channel(name).sample_rate))
-            reading = self._instruments[name].measure_each(raw, _split_index(
-                first, raw.size, [samples_before(b, rate) for b in bounds]))
+            x, clipped = self._instruments[name].measure_mask(self._faults.pre(name, first, raw))
+            x, clipped = self._faults.post(name, first, x, clipped)
+            reading = [((lo, hi), x[lo:hi], int(np.count_nonzero(clipped[lo:hi])) if clipped is not None else 0)
+                       for lo, hi in _split_index(first, raw.size, [samples_before(b, rate) for b in bounds])]
             readings[name] = (first, rate, reading)
+        captures: list[CaptureRecord] = []
+        if self._capture is not None:
+            captures = self._capture.process(parts[0].channels[FORCE_CHANNEL][0],
+                                             np.concatenate([p.channels[FORCE_CHANNEL][1] for p in parts]),
+                                             np.concatenate([p.channels[ACC_CHANNEL][1] for p in parts]),
+                                             parts[0].channels["rimd_acceleration"][0],
+                                             self._config.channel("rimd_acceleration").sample_rate,
+                                             np.concatenate([p.channels["rimd_acceleration"][1] for p in parts]),
+                                             np.concatenate([p.channels["impact_force"][1] for p in parts])
+                                             if self._config.channel("impact_force").sample_rate
+                                             == self._config.channel("rimd_acceleration").sample_rate
+                                             else np.zeros(sum(p.channels["rimd_acceleration"][1].size
+                                                               for p in parts)))
+            cap_rate = Fraction(repr(self._capture.config.sample_rate))
         truth_all = None
         if parts[0].truth is not None:
             truth_all = (parts[0].truth[0], np.concatenate([p.truth[1] for p in parts], axis=1))
@@ -268,12 +327,18 @@ class RigSimulator:
                 lo, hi = truth_cuts[j]
                 truth = (truth_all[0] + lo, truth_all[1][:, lo:hi])
             fb, fp = float(b), float(prev)
+            deliveries = {name: self._faults.deliver(name, cb, prev, b) for name, cb in channels.items()}
             blocks.append(SimBlock(
                 prev, b, channels, truth,
                 [i for i in impacts if (fp <= i.t_end or j == 0) and i.t_end < fb],
                 [s for s in strobe if fp <= s.t < fb],
                 motor[b],
                 [c for c in applied if prev <= c.time < b],
+                deliveries,
+                self._faults.events(prev, b),
+                [c for c in captures
+                 if (j == 0 or prev < Fraction(c.trigger_index + c.force.size - c.pre_trigger_samples, 1) / cap_rate)
+                 and Fraction(c.trigger_index + c.force.size - c.pre_trigger_samples) / cap_rate <= b],
             ))
             prev = b
         return blocks

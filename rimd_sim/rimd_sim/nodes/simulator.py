@@ -39,10 +39,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from rimd_msgs.msg import ImpactEvent, MotorState, RigState, SampleBlock
-from rimd_msgs.srv import Perturb, SetMotorFrequency
+from rimd_msgs.msg import Capture, FaultEvent, ImpactEvent, MotorState, RigState, SampleBlock
+from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
+from rimd_sim.core.capture import CAPTURE_PARAMETERS, CaptureConfig
 from rimd_sim.core.config import MAX_RAMP_RATE, PARAMETERS
+from rimd_sim.core.faults import parse_fault_entry
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.nodes._params import refuse_unnamed
 from rimd_sim.nodes._run import run_node, spin_until_stopped
@@ -109,10 +111,16 @@ class SimulatorNode(Node):
             self.declare_parameter(name, defaults[name], _descriptor(name))
         values = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._config = SimConfig.from_parameters(values)  # ConfigError: caught in main()
+        # Node-only, read at start: the triggered capture (rimd_sim.core.capture).
+        for name, (default, description) in CAPTURE_PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(
+                name=name, type=_ROS_TYPES["bool" if isinstance(default, bool) else "float"], read_only=True,
+                description=description, dynamic_typing=not isinstance(default, bool)))
+        self._capture = CaptureConfig.from_parameters({n: self.get_parameter(n).value for n in CAPTURE_PARAMETERS})
         self._lock = threading.Lock()
         # Load the compiled kernels now (a throwaway pass), so the first published block is not late.
-        RigSimulator(self._config).advance_blocks([Fraction(1, 100)])
-        self._sim = RigSimulator(self._config)
+        RigSimulator(self._config, capture=self._capture).advance_blocks([Fraction(1, 100)])
+        self._sim = RigSimulator(self._config, capture=self._capture)
         self._block = 0  # blocks published
         self._rtf = self._config.real_time_factor
         self._block_rate = Fraction(repr(self._config.block_rate))
@@ -125,6 +133,12 @@ class SimulatorNode(Node):
             name="start_paused", type=_ROS_TYPES["bool"], read_only=True,
             description="start paused: publish nothing until /rig/resume (t0 is then the time of that call)"))
         self._paused = bool(self.get_parameter("start_paused").value)
+        # Node-only, read at start: the fault scenario (docs/faults.md), one "key=value ..." string per fault.
+        self.declare_parameter("faults", [""], ParameterDescriptor(
+            name="faults", type=9, read_only=True,  # PARAMETER_STRING_ARRAY
+            description="fault scenario loaded at start: one 'channel=NAME kind=KIND start=S duration=S "
+                        "magnitude=M' string per fault (\"\" entries are ignored)"))
+        self._load_faults(self.get_parameter("faults").value)
         self._started = not self._paused
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -165,12 +179,23 @@ class SimulatorNode(Node):
         self._pub_clock = self.create_publisher(Clock, "/clock", QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pub_faults = self.create_publisher(FaultEvent, "faults", QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self._fault_events = 0
+        self._pub_captures = {}
+        if self._capture.enabled:
+            cap_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.RELIABLE)
+            self._pub_captures = {"force": self.create_publisher(Capture, "capture/force", cap_qos),
+                                  "acceleration": self.create_publisher(Capture, "capture/acceleration", cap_qos)}
 
         self.create_service(SetMotorFrequency, "set_motor_frequency", self._on_set_motor_frequency)
         self.create_service(Perturb, "perturb", self._on_perturb)
         self.create_service(Trigger, "reset", self._on_reset)
         self.create_service(Trigger, "pause", self._on_pause)
         self.create_service(Trigger, "resume", self._on_resume)
+        self.create_service(InjectFault, "inject_fault", self._on_inject_fault)
+        self.create_service(Trigger, "clear_faults", self._on_clear_faults)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._publish_diagnostics)
 
@@ -266,15 +291,49 @@ class SimulatorNode(Node):
         # Messages are reused (publish serialises at once); only the fields that change are set.
         t0 = self._t0_ns
         for name in CHANNEL_NAMES:
-            ch = block.channels[name]
-            msg = self._msgs[name]
-            msg.header.stamp = self._sample_stamp(ch.first_index, self._rates[name])
-            msg.first_index = ch.first_index
-            samples = array.array("d")
-            samples.frombytes(ch.samples.tobytes())
-            msg.samples = samples
-            msg.saturated_count = ch.saturated
-            self._pubs[name].publish(msg)
+            for ch in block.deliveries[name]:   # after dropout, block loss and delay
+                msg = self._msgs[name]
+                msg.header.stamp = self._sample_stamp(ch.first_index, self._rates[name])
+                msg.first_index = ch.first_index
+                samples = array.array("d")
+                samples.frombytes(ch.samples.tobytes())
+                msg.samples = samples
+                msg.saturated_count = ch.saturated
+                self._pubs[name].publish(msg)
+        for cap in block.captures:
+            stamp = to_time(stamp_ns(t0, cap.trigger_time))
+            for which, values, channel in (("force", cap.force, "impact_force"),
+                                           ("acceleration", cap.acceleration, "rimd_acceleration")):
+                cm = Capture()
+                cm.header.stamp = stamp
+                cm.header.frame_id = self._config.channel(channel).frame_id
+                cm.index = cap.number
+                cm.sample_rate = cap.sample_rate
+                cm.pre_trigger_samples = cap.pre_trigger_samples
+                a = array.array("d")
+                a.frombytes(values.tobytes())
+                cm.samples = a
+                cm.unit = self._config.channel(channel).unit
+                cm.trigger_level = cap.threshold
+                self._pub_captures[which].publish(cm)
+        for event in block.fault_events:
+            spec = event.fault
+            fe = FaultEvent()
+            fe.header.stamp = to_time(stamp_ns(t0, event.time))
+            fe.header.frame_id = (self._config.channel(spec.channel).frame_id if spec.channel in self._rates
+                                  else spec.channel)
+            fe.event = event.event
+            fe.id = spec.number
+            fe.channel = spec.channel
+            fe.kind = spec.kind
+            fe.start = float(spec.start)
+            fe.duration = float(spec.duration)
+            fe.magnitude = spec.magnitude
+            fe.detail = event.detail
+            self._pub_faults.publish(fe)
+            self._fault_events += 1
+            self.get_logger().info(f"fault {spec.number} {event.event} at t = {float(event.time):.6f} s: "
+                                   f"{event.detail}")
         if block.truth is not None:
             self._pub_truth.publish(self._truth_message(block))
         for imp in block.impacts:
@@ -357,7 +416,20 @@ class SimulatorNode(Node):
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [status]
+        faults = DiagnosticStatus()
+        faults.name = f"{self.get_name()}: faults"
+        faults.hardware_id = "rimd_virtual_rig"
+        with self._lock:
+            active = self._sim.active_faults()
+        faults.level = DiagnosticStatus.WARN if active else DiagnosticStatus.OK
+        faults.message = (f"{len(active)} fault(s) active: " + ", ".join(f"{f.kind} on {f.channel}" for f in active)
+                          if active else "no fault active")
+        faults.values = [KeyValue(key=f"fault_{f.number}", value=(
+            f"{f.kind} on {f.channel} from t = {float(f.start):.6f} s, "
+            + (f"duration {float(f.duration):g} s" if f.duration else "until cleared")
+            + f", magnitude {f.magnitude:g}")) for f in active]
+        faults.values.append(KeyValue(key="fault_events_published", value=str(self._fault_events)))
+        arr.status = [status, faults]
         self._pub_diag.publish(arr)
 
     # ---- services ----------------------------------------------------------------------------------
@@ -425,6 +497,44 @@ class SimulatorNode(Node):
             response.success = True
             response.message = f"hammer velocity {request.velocity:+g} m/s at t = {float(when):.6f} s"
             response.effective_stamp = to_time(stamp_ns(self._t0_ns, when))
+        return response
+
+    def _load_faults(self, entries: list[str]) -> None:
+        """Schedule the faults of the ``faults`` parameter (a refusal stops the node with the reason)."""
+        for i, entry in enumerate(entries):
+            if not entry.strip():
+                continue
+            try:
+                fault = parse_fault_entry(entry, f"faults[{i}]")
+                self._sim.inject_fault(**fault)
+            except CommandError as exc:
+                raise ConfigError("faults", entry, f"faults[{i}]: {exc}") from None
+
+    def _on_inject_fault(self, request, response):
+        with self._lock:
+            try:
+                spec = self._sim.inject_fault(request.channel, request.kind, request.start, request.duration,
+                                              request.magnitude)
+            except CommandError as exc:
+                response.success = False
+                response.message = str(exc)
+                self.get_logger().warning(f"inject_fault refused: {exc}")
+                return response
+            response.success = True
+            response.message = (f"fault {spec.number}: {spec.kind} on {spec.channel} from t = {float(spec.start):.6f} s"
+                                + (f" for {float(spec.duration):g} s" if spec.duration else " until cleared"))
+            response.effective_stamp = to_time(stamp_ns(self._t0_ns, spec.start))
+        self._wake.set()
+        return response
+
+    def _on_clear_faults(self, request, response):
+        with self._lock:
+            ended, cancelled = self._sim.clear_faults()
+            now = self._sim.time
+        response.success = True
+        response.message = (f"faults cleared at t = {float(now):.6f} s: {ended} ended, {cancelled} scheduled ones "
+                            "cancelled")
+        self.get_logger().info(response.message)
         return response
 
     def _on_reset(self, request, response):

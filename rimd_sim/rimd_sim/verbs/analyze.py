@@ -59,6 +59,10 @@ def print_report(summary: dict) -> None:
           f"{imp['matches']} matches, {imp['misses']} misses, {imp['extras']} extras"
           + (f"; {imp['detected_after_events_end']} detected after the recorded events end"
              if imp.get("detected_after_events_end") else ""))
+    from rimd_sim.analysis.faultreport import format_fault_report
+
+    for line in format_fault_report(summary.get("faults") or {"faults": [], "channels": {}}):
+        print(line)
     loss = summary["loss"]
     if not loss["complete"] or loss["lost_samples"] or loss["undecodable_messages"]:
         print(f"LOSS: {'; '.join(loss['files'])}; lost samples {loss['lost_samples']}; "
@@ -183,6 +187,10 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
     plots.plot_recorded_impacts(events["time"], events["peak_force"], detected["peak_time"], detected["peak_force"],
                                 steps, out / "impacts.png", "impacts over time (steady windows shaded)")
 
+    from rimd_sim.analysis.faultreport import fault_report
+
+    # Faults (issue 12): what the data alone shows beside /rig/faults; captures against the channel's raw peak.
+    faults = fault_report(data.recording, detected["peak_force_sample"], detected["peak_time"], data.origin_ns)
     summary = {
         "recording": str(recording),
         "origin_ns": data.origin_ns,
@@ -202,6 +210,7 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
         "steps": rows,
         "poincare_points": len(poincare_rows),
         "figures": sorted(p.name for p in out.glob("*.png")),
+        "faults": faults,
         "wall_seconds": time.perf_counter() - start,
     }
     write_summary(out, _jsonable(summary))
