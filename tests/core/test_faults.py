@@ -70,7 +70,7 @@ def test_clear_ends_the_faults_in_force_and_cancels_the_scheduled_ones():
     (("impact_force", "spike", 0.0, 0.0, 30000.0), "at most the channel's sample rate"),
     (("impact_force", "dropout", 0.05), "start = 0.05 refused: in the past"),
     (("impact_force", "motor_slip"), "acts on the channel 'motor'"),
-    (("motor", "motor_slip", 0.0, 0.0, 0.1), "not implemented"),
+    (("motor", "motor_slip", 0.0, 0.0, 1.5), "must be a fraction within [0, 1]"),
 ])
 def test_bad_faults_are_refused_naming_the_field_and_nothing_is_scheduled(fault, message):
     sim = RigSimulator(CFG)
@@ -112,3 +112,69 @@ def test_capture_acceleration_outside_contact_is_close_to_the_full_1_mhz_evaluat
         assert c.acceleration.min() < -300.0
         impact = min(impacts, key=lambda i: abs(i.t_start - float(c.trigger_time)))
         assert abs(c.force.max() / impact.peak_force - 1) <= 0.005
+
+
+def _slip_run(slip: tuple | None, t_end: float = 4.0, clear_at: float | None = None):
+    sim = RigSimulator(CFG.with_parameters({"motor.initial_setpoint": 3.75}))
+    if slip is not None:
+        sim.inject_fault("motor", "motor_slip", *slip)
+    freq, impacts, blocks = [], [], []
+    for k in range(int(t_end * 100)):
+        if clear_at is not None and k == int(clear_at * 100):
+            sim.clear_faults()
+        b = sim.advance(Fraction(k + 1, 100))
+        first, rows = b.truth
+        freq.append(rows[9])
+        impacts += b.impacts
+        blocks.append(b.channels["impact_force"].samples.tobytes())
+    return np.concatenate(freq), impacts, blocks
+
+
+def test_motor_slip_sags_the_motor_at_each_impact_and_it_ramps_back():
+    """Hypothesis (the one physical fault): from its start, each contact onset takes 5 % off the motor's
+    frequency over 2 ms (kernel.SLIP_TIME), which then ramps back to the setpoint at motor.ramp_rate (2 Hz/s:
+    0.19 Hz in 94 ms, well within the 267 ms between impacts at 3.75 Hz); before the start everything is
+    bit for bit the run without it, and after its end the motor sits on its setpoint again."""
+    base_f, base_imp, base_blocks = _slip_run(None)
+    f, imp, blocks = _slip_run((1.0, 2.0, 0.05))
+    rate = CFG.truth_rate
+    n_start = int(1.0 * rate)
+    assert np.array_equal(f[:n_start], base_f[:n_start]) and blocks[:100] == base_blocks[:100]
+    assert [i for i in imp if i.t_start < 1.0] == [i for i in base_imp if i.t_start < 1.0]
+    assert np.all(base_f[int(0.5 * rate):] == 3.75)                  # the motor is at its setpoint without slip
+    during = [i for i in imp if 1.0 <= i.t_start < 3.0]
+    assert len(during) >= 6
+    for i in during:
+        assert i.excitation_frequency == pytest.approx(3.75, abs=1e-9)   # recovered before each next impact
+        n = int(np.ceil((i.t_start + 0.002) * rate))               # the first truth sample after the sag
+        assert f[n] == pytest.approx(3.75 * 0.95 + 2.0 * (n / rate - i.t_start - 0.002), abs=2e-3)
+        assert f[n + int(0.1 * rate)] == 3.75                          # back on the setpoint 100 ms later
+    assert f.min() == pytest.approx(3.75 * 0.95, abs=1e-3)
+    assert np.all(f[int(3.2 * rate):] == 3.75) and not np.all(f[n_start:int(3.0 * rate)] == 3.75)
+    assert blocks[100:300] != base_blocks[100:300]                     # the truth and the sensors show it
+
+
+def test_clear_faults_ends_a_motor_slip_and_cancels_a_scheduled_one():
+    f, imp, _ = _slip_run((0.5, 0.0, 0.1), t_end=2.5, clear_at=1.0)
+    rate = CFG.truth_rate
+    assert f[int(0.5 * rate):int(1.0 * rate)].min() < 3.5               # sagging until the clear
+    assert np.all(f[int(1.2 * rate):] == 3.75)                          # none after (a sag ramps back first)
+    f2, _, _ = _slip_run((1.5, 0.5, 0.1), t_end=2.5, clear_at=1.0)     # cleared before it started
+    assert np.all(f2[int(0.5 * rate):] == 3.75)
+
+
+def test_motor_slip_motor_states_are_the_same_however_the_passes_cut_time():
+    """Under a slip the motor changes at every impact, several times within a pass of many blocks: the motor
+    state of each block end (what /rig/motor/state publishes) must not depend on how the passes cut time."""
+    def states(per_call: int):
+        sim = RigSimulator(CFG.with_parameters({"motor.initial_setpoint": 3.75}))
+        sim.inject_fault("motor", "motor_slip", 0.3, 0.0, 0.05)
+        out = []
+        for i in range(0, 150, per_call):
+            out += [(b.motor.frequency, b.motor.phase, b.truth[1].tobytes(), b.motor.frequency_setpoint)
+                    for b in sim.advance_blocks([Fraction(k + 1, 100) for k in range(i, min(i + per_call, 150))])]
+        return out
+    one, many = states(1), states(25)
+    assert one == many
+    assert min(f for f, *_ in one) < 3.6
+    assert {s for *_, s in one} == {3.75}   # the sag is not a new setpoint: it returns to the user's one

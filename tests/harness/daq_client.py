@@ -84,7 +84,8 @@ def main() -> int:
     for topic in args.topics:
         node.create_subscription(msgs.SampleBlock, topic, lambda d, t=topic: on_block(d, t), qos, raw=True)
     for topic in args.extra:
-        kind = {"/rig/faults": msgs.FaultEvent, "/rig/impact/events": msgs.ImpactEvent}.get(topic, msgs.Capture)
+        kind = {"/rig/faults": msgs.FaultEvent, "/rig/impact/events": msgs.ImpactEvent,
+                "/rig/motor/state": msgs.MotorState}.get(topic, msgs.Capture)
         node.create_subscription(kind, topic, lambda d, t=topic: stored[t].append((d, state["now"], time.time_ns())),
                                  latched if topic == "/rig/faults" else qos, raw=True)
 

@@ -72,7 +72,14 @@ F_MT0, F_MPHI0, F_MW0, F_MALPHA, F_MTEND, F_MWSET = range(5, 11)
 F_VIMP = 11
 F_RT0, F_RPEAK, F_RJ, F_RV, F_RPEN, F_RFREQ, F_RPHASE, F_RLAST = range(12, 20)
 F_ZT0 = 20
+# Motor slip (fault ``motor_slip``, rimd_sim.core.faults): the fraction of its frequency the motor loses at each
+# contact onset (0 = none), the rate (Hz/s) at which it then ramps back, and the setpoint it ramps back to once
+# the sag is over (> 0 while a sag is in progress). See :func:`motor_slip`.
+F_SLIP, F_SLIPRATE, F_SLIPBACK = 21, 22, 23
 N_FSTATE = 24
+#: Duration (s) of the motor's sag at a contact onset under ``motor_slip``: the frequency falls linearly (a
+#: motor cannot jump: the cart's velocity stays continuous), then ramps back at ``F_SLIPRATE``.
+SLIP_TIME = 0.002
 
 # ---- integer state ---------------------------------------------------------------------------------
 I_MODE, I_PEND, I_REC, I_CYC, I_NIMP, I_NSTEP, I_NREJ, I_NEV = range(8)
@@ -520,15 +527,39 @@ def motor_command(fs, ist, t, w_set, rate):
     else:
         fs[F_MALPHA] = rate if w_set > w else -rate
         fs[F_MTEND] = t + abs(w_set - w) / rate
+    fs[F_SLIPBACK] = 0.0   # a new setpoint ends a slip's way back (the command wins)
 
 
 @_jit
 def motor_finish_ramp(fs, ist, t):
-    """End of a ramp at ``t``: the frequency sits exactly on the setpoint from now on."""
+    """End of a ramp at ``t``: the frequency sits exactly on the setpoint from now on.
+
+    At the end of a slip's sag, the motor ramps back to the setpoint it had (:func:`motor_slip`).
+    """
     motor_rebase(fs, ist, t)
     fs[F_MW0] = fs[F_MWSET]
     fs[F_MALPHA] = 0.0
     fs[F_MTEND] = np.inf
+    if fs[F_SLIPBACK] > 0.0:
+        motor_command(fs, ist, t, fs[F_SLIPBACK], fs[F_SLIPRATE])
+
+
+@_jit
+def motor_slip(fs, ist, t):
+    """A contact onset at ``t`` under ``motor_slip``: the motor sags, then ramps back.
+
+    The frequency falls by the fraction ``F_SLIP`` of its value over ``SLIP_TIME``, then ramps back to its
+    setpoint at ``F_SLIPRATE`` (the load of the impact on an induction motor). A sag during the way back of the
+    previous one starts from the frequency reached.
+    """
+    motor_rebase(fs, ist, t)
+    w = fs[F_MW0]
+    if w <= 0.0:
+        return
+    back = fs[F_SLIPBACK] if fs[F_SLIPBACK] > 0.0 else fs[F_MWSET]
+    low = w * (1.0 - fs[F_SLIP])
+    motor_command(fs, ist, t, low, (w - low) / SLIP_TIME)
+    fs[F_SLIPBACK] = back
 
 
 # ======================================================================================================
@@ -757,6 +788,8 @@ def apply_event(fs, ist, p, yb, imp_out):
             close_record(fs, ist, imp_out, t)
         open_record(fs, ist, p, t, yb)
         ist[I_MODE] = CONTACT
+        if fs[F_SLIP] > 0.0:
+            motor_slip(fs, ist, t)
         fs[F_HFREE] = fs[F_H]
         fs[F_H] = min(fs[F_HCONT], fs[F_H])
         yb[2] = 0.0

@@ -302,7 +302,8 @@ class RigModel:
         turns = math.floor(phi)
         return MotorState(
             t=t,
-            frequency_setpoint=float(fs[k.F_MWSET]),
+            # During a slip's sag the kernel ramps to the sag's bottom: the setpoint is the one it returns to.
+            frequency_setpoint=float(fs[k.F_SLIPBACK] if fs[k.F_SLIPBACK] > 0.0 else fs[k.F_MWSET]),
             frequency=float(k.motor_freq(fs, t)),
             ramp_rate=float(abs(fs[k.F_MALPHA])) if t < fs[k.F_MTEND] else 0.0,
             phase=2.0 * math.pi * (phi - turns),
@@ -412,6 +413,33 @@ class RigModel:
         done = self._truncate()
         k.motor_command(self._fs, self._is, float(self._time), float(frequency_hz), float(ramp_rate))
         return done
+
+    @property
+    def motor_slipping(self) -> bool:
+        """A ``motor_slip`` is in force or a sag is in progress.
+
+        The motor segment may then change several times within one :meth:`advance` call, so
+        :meth:`motor_state` is exact only at the end of the call.
+        """
+        return bool(self._fs[k.F_SLIP] > 0.0 or self._fs[k.F_SLIPBACK] > 0.0)
+
+    def set_motor_slip(self, fraction: float) -> list[Impact]:
+        """From now on, the motor loses ``fraction`` of its frequency at each contact onset (0 = no more).
+
+        The fault ``motor_slip`` (:mod:`rimd_sim.core.faults`): at each contact onset the frequency falls
+        linearly by that fraction over ``SLIP_TIME`` (2 ms), then ramps back to its setpoint at
+        ``motor.ramp_rate``. A sag in progress when the slip ends still ramps back. A new motor setpoint ends
+        the way back of a sag (the command wins).
+
+        Raises:
+            CommandError: For a fraction outside [0, 1].
+        """
+        if not isinstance(fraction, (int, float)) or not 0.0 <= fraction <= 1.0:
+            raise CommandError(f"fraction = {fraction!r} refused: must be a fraction within [0, 1]")
+        done = self._truncate()
+        self._fs[k.F_SLIP] = float(fraction)
+        self._fs[k.F_SLIPRATE] = self._config.motor.ramp_rate
+        return done + self._resync()
 
     def perturb(self, velocity: float) -> list[Impact]:
         """Add ``velocity`` (m/s, inertial, along the impact line) to the hammer now.

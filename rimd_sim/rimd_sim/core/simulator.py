@@ -196,12 +196,25 @@ class RigSimulator:
             channel, kind, start, duration, magnitude, now=self.time,
             channels={c.name: c for c in self._config.channels})
         if kind == "motor_slip":
-            raise CommandError("kind = 'motor_slip' refused: not implemented in this version (the sensor faults are)")
+            if self._config.rig.structure.model != "rigid":
+                raise CommandError("kind = 'motor_slip' refused: not supported with structure.model "
+                                   f"'{self._config.rig.structure.model}' yet (use structure.model: rigid)")
+            spec = self._faults.add(channel, kind, t_start, duration_t, magnitude)
+            self._push(t_start, "motor_slip", float(magnitude))
+            if spec.end is not None:
+                self._push(spec.end, "motor_slip", 0.0)
+            return spec
         return self._faults.add(channel, kind, t_start, duration_t, magnitude)
 
     def clear_faults(self) -> tuple[int, int]:
         """End every fault in force now and cancel the scheduled ones; returns ``(ended, cancelled)``."""
-        return self._faults.clear(self.time)
+        slipping = any(f.kind == "motor_slip" for f in self._faults.active(self.time))
+        result = self._faults.clear(self.time)
+        if any(kind == "motor_slip" for _, _, kind, _ in self._queue) or slipping:
+            self._queue = [c for c in self._queue if c[2] != "motor_slip"]
+            heapq.heapify(self._queue)
+            self._push(self.time, "motor_slip", 0.0)
+        return result
 
     def active_faults(self) -> list[FaultSpec]:
         """Faults in force now."""
@@ -221,6 +234,8 @@ class RigSimulator:
             return done, f"setpoint {f:g} Hz, ramp {rate or self._config.motor.ramp_rate:g} Hz/s"
         if kind == "perturb":
             return model.perturb(arg), f"hammer velocity {arg:+g} m/s"
+        if kind == "motor_slip":
+            return model.set_motor_slip(arg), f"motor slip {arg:g} of the frequency per impact"
         if kind == "reset":
             return model.reset_hammer(), "hammer reset to its initial state"
         config = self._config.with_parameters(arg)
@@ -263,11 +278,15 @@ class RigSimulator:
         extra: list[Impact] = []
 
         def run_to(t: Fraction) -> None:
-            start = self.time
-            parts.append(self._model.advance(t))
-            for b in bounds:
-                if start < b <= t and b not in motor:
-                    motor[b] = self._model.motor_state(float(b))
+            # Under a motor slip the motor changes at every impact: block by block, so that the motor state
+            # of each block end is read at the end of an advance (RigModel.motor_state).
+            steps = [b for b in bounds if self.time < b < t] if self._model.motor_slipping else []
+            for stop in (*steps, t):
+                start = self.time
+                parts.append(self._model.advance(stop))
+                for b in bounds:
+                    if start < b <= stop and b not in motor:
+                        motor[b] = self._model.motor_state(float(b))
 
         while self._queue and self._queue[0][0] < bounds[-1]:
             when, _, kind, arg = heapq.heappop(self._queue)
