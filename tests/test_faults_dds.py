@@ -5,7 +5,7 @@ of +100 ppm over 600 s; bad requests refused while the rig keeps running.
 Hypotheses: the fault layer only touches the faulted channel's readings and deliveries (so the other
 channels and the faulted one outside its windows are sample for sample those of a run without faults), and
 its random choices come from per-fault seeded streams (so two runs are identical byte for byte).
-The runs are at ``real_time_factor 0`` from a paused rig (the client resumes it once subscribed).
+The runs are at 4x real time from a paused rig (the client resumes it once subscribed).
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ def _blocks(messages, *, raw: bool = False):  # noqa: ANN001
         m = deserialize_message(data, SampleBlock)
         if (m.first_index + len(m.samples)) / m.sample_rate > sc.END_S:
             continue
-        # The client's simulation-time arrival estimate is too rough at real_time_factor 0 (topics arrive in
+        # The client's simulation-time arrival estimate is too rough faster than real time (topics arrive in
         # bursts): the scan sees a delay by the blocks it puts out of order (the wall-clock test covers the rest).
         out.append(data if raw else (m, Block(m.first_index, np.asarray(m.samples), m.saturated_count)))
     return out
