@@ -13,7 +13,9 @@ cd "$ROOT" || exit 1
 # The load: one busy process, pinned to nothing (the scheduler moves it like any other job).
 python3 -c "while True: pass" &
 BUSY=$!
-trap 'kill "$BUSY" 2>/dev/null' EXIT INT TERM
+trap 'kill "$BUSY" 2>/dev/null' EXIT
+# Ctrl-C or SIGTERM ends the series (a bare trap would only stop the busy loop and go on to the next run).
+trap 'exit 130' INT TERM
 
 failed=0
 for i in $(seq 1 "$RUNS"); do
