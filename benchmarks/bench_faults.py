@@ -16,14 +16,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
-import signal
 import statistics
-import subprocess
 import sys
 import time
 from fractions import Fraction
 from pathlib import Path
+
+from bench_simulator_node import start, stop  # the node as the simulator bench runs it
 
 FAULTS = ["channel=impact_force kind=offset start=0 duration=0 magnitude=0.5",
           "channel=rimd_acceleration kind=clock_drift start=0 duration=0 magnitude=80",
@@ -56,22 +55,6 @@ def core(seconds: float) -> dict[str, float]:
             sim.advance_blocks([Fraction(10 * i + k + 1, 100) for k in range(10)])
         out[name] = (time.process_time() - t0) / (n / 10)
     return out
-
-
-def start(*ros_args: str) -> subprocess.Popen:
-    exe = shutil.which("rimd_simulator")
-    if exe is None:
-        raise SystemExit("rimd_simulator not on PATH: run `source env.sh` first")
-    return subprocess.Popen([exe, "--ros-args", *ros_args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    os.killpg(proc.pid, signal.SIGINT)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
 
 
 def real_time(node, args: list[str], seconds: float) -> float:  # noqa: ANN001
