@@ -80,6 +80,12 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
         probe.create_subscription(SampleBlock, "/rig/" + ch.topic, heard[ch.name].append, qos)
     events: list[ImpactEvent] = []
     probe.create_subscription(ImpactEvent, "/rig/impact/events", events.append, qos)
+    # The probe is the truth the file is checked against, so it must hear every block the bridge will hear:
+    # the bridge starts only once the probe receives every channel and the impact events (volatile topics,
+    # so the bridge cannot be given anything older). Under load the test process can match its readers after
+    # a bridge started at the same time, and would then miss the bridge's first blocks.
+    assert spin_until(ros_executor, lambda: all(heard.values()) and bool(events), timeout=30), \
+        {name: len(blocks) for name, blocks in heard.items()} | {"impact events": len(events)}
 
     out = tmp_path / "live.rrd"
     bridge = ros_processes.start_node("rimd_rerun", "--ros-args", "-p", "sink:=save", "-p", f"save_path:={out}",
@@ -90,8 +96,6 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
                                                       bridge.output()) is not None, timeout=30), bridge.tail()
     bridge.send_signal(signal.SIGTERM)
     assert bridge.wait(20) == 0, bridge.tail()
-    spin_until(ros_executor, lambda: False, timeout=0.3)
-    assert rig.stop() == 0, rig.tail()
     closed = re.search(r"rimd_rerun: closed .*", bridge.output())
     assert closed, bridge.tail()
 
@@ -99,6 +103,17 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
     data = load_rrd(out)
     assert ENTITIES <= set(data), sorted(ENTITIES - set(data))
     runs = check_channels(data)
+    origin = stamp_ns(heard["impact_force"][0].header.stamp) - int(
+        sample_times_ns(heard["impact_force"][0].first_index, 1, 20000.0)[0])
+    markers = data["channels/impact_force/impacts"]
+    # The rig still runs: let the probe take every block and impact up to the bridge's last before it stops.
+    heard_to = {name: lambda name=name: max((b.first_index + len(b.samples) for b in heard[name]), default=0)
+                for name in heard}
+    last_impact = int(markers.times[-1]) if markers.times.size else 0
+    assert spin_until(ros_executor, lambda: all(heard_to[n]() >= sum(runs[n]) for n in runs) and any(
+        stamp_ns(e.header.stamp) - origin >= last_impact for e in events), timeout=20), \
+        {n: (heard_to[n](), sum(runs[n])) for n in runs}
+    assert rig.stop() == 0, rig.tail()
     for ch in CHANNELS:
         first, count = runs[ch.name]
         assert f"{ch.name} {count} samples" in closed.group(0)  # what the bridge counted is what is in the file
@@ -112,9 +127,6 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
             stamp_ns(heard["impact_force"][0].header.stamp) - int(sample_times_ns(
                 heard["impact_force"][0].first_index, 1, 20000.0)[0]), "one origin for all channels"
 
-    origin = stamp_ns(heard["impact_force"][0].header.stamp) - int(
-        sample_times_ns(heard["impact_force"][0].first_index, 1, 20000.0)[0])
-    markers = data["channels/impact_force/impacts"]
     assert markers.times.size >= 3
     by_time = {stamp_ns(e.header.stamp) - origin: e for e in events}
     for t, peak in zip(markers.times, markers.scalars(), strict=True):
