@@ -16,9 +16,12 @@ while the node is still loading also ends in a clean exit.
 
 from __future__ import annotations
 
+import inspect
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import rclpy
 import yaml
@@ -32,6 +35,53 @@ from rimd_sim.nodes._stop import StopRequest, install_stop_handlers
 #: Longest time between a stop request and the loop noticing it (s). rcl_wait cannot be interrupted by a
 #: Python signal handler, so the loop waits at most this long before it looks at the request.
 SPIN_PERIOD_S = 0.1
+
+#: Environment variable choosing the nodes' executor: ``events`` (default) or ``single`` (rclpy's
+#: SingleThreadedExecutor, for comparison or should the events executor misbehave on some platform).
+EXECUTOR_ENV = "RIMD_EXECUTOR"
+EXECUTORS = ("events", "single")
+
+
+def make_executor() -> Executor:
+    """The executor of the rig's nodes: rclpy's events executor unless ``RIMD_EXECUTOR=single``.
+
+    rclpy's ``SingleThreadedExecutor`` builds a wait set in Python for every callback it runs (one message,
+    one pass over every subscription, timer, service and guard condition of the node): at the rig's 600
+    messages per second that was half the CPU of the recorder and of the Rerun bridge
+    (``benchmarks/bench_rig.py``, docs/benchmarks.md). The events executor (``rclpy.experimental``, in
+    C++ since Jazzy) is told by the middleware which entity is ready and calls the callback directly.
+
+    Raises:
+        ValueError: ``RIMD_EXECUTOR`` names no known executor.
+    """
+    choice = os.environ.get(EXECUTOR_ENV, "events") or "events"
+    if choice not in EXECUTORS:
+        raise ValueError(f"{EXECUTOR_ENV}={choice!r} refused: must be one of {', '.join(EXECUTORS)}")
+    if choice == "single":
+        return SingleThreadedExecutor()
+    from rclpy.experimental import EventsExecutor
+
+    return EventsExecutor()
+
+class WithMessageInfo:
+    """A subscription callback ``fn(msg, info)`` that both of rclpy's call conventions reach.
+
+    rclpy gives the message info to a callback that takes two arguments. Its Python executors then call
+    ``fn(msg, info)``; the events executor of Jazzy's rclpy (7.1) calls ``fn((msg, info))`` with one tuple,
+    which a two-argument function refuses (``SystemError: null argument to internal routine`` out of
+    ``spin_once``). This wrapper declares the two-argument signature, so that rclpy asks for the message
+    info, and accepts either call.
+    """
+
+    def __init__(self, fn: Callable[[Any, dict], None]) -> None:
+        self.fn = fn
+        self.__signature__ = inspect.signature(lambda msg, info: None)
+
+    def __call__(self, *args: Any) -> None:
+        if len(args) == 1:
+            args = args[0]
+        self.fn(*args)
+
 
 def spin_until_stopped(executor: Executor, stop: StopRequest, done: Callable[[], bool] | None = None) -> None:
     """Spin ``executor`` until a stop is requested, ``done()`` is true, or the context is shut down."""
@@ -60,7 +110,7 @@ def params_file_problem(node: Node, args: Sequence[str]) -> str | None:
 
 def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseException], ...], *,
              args: list[str] | None = None, refused_status: int = 2, refused_prefix: str = "",
-             executor: Callable[[], Executor] = SingleThreadedExecutor,
+             executor: Callable[[], Executor] = make_executor,
              spin: Callable[[Node, Executor, StopRequest], None] | None = None,
              close: Callable[[Node], int | None] | None = None) -> int:
     """Run one node until it ends, Ctrl-C, SIGTERM or an external shutdown; return the exit status.

@@ -38,8 +38,8 @@ import struct
 import sys
 import threading
 import time
-from collections import deque
 from pathlib import Path
+from queue import Empty, SimpleQueue
 from typing import Any
 
 import rclpy
@@ -54,7 +54,7 @@ from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
 from rimd_sim.nodes._params import refuse_unnamed
-from rimd_sim.nodes._run import run_node
+from rimd_sim.nodes._run import WithMessageInfo, run_node
 from rimd_sim.recording.bag import BagWriter, WriteFailure
 from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
@@ -129,8 +129,9 @@ class RecorderNode(Node):
                                   "topics": " ".join(values["topics"]),
                                   "use_sim_time": str(self.get_parameter("use_sim_time").value),
                               }})
-        # Shared between the executor thread and the writer thread (deque appends/pops are atomic).
-        self._queue: deque[tuple] = deque()
+        # Shared between the executor thread and the writer thread. A SimpleQueue (C, thread-safe): the writer
+        # sleeps in get() until a message comes or a flush is due, instead of polling.
+        self._queue: SimpleQueue[tuple] = SimpleQueue()
         self._queue_size = values["queue_size"]
         self._recording = True
         self._paused = bool(values["start_paused"])
@@ -195,7 +196,7 @@ class RecorderNode(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self._types[topic] = type_name
             self._received[topic] = 0
-            self._queue.append(("topic", topic, type_name, offered))
+            self._queue.put(("topic", topic, type_name, offered))
             self._subs[topic] = self.create_subscription(
                 msg_type, topic, self._make_callback(topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} ({type_name}, "
@@ -221,10 +222,10 @@ class RecorderNode(Node):
             if stamped and len(data) >= 12:   # header.stamp: the CDR's first field after the 4-byte encapsulation
                 sec, nanosec = _STAMP_LE.unpack_from(data, 4) if data[1] == 1 else _STAMP_BE.unpack_from(data, 4)
                 last_stamp[topic] = sec * 1_000_000_000 + nanosec
-            if len(queue) >= self._queue_size:
+            if queue.qsize() >= self._queue_size:
                 dropped[topic] = dropped.get(topic, 0) + 1
                 return
-            queue.append(("msg", topic, data, clock.now().nanoseconds, info.get("source_timestamp", 0)))
+            queue.put(("msg", topic, data, clock.now().nanoseconds, info.get("source_timestamp", 0)))
 
         def drain(limit: int = 1000) -> int:
             """Take up to ``limit`` messages already waiting in the subscription; return how many."""
@@ -250,7 +251,7 @@ class RecorderNode(Node):
             drain()
 
         self._drains[topic] = drain
-        return callback
+        return WithMessageInfo(callback)
 
     def _fetch_rig_parameters(self) -> None:
         """Ask ``rig_node`` for its parameters (list, then get), one step per discovery tick, never blocking."""
@@ -271,7 +272,7 @@ class RecorderNode(Node):
         if response is not None:  # GetParameters answered
             values = {name: parameter_value_to_python(value)
                       for name, value in zip(self._params_names, response.values, strict=False)}
-            self._queue.append(("metadata", "rimd_rig_parameters", {k: str(v) for k, v in sorted(values.items())}))
+            self._queue.put(("metadata", "rimd_rig_parameters", {k: str(v) for k, v in sorted(values.items())}))
         self._params_done = True
 
     # -- writer thread ----------------------------------------------------------------------------------------
@@ -280,19 +281,18 @@ class RecorderNode(Node):
         last_flush = time.monotonic()
         interval = self._p["flush_interval"]
         while True:
-            try:
-                item = queue.popleft()
-            except IndexError:
-                if self._stop.is_set():
-                    break
+            try:   # sleep until an item comes or the next flush is due (at most 1 s: failure reminders)
+                item = queue.get(timeout=min(1.0, max(0.001, last_flush + interval - time.monotonic())))
+            except Empty:
                 now = time.monotonic()
                 if now - last_flush >= interval:
                     self._safely(bag.flush)
                     self._check_failure()
                     last_flush = now
-                time.sleep(0.002)
                 continue
             kind = item[0]
+            if kind == "stop":
+                break
             if kind == "msg":
                 _, topic, data, log_time, publish_time = item
                 if self._types[topic] in BLOCK_TYPES:
@@ -382,7 +382,7 @@ class RecorderNode(Node):
     def _on_writer(self, function, timeout: float = 10.0):  # noqa: ANN001
         """Run ``function`` on the writer thread, after the messages queued before it; return its result."""
         done, result = threading.Event(), []
-        self._queue.append(("call", function, done, result))
+        self._queue.put(("call", function, done, result))
         if not done.wait(timeout):
             raise TimeoutError("the writer did not answer")
         if isinstance(result[0], Exception):
@@ -482,7 +482,7 @@ class RecorderNode(Node):
             if not_written:
                 status.message += f" ({not_written} messages not written after a {failures[-1].headline})"
         values = {"state": state, "file": str(self._bag.current_path or ""),
-                  "queue": str(len(self._queue)), "write_errors": str(self._write_errors),
+                  "queue": str(self._queue.qsize()), "write_errors": str(self._write_errors),
                   "write_failure": failures[-1].describe() if failures else "",
                   "messages_written": str(sum(r["written"] for r in report.values())),
                   "messages_not_written": str(not_written),
@@ -513,6 +513,7 @@ class RecorderNode(Node):
                         break
         self._recording = False
         self._stop.set()
+        self._queue.put(("stop",))   # wakes the writer; it is the last item, so everything before is written
         self._writer.join(timeout=60.0)
         bag = self._bag
         files = [f for f in bag.files if f.finished or f.error]
