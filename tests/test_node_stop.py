@@ -149,3 +149,13 @@ def test_the_nodes_use_the_fast_dds_profile_with_a_short_heartbeat(tmp_path):
     chosen = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60,
                             check=True).stdout.strip()
     assert chosen == str(mine)   # the user's own profile wins
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(("node", "status"), [("rimd_simulator", 2), ("rimd_recorder", 2), ("rimd_rerun", 1)])
+def test_an_unknown_executor_is_refused_by_name(ros_processes, node, status):
+    """RIMD_EXECUTOR chooses the nodes' executor (events, the default, or single): any other value is refused
+    before the node starts, naming the variable and the choices."""
+    proc = ros_processes.start_node(node, env={"RIMD_EXECUTOR": "fast"})
+    assert proc.wait(60) == status, proc.tail()
+    assert "RIMD_EXECUTOR='fast' refused: must be one of events, single" in proc.output(), proc.tail()

@@ -42,6 +42,18 @@ EXECUTOR_ENV = "RIMD_EXECUTOR"
 EXECUTORS = ("events", "single")
 
 
+def executor_kind() -> str:
+    """The executor chosen by ``RIMD_EXECUTOR``: ``events`` or ``single``.
+
+    Raises:
+        ValueError: ``RIMD_EXECUTOR`` names no known executor.
+    """
+    choice = os.environ.get(EXECUTOR_ENV, "events") or "events"
+    if choice not in EXECUTORS:
+        raise ValueError(f"{EXECUTOR_ENV}={choice!r} refused: must be one of {', '.join(EXECUTORS)}")
+    return choice
+
+
 def make_executor() -> Executor:
     """The executor of the rig's nodes: rclpy's events executor unless ``RIMD_EXECUTOR=single``.
 
@@ -54,10 +66,7 @@ def make_executor() -> Executor:
     Raises:
         ValueError: ``RIMD_EXECUTOR`` names no known executor.
     """
-    choice = os.environ.get(EXECUTOR_ENV, "events") or "events"
-    if choice not in EXECUTORS:
-        raise ValueError(f"{EXECUTOR_ENV}={choice!r} refused: must be one of {', '.join(EXECUTORS)}")
-    if choice == "single":
+    if executor_kind() == "single":
         return SingleThreadedExecutor()
     from rclpy.experimental import EventsExecutor
 
@@ -129,6 +138,11 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
         close: Called once in every case after spinning, with the context still valid, before the node is
             destroyed; a non-zero return becomes the exit status.
     """
+    try:
+        executor_kind()
+    except ValueError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return refused_status
     stop = install_stop_handlers()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None

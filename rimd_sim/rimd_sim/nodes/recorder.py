@@ -38,6 +38,7 @@ import struct
 import sys
 import threading
 import time
+from collections import deque
 from pathlib import Path
 from queue import Empty, SimpleQueue
 from typing import Any
@@ -54,7 +55,7 @@ from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
 from rimd_sim.nodes._params import refuse_unnamed
-from rimd_sim.nodes._run import WithMessageInfo, run_node
+from rimd_sim.nodes._run import WithMessageInfo, executor_kind, run_node
 from rimd_sim.recording.bag import BagWriter, WriteFailure
 from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
@@ -69,6 +70,8 @@ STAMPED_TYPES = frozenset({"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 _STAMP_LE, _STAMP_BE = struct.Struct("<iI"), struct.Struct(">iI")
 
 NODE_NAME = "rimd_recorder"
+#: The writer thread sleeps this long after the first message of a batch, then writes all that came (s).
+WRITER_BATCH_S = 0.02
 #: While the writing is stopped by a write error, the log reminds of it this often (s).
 FAILURE_REMINDER_S = 30.0
 
@@ -206,16 +209,23 @@ class RecorderNode(Node):
     def _make_callback(self, topic: str):
         """Return the callback of one topic.
 
-        It queues the message, then drains the messages already waiting in the subscription
-        (``take_message`` in a loop): one executor dispatch then serves a burst of messages, which multiplies
-        the rate the recorder sustains when the rig runs faster than real time.
+        It queues the message. Under rclpy's SingleThreadedExecutor (``RIMD_EXECUTOR=single``) it then drains
+        the messages already waiting in the subscription (``take_message`` in a loop), so that one dispatch
+        serves a burst. The stop drains every subscription the same way (:meth:`shutdown`).
         """
         queue = self._queue
         clock = self.get_clock()
+        # The node clock: ROS time with use_sim_time, else the system clock (what clock.now() reads, without
+        # building a Time object per message).
+        now_ns = ((lambda: clock.now().nanoseconds) if self.get_parameter("use_sim_time").value else time.time_ns)
         received = self._received
         dropped = self._dropped
         last_stamp = self._last_stamp
         stamped = self._types.get(topic) in STAMPED_TYPES
+        # rclpy's SingleThreadedExecutor pays a wait set per callback: there, one dispatch takes the burst
+        # waiting behind it. The events executor dispatches each message for the cost of a take: draining
+        # would only add a take that finds nothing.
+        drain_here = executor_kind() == "single"
 
         def accept(data: bytes, info: dict) -> None:
             received[topic] += 1
@@ -225,7 +235,7 @@ class RecorderNode(Node):
             if queue.qsize() >= self._queue_size:
                 dropped[topic] = dropped.get(topic, 0) + 1
                 return
-            queue.put(("msg", topic, data, clock.now().nanoseconds, info.get("source_timestamp", 0)))
+            queue.put(("msg", topic, data, now_ns(), info.get("source_timestamp", 0)))
 
         def drain(limit: int = 1000) -> int:
             """Take up to ``limit`` messages already waiting in the subscription; return how many."""
@@ -248,7 +258,8 @@ class RecorderNode(Node):
                 self._skipped_paused += 1
                 return
             accept(data, info)
-            drain()
+            if drain_here:
+                drain()
 
         self._drains[topic] = drain
         return WithMessageInfo(callback)
@@ -280,16 +291,28 @@ class RecorderNode(Node):
         queue, bag = self._queue, self._bag
         last_flush = time.monotonic()
         interval = self._p["flush_interval"]
+        batch: deque[tuple] = deque()
         while True:
-            try:   # sleep until an item comes or the next flush is due (at most 1 s: failure reminders)
-                item = queue.get(timeout=min(1.0, max(0.001, last_flush + interval - time.monotonic())))
-            except Empty:
-                now = time.monotonic()
-                if now - last_flush >= interval:
-                    self._safely(bag.flush)
-                    self._check_failure()
-                    last_flush = now
-                continue
+            if not batch:
+                try:   # sleep until an item comes or the next flush is due (at most 1 s: failure reminders)
+                    first = queue.get(timeout=min(1.0, max(0.001, last_flush + interval - time.monotonic())))
+                except Empty:
+                    now = time.monotonic()
+                    if now - last_flush >= interval:
+                        self._safely(bag.flush)
+                        self._check_failure()
+                        last_flush = now
+                    continue
+                # Let the rest of the rig's block arrive, then take everything: one wake-up of this thread per
+                # batch instead of one per message (each wake-up is a thread switch and a GIL hand-over).
+                time.sleep(WRITER_BATCH_S)
+                batch.append(first)
+                while True:
+                    try:
+                        batch.append(queue.get_nowait())
+                    except Empty:
+                        break
+            item = batch.popleft()
             kind = item[0]
             if kind == "stop":
                 break
