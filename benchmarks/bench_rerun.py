@@ -119,7 +119,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="live measurement, s (default 60)")
     parser.add_argument("--sink", default="save", choices=("save", "serve_web"))
-    parser.add_argument("--batch", type=int, default=5, help="batch_blocks of the bridge (default 5, as configured)")
+    parser.add_argument("--batch", type=int, default=10, help="batch_blocks of the bridge (default 10, as configured)")
     parser.add_argument("--offline-seconds", type=float, default=20.0, help="simulated s converted offline")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_rerun_") as tmp:

@@ -93,6 +93,7 @@ class RigSimulator:
     def __init__(self, config: SimConfig, *, truth: bool = True, strobe: bool = False,
                  capture: CaptureConfig | None = None) -> None:
         self._config = config
+        self._rates_cache: tuple[SimConfig, dict[str, Fraction], Fraction] | None = None
         from .structural import make_model  # the model structure.model selects (issue 15)
 
         capture = capture if capture is not None and capture.enabled else None
@@ -258,6 +259,15 @@ class RigSimulator:
             raise CommandError(f"cannot advance to {float(t_stop)} s: already at {float(self.time)} s")
         return self.advance_blocks([t_stop])[0]
 
+    def _exact_rates(self) -> tuple[dict[str, Fraction], Fraction]:
+        """The channels' and the truth's sample rates as exact fractions (cached per configuration)."""
+        cached = self._rates_cache
+        if cached is None or cached[0] is not self._config:
+            config = self._config
+            cached = self._rates_cache = (config, {ch.name: Fraction(repr(ch.sample_rate)) for ch in config.channels},
+                                          Fraction(repr(config.truth_rate)))
+        return cached[1], cached[2]
+
     def advance_blocks(self, boundaries: Sequence[float | Fraction]) -> list[SimBlock]:
         """Simulate to the last of ``boundaries`` in one pass and return one block per interval.
 
@@ -302,11 +312,12 @@ class RigSimulator:
         for b in bounds:  # a boundary equal to the start of the pass
             motor.setdefault(b, self._model.motor_state(float(b)))
 
+        rates, truth_rate = self._exact_rates()
         readings = {}
         for name in CHANNEL_NAMES:
             first = parts[0].channels[name][0]
             raw = np.concatenate([p.channels[name][1] for p in parts])
-            rate = Fraction(repr(self._config.channel(name).sample_rate))
+            rate = rates[name]
             x, clipped = self._instruments[name].measure_mask(self._faults.pre(name, first, raw))
             x, clipped = self._faults.post(name, first, x, clipped)
             reading = [((lo, hi), x[lo:hi], int(np.count_nonzero(clipped[lo:hi])) if clipped is not None else 0)
@@ -330,7 +341,7 @@ class RigSimulator:
         if parts[0].truth is not None:
             truth_all = (parts[0].truth[0], np.concatenate([p.truth[1] for p in parts], axis=1))
             truth_cuts = _split_index(truth_all[0], truth_all[1].shape[1],
-                                      [samples_before(b, Fraction(repr(self._config.truth_rate))) for b in bounds])
+                                      [samples_before(b, truth_rate) for b in bounds])
         impacts = sorted([i for p in parts for i in p.impacts] + extra, key=lambda i: i.index)
         strobe = [s for p in parts for s in p.strobe]
         blocks = []
