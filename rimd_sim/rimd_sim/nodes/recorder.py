@@ -55,7 +55,7 @@ from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
 from rimd_sim.nodes._params import refuse_unnamed
-from rimd_sim.nodes._run import WithMessageInfo, executor_kind, run_node
+from rimd_sim.nodes._run import PolledSubscriptions, run_node
 from rimd_sim.recording.bag import BagWriter, WriteFailure
 from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
@@ -70,6 +70,8 @@ STAMPED_TYPES = frozenset({"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 _STAMP_LE, _STAMP_BE = struct.Struct("<iI"), struct.Struct(">iI")
 
 NODE_NAME = "rimd_recorder"
+#: Period of the takes from the subscriptions (s): the messages of one period are taken at once.
+POLL_PERIOD_S = 0.02
 #: The writer thread sleeps this long after the first message of a batch, then writes all that came (s).
 WRITER_BATCH_S = 0.02
 #: While the writing is stopped by a write error, the log reminds of it this often (s).
@@ -139,7 +141,9 @@ class RecorderNode(Node):
         self._recording = True
         self._paused = bool(values["start_paused"])
         self._subs: dict[str, Any] = {}
-        self._drains: dict[str, Any] = {}
+        self._handlers: dict[str, Any] = {}
+        # The subscriptions are taken by a timer, every message waiting at once (nodes._run.PolledSubscriptions).
+        self._polled = PolledSubscriptions(self, POLL_PERIOD_S)
         self._types: dict[str, str] = {}
         self._received: dict[str, int] = {}
         self._last_stamp: dict[str, int] = {}   # header stamp (ns) of the last message received per topic
@@ -169,6 +173,12 @@ class RecorderNode(Node):
         self._writer.start()
         self.get_logger().info(f"recording {', '.join(values['topics'])} into {self.output_dir}"
                                + (" (paused: call ~/resume to start)" if self._paused else ""))
+
+    @property
+    def subscriptions(self) -> list:
+        """The subscriptions the executor takes: none of the recorded topics (they are polled)."""
+        polled = getattr(self, "_polled", None)   # None while Node.__init__ runs
+        return list(super().subscriptions) if polled is None else polled.visible(super().subscriptions)
 
     # -- discovery and subscriptions --------------------------------------------------------------------------
     def _wanted(self, topic: str) -> bool:
@@ -200,18 +210,16 @@ class RecorderNode(Node):
             self._types[topic] = type_name
             self._received[topic] = 0
             self._queue.put(("topic", topic, type_name, offered))
-            self._subs[topic] = self.create_subscription(
-                msg_type, topic, self._make_callback(topic), qos, raw=True)
+            self._subs[topic] = self._polled.create(self, msg_type, topic, qos, self._make_handler(topic))
             self.get_logger().info(f"recording {topic} ({type_name}, "
                                    f"{'reliable' if reliable else 'best effort'})")
         self._fetch_rig_parameters()
 
-    def _make_callback(self, topic: str):
-        """Return the callback of one topic.
+    def _make_handler(self, topic: str):
+        """Return the handler of one topic's messages, taken by :attr:`_polled` (every ``POLL_PERIOD_S``).
 
-        It queues the message. Under rclpy's SingleThreadedExecutor (``RIMD_EXECUTOR=single``) it then drains
-        the messages already waiting in the subscription (``take_message`` in a loop), so that one dispatch
-        serves a burst. The stop drains every subscription the same way (:meth:`shutdown`).
+        It stamps the message (log time) and queues it for the writer. The stop takes what is left in every
+        subscription the same way (:meth:`shutdown`).
         """
         queue = self._queue
         clock = self.get_clock()
@@ -222,10 +230,6 @@ class RecorderNode(Node):
         dropped = self._dropped
         last_stamp = self._last_stamp
         stamped = self._types.get(topic) in STAMPED_TYPES
-        # rclpy's SingleThreadedExecutor pays a wait set per callback: there, one dispatch takes the burst
-        # waiting behind it. The events executor dispatches each message for the cost of a take: draining
-        # would only add a take that finds nothing.
-        drain_here = executor_kind() == "single"
 
         def accept(data: bytes, info: dict) -> None:
             received[topic] += 1
@@ -237,32 +241,14 @@ class RecorderNode(Node):
                 return
             queue.put(("msg", topic, data, now_ns(), info.get("source_timestamp", 0)))
 
-        def drain(limit: int = 1000) -> int:
-            """Take up to ``limit`` messages already waiting in the subscription; return how many."""
-            sub = self._subs.get(topic)
-            if sub is None:
-                return 0
-            for n in range(limit):
-                try:
-                    with sub.handle:
-                        taken = sub.handle.take_message(sub.msg_type, True)
-                except Exception:  # noqa: BLE001 - the subscription is being destroyed
-                    return n
-                if taken is None:
-                    return n
-                accept(taken[0], taken[1])
-            return limit
-
-        def callback(data: bytes, info: dict) -> None:
+        def handler(data: bytes, info: dict) -> None:
             if not self._recording or self._paused:
                 self._skipped_paused += 1
                 return
             accept(data, info)
-            if drain_here:
-                drain()
 
-        self._drains[topic] = drain
-        return WithMessageInfo(callback)
+        self._handlers[topic] = handler
+        return handler
 
     def _fetch_rig_parameters(self) -> None:
         """Ask ``rig_node`` for its parameters (list, then get), one step per discovery tick, never blocking."""
@@ -530,9 +516,9 @@ class RecorderNode(Node):
         different times. This runs before the context is shut down (see :mod:`rimd_sim.nodes._run`).
         """
         if self._recording and not self._paused and self.context.ok():
-            for drain in list(self._drains.values()):
+            for topic, handler in list(self._handlers.items()):
                 for _ in range(10):   # bounded: a publisher faster than the takes cannot hold the stop
-                    if drain(10_000) < 10_000:
+                    if PolledSubscriptions.take(self._subs[topic], handler, 10_000) < 10_000:
                         break
         self._recording = False
         self._stop.set()

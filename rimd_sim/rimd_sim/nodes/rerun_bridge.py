@@ -22,7 +22,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
 from rimd_sim.nodes._params import refuse_unnamed
-from rimd_sim.nodes._run import run_node
+from rimd_sim.nodes._run import PolledSubscriptions, run_node
 from rimd_sim.recording.cdr import read_block
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
 from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
@@ -30,6 +30,8 @@ from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_paramete
 __all__ = ["RerunBridgeNode", "main"]
 
 NODE_NAME = "rimd_rerun"
+#: Period of the takes from the block subscriptions (s); their history (500 blocks) holds seconds of it.
+POLL_PERIOD_S = 0.02
 SAMPLE_BLOCK, RIG_STATE = "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 DEFAULT_NAMESPACE = "rig"
 
@@ -93,9 +95,12 @@ class RerunBridgeNode(Node):
         # The block topics arrive serialized and are read in place (rimd_sim.recording.cdr.read_block: the
         # samples as NumPy views, no message objects): a third of the bridge's time went to rclpy's
         # deserialisation. The impact events (a few per second) are deserialised as usual.
+        # They are taken by a timer, every message waiting at once (nodes._run.PolledSubscriptions): one
+        # wake-up per period instead of one dispatch per message.
+        self._polled = PolledSubscriptions(self, POLL_PERIOD_S)
         for ch in CHANNELS:
-            self.create_subscription(SampleBlock, ch.topic, self._raw_handler(ch.topic, SAMPLE_BLOCK), qos, raw=True)
-        self.create_subscription(RigState, TRUTH_TOPIC, self._raw_handler(TRUTH_TOPIC, RIG_STATE), qos, raw=True)
+            self._polled.create(self, SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
+        self._polled.create(self, RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE))
         self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._handler(EVENTS_TOPIC), events_qos)
         self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
         if p["status_period"] > 0:
@@ -103,6 +108,12 @@ class RerunBridgeNode(Node):
         self.get_logger().info(
             f"rerun bridge ready: sink {spec.kind} -> {self.stream.viewer_url}; topics under "
             f"{self.get_namespace()}; analytics {'per user config' if spec.analytics else 'off'}")
+
+    @property
+    def subscriptions(self) -> list:
+        """The subscriptions the executor takes: the impact events only (the block topics are polled)."""
+        polled = getattr(self, "_polled", None)   # None while Node.__init__ runs
+        return list(super().subscriptions) if polled is None else polled.visible(super().subscriptions)
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
         """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
@@ -112,7 +123,7 @@ class RerunBridgeNode(Node):
     def _raw_handler(self, topic: str, type_name: str):
         on_message = self._handler(topic)
 
-        def on_raw(data: bytes) -> None:
+        def on_raw(data: bytes, info: dict) -> None:  # noqa: ARG001 - the message info is not used
             try:
                 view = read_block(data, type_name)
             except ValueError as exc:
