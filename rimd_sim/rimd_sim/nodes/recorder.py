@@ -7,9 +7,10 @@
   stored with the channel, as rosbag2 does.
 * The executor thread takes the subscriptions every ``POLL_PERIOD_S`` (every waiting message at once,
   :class:`rimd_sim.nodes._run.PolledSubscriptions`), stamps each message (node clock: wall time, or simulation
-  time with ``use_sim_time``) and queues it; a writer thread, woken once per batch, owns the files (:class:`rimd_sim.recording.bag.BagWriter`), counts
-  loss and closes a chunk at least every ``flush_interval`` seconds. A full queue (``queue_size`` messages)
-  drops the newest message and counts it; nothing is ever dropped silently.
+  time with ``use_sim_time``) and queues it; a writer thread, woken once per batch, owns the files
+  (:class:`rimd_sim.recording.bag.BagWriter`), counts loss and closes a chunk at least every
+  ``flush_interval`` seconds. A full queue (``queue_size`` messages) drops the newest message and counts it;
+  nothing is ever dropped silently.
 * Loss per topic: samples missing between consecutive blocks (``first_index`` gaps of SampleBlock and
   RigState) and queue overflows, reported in ``/diagnostics`` (1 Hz), the log, and the final summary.
 * On ``~/stop``, SIGINT and SIGTERM the current file is finished (summary, indexes, rosbag2 metadata) and

@@ -66,6 +66,8 @@ CHANNEL_TOPICS = {
 TRUTH_ARRAY_FIELDS = ("theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity", "rimd_acceleration",
                       "penetration", "contact_force", "motor_phase", "motor_frequency")
 
+#: Longest the first resume waits for DDS to match the readers the graph already shows (s).
+RESUME_MATCH_TIMEOUT_S = 2.0
 #: Longest a command may be scheduled ahead of the simulation (s of simulation time).
 MAX_SCHEDULE_AHEAD_S = 86_400
 
@@ -554,7 +556,23 @@ class SimulatorNode(Node):
         self.get_logger().info(response.message)
         return response
 
+    def _unmatched(self) -> list[str]:
+        """Topics with a subscription in the ROS graph that its publisher has not matched yet (DDS discovery)."""
+        pubs = [*self._pubs.values(), self._pub_events, self._pub_motor, self._pub_truth, *self._pub_captures.values()]
+        return [p.topic_name for p in pubs if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
+
     def _on_resume(self, request, response):
+        if not self._started:
+            # The first resume starts sample 0, which a volatile topic gives only to readers its publisher has
+            # matched. The graph (what a caller such as `rimd rig` sees) can show a subscription some ms
+            # before DDS has matched it with this writer: wait for the match (bounded), so that every reader
+            # the caller saw gets sample 0.
+            deadline = time.monotonic() + RESUME_MATCH_TIMEOUT_S
+            while (unmatched := self._unmatched()) and time.monotonic() < deadline:
+                time.sleep(0.005)
+            if unmatched:
+                self.get_logger().warning(f"resuming although readers of {', '.join(unmatched)} are not matched "
+                                          f"after {RESUME_MATCH_TIMEOUT_S:g} s: they may miss the first blocks")
         with self._lock:
             if not self._paused:
                 response.success = False
