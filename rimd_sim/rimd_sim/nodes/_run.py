@@ -71,6 +71,7 @@ def make_executor() -> Executor:
 
     return EventsExecutor()
 
+
 class PolledSubscriptions:
     """Raw subscriptions that their node takes itself, every ready message at once, every ``period`` s.
 
