@@ -22,7 +22,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rimd_msgs.msg import RigState, SampleBlock
 from rimd_sim.recording.cdr import BLOCK_ARRAYS, SampleBlockEncoder, block_span, read_block
 
-TEXT = st.text(max_size=24)
+TEXT = st.text(st.characters(blacklist_characters="\0"), max_size=24)   # ROS 2 strings are C strings
 FLOATS = st.floats(allow_nan=True, allow_infinity=True, width=64)
 SAMPLES = st.lists(FLOATS, max_size=64).map(lambda xs: np.array(xs, dtype=np.float64))
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -71,6 +71,15 @@ def test_read_block_reads_every_array_of_a_rig_state(arrays, contact, frame):
     assert view.first_index == 42 and view.sample_rate == 1000.0
     for name, values in zip(names, arrays, strict=True):
         assert _same(getattr(view, name), values), name
+
+
+def test_a_string_holding_nul_is_refused_not_cut():
+    # rclpy would publish "rimd\0laser" as "rimd": the encoder refuses it instead (and the config rule of
+    # channels.<name>.frame_id refuses it before it gets there).
+    with pytest.raises(ValueError, match="NUL"):
+        SampleBlockEncoder("rimd\0laser", 2000.0, "m", -0.01, 0.01)
+    with pytest.raises(ValueError, match="NUL"):
+        SampleBlockEncoder("rimd_laser", 2000.0, "m\0", -0.01, 0.01).encode(1, 2, 3, np.arange(2.0), 0)
 
 
 def test_bytes_cut_short_are_refused():

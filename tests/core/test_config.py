@@ -61,6 +61,8 @@ BAD_VALUES = [
     ("real_time_factor", -1.0, ">= 0"),
     ("block_rate", 0.0, "> 0"),
     ("truth.sample_rate", 0.0, "> 0"),
+    ("channels.impact_force.frame_id", "", "non-empty"),
+    ("channels.impact_force.frame_id", "force\0sensor", "without NUL"),
     ("no_such_parameter", 1.0, "unknown parameter"),
 ]
 

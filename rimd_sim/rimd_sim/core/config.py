@@ -409,7 +409,8 @@ def _channel_specs() -> Iterator[tuple[str, ParameterSpec]]:
             "bool", "must be true or false", "reliable QoS (else best effort)", lambda v: True, getter("reliable")
         )
         yield prefix + "frame_id", ParameterSpec(
-            "str", "must be a non-empty string", "sensor id in header.frame_id", lambda v: bool(v), getter("frame_id")
+            "str", "must be a non-empty string without NUL characters (a ROS 2 string is a C string)",
+            "sensor id in header.frame_id", lambda v: bool(v) and "\0" not in v, getter("frame_id")
         )
 
 

@@ -125,7 +125,13 @@ def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays
 
 
 def _cdr_string(text: str, offset: int) -> tuple[bytes, int]:
-    """A CDR string (uint32 length with the NUL, the bytes, NUL) aligned at body ``offset``; its end offset."""
+    """A CDR string (uint32 length with the NUL, the bytes, NUL) aligned at body ``offset``; its end offset.
+
+    A ROS 2 string is a C string: one holding NUL would be cut there by every reader (rclpy reads "a", NUL, "b" as
+    ``"a"``), so it is refused here rather than published as something other than what was asked.
+    """
+    if "\0" in text:
+        raise ValueError(f"a ROS 2 string cannot hold a NUL character: {text!r}")
     raw = text.encode("utf-8") + b"\0"
     pad = -offset % 4
     return b"\0" * pad + struct.pack("<I", len(raw)) + raw, offset + pad + 4 + len(raw)
