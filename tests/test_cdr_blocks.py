@@ -22,7 +22,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rimd_msgs.msg import RigState, SampleBlock
 from rimd_sim.recording.cdr import BLOCK_ARRAYS, SampleBlockEncoder, block_span, read_block
 
-TEXT = st.text(st.characters(blacklist_characters="\0"), max_size=24)   # ROS 2 strings are C strings
+TEXT = st.text(st.characters(exclude_categories=("Cs",), exclude_characters="\0"), max_size=24)  # C strings, UTF-8
 FLOATS = st.floats(allow_nan=True, allow_infinity=True, width=64)
 SAMPLES = st.lists(FLOATS, max_size=64).map(lambda xs: np.array(xs, dtype=np.float64))
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
