@@ -6,10 +6,10 @@ Small grids and few cycles keep these fast; the full sizes run in benchmarks/ben
 from __future__ import annotations
 
 import csv
-import json
 
 import pytest
 
+from harness.outputs import read_json
 from rimd_sim import cli
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -19,7 +19,7 @@ def _files(out, *names):
     for name in names:
         assert (out / name).is_file(), name
     assert (out / names[0]).read_bytes()[:8] == PNG
-    return json.loads((out / "summary.json").read_text())
+    return read_json(out / "summary.json")
 
 
 def test_bifurcation_gap0_shows_the_doubling_window_up_and_down(tmp_path, capsys):
@@ -97,3 +97,26 @@ def test_bad_input_gives_one_line_and_exit_1(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert status == 1
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_json_outputs_are_strict_json(tmp_path):
+    """Every summary, report and schedule goes through write_json: NaN and infinities (a capture with no
+    sample, a step with no impact) become null, NumPy values plain numbers, and the file parses in a strict
+    reader (harness.outputs.read_json refuses the bare tokens NaN and Infinity that Python's json writes)."""
+    import math
+
+    import numpy as np
+
+    from rimd_sim.verbs._analysis_io import write_json, write_summary
+
+    data = {"nan": math.nan, "pair": (np.float64(np.inf), np.int64(3)), "array": np.array([1.5, np.nan]),
+            "minus_inf": -math.inf, "nested": {"x": [np.float32(0.5), None, "text", True]}}
+    expected = {"nan": None, "pair": [None, 3], "array": [1.5, None], "minus_inf": None,
+                "nested": {"x": [0.5, None, "text", True]}}
+    write_summary(tmp_path, data)
+    assert read_json(tmp_path / "summary.json") == expected
+    write_json(tmp_path / "report.json", data)
+    assert read_json(tmp_path / "report.json") == expected
+    (tmp_path / "python.json").write_text('{"a": NaN}')
+    with pytest.raises(ValueError, match="NaN"):
+        read_json(tmp_path / "python.json")

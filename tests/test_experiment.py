@@ -8,7 +8,6 @@ rate; its steady peaks are compared with what ``rimd analyze`` reads from the re
 from __future__ import annotations
 
 import csv
-import json
 import shutil
 import signal
 from pathlib import Path
@@ -16,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness.outputs import read_json
 from harness.ros import call_service, spin_until
 from rimd_sim.analysis.sweep import sweep
 from rimd_sim.core import SimConfig
@@ -108,7 +108,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     assert experiment.wait(90) == 0, experiment.tail()
     assert "step 4/4" in experiment.output()   # progress shown
 
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_json(out / "summary.json")
     assert summary["loss"]["complete"] and not summary["loss"]["lost_samples"]
     rows = _steps(out)
     assert [float(r["frequency_hz"]) for r in rows][-len(freqs):] == freqs
@@ -147,7 +147,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     # Every step took effect at its scheduled stamp, one dwell apart, and the recording is exactly what the
     # core computes offline for that schedule: the same schedule gives the same data however loaded the
     # machine was (the requests travel late; the rig applies them at the stamps they name).
-    schedule = json.loads((out / "experiment.json").read_text())["steps"]
+    schedule = read_json(out / "experiment.json")["steps"]
     starts = [s["scheduled_stamp_ns"] for s in schedule]
     assert [s["effective_stamp_ns"] for s in schedule] == starts and starts[0] == round(START * 1e9)
     assert {b - a for a, b in zip(starts, starts[1:], strict=False)} == {round(dwell * 1e9)}
@@ -178,7 +178,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     analysis = _rimd(ros_processes, "analyze", str(cut), "--out", str(tmp_path / "cut_out"), "--settle", str(settle),
                      name="analyze_cut")
     assert analysis.wait(60) == 0, analysis.tail()
-    cut_summary = json.loads((tmp_path / "cut_out" / "summary.json").read_text())
+    cut_summary = read_json(tmp_path / "cut_out" / "summary.json")
     assert not cut_summary["loss"]["complete"]
     assert "incomplete" in cut_summary["loss"]["files"][0] and "LOSS" in analysis.output()
     assert 0 < cut_summary["impacts"]["events"] < impacts["events"]
@@ -252,7 +252,7 @@ def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, ros_
     rows = {float(r["frequency_hz"]): r for r in _steps(out / "an")}
     assert float(rows[2.5]["impacts_per_cycle_events"]) > 0.9                 # band A: impacting
     assert int(rows[3.0]["impacts_events"]) == int(rows[4.0]["impacts_events"]) == 0   # fell off, stays off
-    summary = json.loads((out / "an" / "summary.json").read_text())
+    summary = read_json(out / "an" / "summary.json")
     t_kick = (kick_ns - summary["origin_ns"]) * 1e-9
     with open(out / "an" / "impact_events.csv") as fh:
         recorded = [float(r["time_s"]) for r in csv.DictReader(fh)]

@@ -10,8 +10,8 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
-import json
 
+from harness.outputs import read_json
 from rimd_sim.cli import main
 
 
@@ -25,7 +25,7 @@ def _run(*args: str) -> tuple[int, str, str]:
 def test_fit_table_on_table_1(tmp_path):
     status, out, err = _run("--out", str(tmp_path), "--max-evaluations", "4")
     assert status == 0, err
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = read_json(tmp_path / "summary.json")
     assert summary["natural_frequency_from_table"] == 1.82
     assert summary["all_resonances_within_0.25_hz"]
     with open(tmp_path / "fit_table.csv") as fh:

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import re
 import struct
 import subprocess
@@ -47,6 +46,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from harness.outputs import read_json
 from harness.rig_mcap import write_rig_mcap
 from rimd_sim.recording.reader import RecordingError, open_recording
 
@@ -441,7 +441,7 @@ def check_analyze(path: Path, out: Path, status: int, stdout: str, stderr: str) 
     assert "Traceback" not in stdout + stderr
     if topics & ANALYSED:
         assert status == 0, stderr
-        summary = json.loads((out / "summary.json").read_text())
+        summary = read_json(out / "summary.json")
         assert summary["loss"]["complete"] == complete
         if not complete:
             assert re.search(rf"^LOSS: {re.escape(path.name)}: incomplete \(", stdout, re.M), stdout
@@ -497,7 +497,7 @@ def test_verbs_on_a_foreign_type(sources, work):
         CASES["analyze"] += 1
         status, stdout, stderr = rimd("analyze", str(path), "--out", str(out))
         check_analyze(path, out, status, stdout, stderr)
-        undecodable = json.loads((out / "summary.json").read_text())["loss"]["undecodable_messages"]
+        undecodable = read_json(out / "summary.json")["loss"]["undecodable_messages"]
         if name == "foreign_events":
             assert undecodable.get("/rig/impact/events") and "LOSS" in stdout, stdout
         else:

@@ -11,7 +11,6 @@ measured channels (it never reads the recording's metadata).
 from __future__ import annotations
 
 import csv
-import json
 import shutil
 from fractions import Fraction
 from pathlib import Path
@@ -19,6 +18,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from harness.outputs import read_json
 from harness.ros import call_service
 
 pytestmark = pytest.mark.ros
@@ -99,14 +99,14 @@ def _rerun_peaks(identified: Path, freqs: list[float], out: Path, kick: float, k
     from rimd_sim.core import load_config
     from rimd_sim.core.simulator import RigSimulator
 
-    schedule = json.loads((out / "experiment.json").read_text())["steps"]
+    schedule = read_json(out / "experiment.json")["steps"]
     config = load_config(identified, {"motor.initial_frequency": freqs[0], "motor.initial_setpoint": freqs[0]})
     core = RigSimulator(config, truth=False)
     for f, step in zip(freqs, schedule, strict=True):
         core.set_motor_frequency(f, 2.0, at=Fraction(step["effective_stamp_ns"], 10**9))
     core.perturb(kick, at=Fraction(round(kick_at * 1e9), 10**9))
     # The steady windows of the recording's analysis (steps.csv), in the rig's time base.
-    origin = json.loads((out / "summary.json").read_text())["origin_ns"] * 1e-9
+    origin = read_json(out / "summary.json")["origin_ns"] * 1e-9
     with open(out / "steps.csv") as fh:
         windows = {float(r["frequency_hz"]): (float(r["steady_from_s"]) + origin, float(r["end_s"]) + origin)
                    for r in csv.DictReader(fh) if r["steady_from_s"] not in ("", "None")}
@@ -140,7 +140,7 @@ def _round_trip(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: l
     ident_dir = tmp_path / "ident"
     run = _rimd(ros_processes, "identify", str(out / "recording"), "--out", str(ident_dir), name="identify")
     assert run.wait(180) == 0, run.tail()
-    report = json.loads((ident_dir / "identification.json").read_text())
+    report = read_json(ident_dir / "identification.json")
     expected = truth.to_parameters()
     lines = []
     for name in ("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness",
@@ -223,7 +223,7 @@ def test_identify_refuses_what_the_recording_cannot_give(tmp_path):
              "--fix", "contact.damping=1200"]
     status, out, err = _identify(tmp_path, no_impact, *fixes)
     assert status == 0, err
-    report = json.loads((tmp_path / "id" / "identification.json").read_text())
+    report = read_json(tmp_path / "id" / "identification.json")
     assert set(report["estimates"]) == {"amplitude", "natural_frequency", "damping_ratio"}
     assert report["fixed"]["mass"] == 0.15
     assert abs(report["estimates"]["amplitude"]["value"] / 1e-3 - 1) < 0.01
@@ -244,7 +244,7 @@ def test_identify_uses_the_valid_part_of_a_damaged_recording_without_motor_state
     assert status == 0, err
     assert out.startswith("LOSS: identified from the valid part"), out
     assert "no /rig/motor/state: one constant motor frequency fitted to the cart laser, 3.7500" in err, err
-    report = json.loads((tmp_path / "id" / "identification.json").read_text())
+    report = read_json(tmp_path / "id" / "identification.json")
     assert not report["data"]["recording_loss"]["complete"]
     est = {k: v["value"] for k, v in report["estimates"].items()}
     truth = {"amplitude": 1e-3, "natural_frequency": 1.82, "damping_ratio": 0.08, "mass": 0.15,

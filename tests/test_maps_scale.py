@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import socket
@@ -27,6 +26,7 @@ import numpy as np
 import pytest
 
 import rimd_sim
+from harness.outputs import read_json
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics import steady_orbit
 from rimd_sim.core import load_config
@@ -70,7 +70,7 @@ def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     with twice the former 96 cycles; every differing cell listed in the summary with both classes."""
     out = tmp_path / "pk"
     assert cli.main(["peterka", "--gaps", "11", "--compare-fixed", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_json(out / "summary.json")
     comp = summary["comparison"]
     assert comp["fixed_cycles"] == 192 and summary["cells"] == 11 * 61
     assert comp["agreement_from_rest"] >= 0.99, comp
@@ -166,7 +166,7 @@ def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path
     assert cli.main([*PETERKA, "--out", str(local)]) == 0
     assert cli.main([*PETERKA, "--scheduler", cluster.address, "--out", str(remote)]) == 0
     assert (remote / "peterka.csv").read_bytes() == (local / "peterka.csv").read_bytes()
-    assert json.loads((remote / "summary.json").read_text())["where"] == cluster.address
+    assert read_json(remote / "summary.json")["where"] == cluster.address
 
     from rimd_sim.analysis.peterka import peterka, peterka_table
 

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import csv
-import json
 
 import numpy as np
 
+from harness.outputs import read_json
 from rimd_sim import cli
 from rimd_sim.analysis.sweep import sweep
 from rimd_sim.core import SimConfig
@@ -17,7 +17,7 @@ def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
     status = cli.main(["sweep", "--gap-mm", "0", "--f-min", "3.5", "--f-max", "4.0", "--f-step", "0.25",
                        "--direction", "rest", "--out", str(out)])
     assert status == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_json(out / "summary.json")
     assert summary["gap_mm"] == 0.0
     assert summary["band_a"]["frequency_hz"] == 3.75
     assert abs(summary["band_a"]["peak_force_n"] - 79.2) < 0.5

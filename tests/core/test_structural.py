@@ -206,14 +206,13 @@ def test_rimd_pulse_writes_plot_samples_and_summary(structural, tmp_path, capsys
     """`rimd pulse` with the structural preset at the steady-state velocity of 3.75 Hz (0.066 m/s): 1 MHz
     samples, a plot, and a summary whose peaks, duration and ringing agree with the model (the second peak
     50-70 % of the first, ringing at the axial frequency within 1 %)."""
-    import json
-
+    from harness.outputs import read_json
     from rimd_sim import cli
 
     out = tmp_path / "pulse"
     assert cli.main(["pulse", "--config", str(find_config_file("structural.yaml")), "--velocity", "0.066",
                      "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_json(out / "summary.json")
     assert {"peak_force_n", "second_peak_force_n", "duration_s", "ring_frequency_hz"} <= set(summary)
     assert summary["sample_rate_hz"] == 1e6
     assert 0.50 <= summary["second_peak_force_n"] / summary["peak_force_n"] <= 0.70

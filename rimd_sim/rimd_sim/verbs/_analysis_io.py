@@ -156,9 +156,36 @@ def write_csv(path: Path, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
+def jsonable(value):  # noqa: ANN001, ANN201 - any JSON-like tree
+    """``value`` as strict JSON data: NumPy scalars as Python numbers, tuples as lists, NaN and ±inf as null.
+
+    JSON has no NaN or infinity; Python's ``json`` would write the bare tokens ``NaN`` and ``Infinity``,
+    which jq, browsers and most JSON libraries refuse. A value that does not exist (the peak of a capture with
+    no sample, the phase of a step with no impact) is ``null``.
+    """
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [jsonable(v) for v in value.tolist()]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_json(path: Path, data) -> None:  # noqa: ANN001 - any JSON-like tree
+    """Write ``data`` to ``path`` as strict JSON (:func:`jsonable`), indented, with a final newline."""
+    path.write_text(json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
+
+
 def write_summary(out: Path, summary: dict) -> None:
-    """Write ``out/summary.json``."""
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    """Write ``out/summary.json`` (strict JSON: :func:`jsonable`)."""
+    write_json(out / "summary.json", summary)
 
 
 def class_runs(frequencies, labels) -> list[dict]:

@@ -213,7 +213,7 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
         "faults": faults,
         "wall_seconds": time.perf_counter() - start,
     }
-    write_summary(out, _jsonable(summary))
+    write_summary(out, summary)
     return summary
 
 
@@ -225,13 +225,3 @@ def _at(columns, name, i):  # noqa: ANN001
     return float(columns[name][i]) if i >= 0 else None
 
 
-def _jsonable(value):  # noqa: ANN001
-    import numpy as np
-
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value

@@ -18,7 +18,6 @@ ends the experiment with an error naming it, and the rig keeps running.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import signal
 import subprocess
@@ -181,6 +180,7 @@ def _tail(path: Path, lines: int = 5) -> str:
 def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
     """Run the experiment, then the analysis of its recording."""
     from rimd_sim.cli import CommandError
+    from rimd_sim.verbs._analysis_io import write_json
 
     freqs = schedule(args)
     out = args.out or Path(f"experiment_{datetime.now(UTC).strftime('%Y%m%dT%H%M%SZ')}")
@@ -221,9 +221,9 @@ def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
             code = _stop_recorder(recorder)
             if code not in (0, None):
                 log(f"the recorder exited with status {code}: {_tail(out / 'recorder.log')}")
-        (out / "experiment.json").write_text(json.dumps({
+        write_json(out / "experiment.json", {
             "frequencies_hz": freqs, "dwell_s": args.dwell, "settle_s": args.settle, "ramp_rate_hz_s": args.ramp_rate,
-            "recording": None if args.no_record else str(record_dir), "steps": steps_done}, indent=2) + "\n")
+            "recording": None if args.no_record else str(record_dir), "steps": steps_done})
         rig.close()
     print(file=sys.stderr)
     target = args.recording if args.no_record else record_dir

@@ -27,14 +27,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Fit and write the results."""
-    import json
     import time
 
     from rimd_sim.analysis.fit_table import SCALES, TableError, fit_table, read_table
     from rimd_sim.cli import CommandError
     from rimd_sim.core.config import find_config_file, load_config
     from rimd_sim.core.errors import ConfigError
-    from rimd_sim.verbs._analysis_io import write_csv
+    from rimd_sim.verbs._analysis_io import write_csv, write_summary
     from rimd_sim.verbs.identify import write_parameter_file
 
     for p in args.parameters:
@@ -72,7 +71,7 @@ def main(args: argparse.Namespace) -> int:
                "determines": "damping_ratio and mass (the force scale) at most, with A0, the gaps and the contact "
                              "law given; not contact.stiffness and contact.damping separately, nor A0 apart from "
                              "the gaps"}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_summary(out, summary)
     print(f"{'gap (mm)':>8} {'band':>4} {'table (Hz)':>10} {'twin (Hz)':>9} {'table F (N)':>11} {'twin F (N)':>10}")
     for r in rows:
         twin = "-" if r["twin_grid_hz"] is None else f"{r['twin_grid_hz']:.2f}"

@@ -113,10 +113,8 @@ def nest(flat: dict) -> dict:
 
 def write_outputs(result, base_path: Path, out: Path, recording: Path, seconds: float) -> None:  # noqa: ANN001
     """identified.yaml, identification.json, validation.csv and validation.png."""
-    import json
-
     from rimd_sim.analysis import identify_plots
-    from rimd_sim.verbs._analysis_io import write_csv
+    from rimd_sim.verbs._analysis_io import write_csv, write_json
 
     out.mkdir(parents=True, exist_ok=True)
     write_parameter_file(out / "identified.yaml", base_path, result.config,
@@ -139,7 +137,7 @@ def write_outputs(result, base_path: Path, out: Path, recording: Path, seconds: 
         "log": result.log,
         "wall_seconds": seconds,
     }
-    (out / "identification.json").write_text(json.dumps(_jsonable(report), indent=2) + "\n")
+    write_json(out / "identification.json", report)
     write_csv(out / "validation.csv", result.validation)
     identify_plots.plot_validation(result, out / "validation.png", f"identification of {recording.name}")
 
@@ -177,17 +175,3 @@ def write_parameter_file(path: Path, base_path: Path, config, header: str) -> No
     path.write_text(header + yaml.safe_dump(doc, sort_keys=False))
 
 
-def _jsonable(value):  # noqa: ANN001
-    import math
-
-    import numpy as np
-
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import sys
 from pathlib import Path
 
@@ -15,7 +14,7 @@ import numpy as np
 
 from rimd_sim.core import ConfigError, load_config
 
-from ._analysis_io import add_scheduler_argument, progress_printer
+from ._analysis_io import add_scheduler_argument, progress_printer, write_summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,7 +58,7 @@ def main(args: argparse.Namespace) -> int:
         writer.writeheader()
         writer.writerows(rows)
     summary = result.summary()
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_summary(args.out, summary)
     plot_sweep([result], args.out / "sweep.png", f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}")
     def band(p) -> str:
         return "none" if p is None else f"{p.frequency_hz:g} Hz {p.peak_force_n:.1f} N"
