@@ -489,19 +489,25 @@ def test_rerun_on_damaged_recordings(sources, work, data):
 
 
 def test_verbs_on_a_foreign_type(sources, work):
-    """Beside the rig topics: ignored. Instead of a rig topic: analyze counts its messages as undecodable, rerun
-    leaves the topic out and says so; both convert the rest."""
+    """Beside the rig topics: ignored. Instead of a rig topic: analyze and rerun check the recorded type (the
+    bytes of another type may well decode as the rig's), leave the topic out and say so; both convert the
+    rest."""
     for name in ("gauge", "foreign_events"):
         path = sources[name].path
         out, rrd = work / f"foreign_{name}", work / f"foreign_{name}.rrd"
         CASES["analyze"] += 1
         status, stdout, stderr = rimd("analyze", str(path), "--out", str(out))
         check_analyze(path, out, status, stdout, stderr)
-        undecodable = read_json(out / "summary.json")["loss"]["undecodable_messages"]
+        loss = read_json(out / "summary.json")["loss"]
+        assert not loss["undecodable_messages"], loss
         if name == "foreign_events":
-            assert undecodable.get("/rig/impact/events") and "LOSS" in stdout, stdout
+            wrong = loss["wrong_type"]["/rig/impact/events"]
+            assert wrong["recorded_type"] == GAUGE and wrong["expected_type"] == "rimd_msgs/msg/ImpactEvent"
+            assert wrong["messages"] == sum(t == "/rig/impact/events" for t, _, _ in sources[name].messages)
+            assert re.search(rf"^LOSS: .*/rig/impact/events has type {GAUGE}, not rimd_msgs/msg/ImpactEvent: "
+                             rf"its {wrong['messages']} messages left out", stdout, re.M), stdout
         else:
-            assert not undecodable and "LOSS" not in stdout, stdout
+            assert not loss["wrong_type"] and "LOSS" not in stdout, stdout
         CASES["rerun"] += 1
         status, stdout, stderr = rimd("rerun", str(path), "--save", str(rrd))
         check_rerun(path, rrd, status, stdout, stderr)

@@ -55,6 +55,10 @@ MOTOR = "/rig/motor/state"
 RIMD_X = "/rig/rimd/displacement"
 CART_X = "/rig/cart/displacement"
 BLOCK_TOPICS = (FORCE, RIMD_X, CART_X)
+#: The type each topic the analyses read must have been recorded with.
+_TYPE_NAMES = {FORCE: "rimd_msgs/msg/SampleBlock", RIMD_X: "rimd_msgs/msg/SampleBlock",
+               CART_X: "rimd_msgs/msg/SampleBlock", EVENTS: "rimd_msgs/msg/ImpactEvent",
+               MOTOR: "rimd_msgs/msg/MotorState"}
 
 #: Default detection threshold of the force channel (N).
 DEFAULT_THRESHOLD = 2.0
@@ -98,16 +102,37 @@ class RecordedData:
     motor: dict[str, np.ndarray] = field(default_factory=dict)
     counts: dict[str, int] = field(default_factory=dict)
     undecodable: dict[str, int] = field(default_factory=dict)
+    wrong_type: dict[str, dict] = field(default_factory=dict)
 
     def loss(self) -> dict:
-        """What was lost: unreadable file tails, holes in the sampled channels, undecodable messages."""
+        """What was lost: unreadable file tails, holes in the sampled channels, undecodable messages.
+
+        ``wrong_type``: the topics recorded with another type than the rig's (recorded and expected type, the
+        messages left out).
+        """
         return {
             "complete": self.recording.complete,
             "files": [r.describe() for r in self.recording.reports],
             "lost_samples": {t: c.lost_samples for t, c in self.channels.items() if c.lost_samples},
             "lost_blocks": {t: c.lost_blocks for t, c in self.channels.items() if c.lost_blocks},
             "undecodable_messages": dict(self.undecodable),
+            "wrong_type": {t: dict(v) for t, v in self.wrong_type.items()},
         }
+
+
+def loss_text(loss: dict) -> str | None:
+    """One line saying what :meth:`RecordedData.loss` found, or None when nothing was lost."""
+    if loss["complete"] and not loss["lost_samples"] and not loss["undecodable_messages"] \
+            and not loss.get("wrong_type"):
+        return None
+    parts = list(loss["files"])
+    if loss["lost_samples"]:
+        parts.append(f"lost samples {loss['lost_samples']}")
+    if loss["undecodable_messages"]:
+        parts.append(f"undecodable {loss['undecodable_messages']}")
+    parts += [f"{topic} has type {w['recorded_type']}, not {w['expected_type']}: its {w['messages']} messages "
+              f"left out" for topic, w in loss.get("wrong_type", {}).items()]
+    return "; ".join(parts)
 
 
 def _stamp_ns(header) -> int:  # noqa: ANN001
@@ -136,8 +161,17 @@ def load(path: str | Path) -> RecordedData:
     events: list = []
     motor: list = []
     undecodable: dict[str, int] = {}
+    wrong_type: dict[str, dict] = {}
     counts: dict[str, int] = {}
     for msg in recording.messages(list(kinds)):
+        expected = _TYPE_NAMES[msg.topic]
+        if msg.type_name and msg.type_name != expected:
+            # Another type under a rig topic name: its bytes may well decode as the rig's type (garbage), so
+            # the type is checked, not left to the decoder.
+            wrong = wrong_type.setdefault(msg.topic, {"recorded_type": msg.type_name, "expected_type": expected,
+                                                      "messages": 0})
+            wrong["messages"] += 1
+            continue
         try:
             decoded = deserialize_message(msg.data, kinds[msg.topic])
         except Exception:  # noqa: BLE001 - damaged bytes inside a readable record: count, do not stop
@@ -153,7 +187,8 @@ def load(path: str | Path) -> RecordedData:
             motor.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _MOTOR_FIELDS)))
     stamps = [b[0][0] for b in blocks.values() if b] + [e[0] for e in events[:1]] + [m[0] for m in motor[:1]]
     origin = min(stamps) if stamps else 0
-    data = RecordedData(Path(path), recording, origin, counts=counts, undecodable=undecodable)
+    data = RecordedData(Path(path), recording, origin, counts=counts, undecodable=undecodable,
+                        wrong_type=wrong_type)
     for topic, items in blocks.items():
         if items:
             data.channels[topic] = _channel(topic, items, origin)

@@ -63,10 +63,11 @@ def print_report(summary: dict) -> None:
 
     for line in format_fault_report(summary.get("faults") or {"faults": [], "channels": {}}):
         print(line)
-    loss = summary["loss"]
-    if not loss["complete"] or loss["lost_samples"] or loss["undecodable_messages"]:
-        print(f"LOSS: {'; '.join(loss['files'])}; lost samples {loss['lost_samples']}; "
-              f"undecodable {loss['undecodable_messages']}")
+    from rimd_sim.analysis.recorded import loss_text
+
+    text = loss_text(summary["loss"])
+    if text:
+        print(f"LOSS: {text}")
 
 
 def _log(text: str) -> None:

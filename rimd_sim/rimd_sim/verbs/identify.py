@@ -71,10 +71,11 @@ def main(args: argparse.Namespace) -> int:
         result = identify(args.recording, base, fixed, threshold=args.threshold, log=_log)
     except (IdentificationError, RecordingError) as exc:
         raise CommandError(str(exc)) from None
-    loss = result.data["recording_loss"]
-    if not loss["complete"] or loss["lost_samples"] or loss["undecodable_messages"]:
-        print(f"LOSS: identified from the valid part: {'; '.join(loss['files'])}; lost samples "
-              f"{loss['lost_samples']}; undecodable {loss['undecodable_messages']}")
+    from rimd_sim.analysis.recorded import loss_text
+
+    text = loss_text(result.data["recording_loss"])
+    if text:
+        print(f"LOSS: identified from the valid part: {text}")
     write_outputs(result, base_path, args.out, args.recording, time.perf_counter() - start)
     print(f"{'parameter':<18} {'identified':>14} {'std error':>11}  base")
     for name, est in result.estimates.items():
