@@ -85,24 +85,18 @@ def publisher(seconds: float, subscribers: int) -> None:
 def subscriber(seconds: float) -> None:
     import rclpy
     from rclpy.experimental import EventsExecutor
-    from rclpy.node import Node
 
     from rimd_msgs.msg import MotorState, RigState, SampleBlock
-    from rimd_sim.nodes._run import PolledSubscriptions
+    from rimd_sim.nodes._run import PolledSubscriptions, PollingNode
 
-    class Sink(Node):
+    class Sink(PollingNode):
         def __init__(self) -> None:
             super().__init__(f"bench_dds_floor_sub_{os.getpid()}")
             self.count = 0
             self._polled = PolledSubscriptions(self, 0.02)
             types = {"truth": RigState, "motor": MotorState}
             for t in TOPICS:
-                self._polled.create(self, types.get(t, SampleBlock), f"/bench_dds_floor/{t}", _qos(), self.on)
-
-        @property
-        def subscriptions(self) -> list:
-            polled = getattr(self, "_polled", None)
-            return list(super().subscriptions) if polled is None else polled.visible(super().subscriptions)
+                self._polled.create(types.get(t, SampleBlock), f"/bench_dds_floor/{t}", _qos(), self.on)
 
         def on(self, data: bytes, info: dict) -> None:  # noqa: ARG002
             self.count += 1

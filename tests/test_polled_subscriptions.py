@@ -11,7 +11,7 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from harness.ros import spin_until
-from rimd_sim.nodes._run import PolledSubscriptions
+from rimd_sim.nodes._run import PolledSubscriptions, PollingNode
 
 pytestmark = pytest.mark.ros
 
@@ -23,23 +23,18 @@ def test_every_message_reaches_the_handler_once_with_its_info_and_never_through_
     from rclpy.node import Node
     from std_msgs.msg import UInt32
 
-    class Polling(Node):
+    class Polling(PollingNode):
         def __init__(self) -> None:
             super().__init__("polling", context=rclpy_context)
             self.got: list[tuple[bytes, dict]] = []
             self.ticks = 0
             self._polled = PolledSubscriptions(self, 0.02)
             qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-            self._polled.create(self, UInt32, "/polled", qos, lambda data, info: self.got.append((data, info)))
+            self._polled.create(UInt32, "/polled", qos, lambda data, info: self.got.append((data, info)))
             self.create_timer(0.01, self._tick)
 
         def _tick(self) -> None:
             self.ticks += 1
-
-        @property
-        def subscriptions(self) -> list:
-            polled = getattr(self, "_polled", None)
-            return list(super().subscriptions) if polled is None else polled.visible(super().subscriptions)
 
     node = Polling()
     sender = Node("sender", context=rclpy_context)

@@ -55,10 +55,6 @@ MOTOR = "/rig/motor/state"
 RIMD_X = "/rig/rimd/displacement"
 CART_X = "/rig/cart/displacement"
 BLOCK_TOPICS = (FORCE, RIMD_X, CART_X)
-#: The type each topic the analyses read must have been recorded with.
-_TYPE_NAMES = {FORCE: "rimd_msgs/msg/SampleBlock", RIMD_X: "rimd_msgs/msg/SampleBlock",
-               CART_X: "rimd_msgs/msg/SampleBlock", EVENTS: "rimd_msgs/msg/ImpactEvent",
-               MOTOR: "rimd_msgs/msg/MotorState"}
 
 #: Default detection threshold of the force channel (N).
 DEFAULT_THRESHOLD = 2.0
@@ -163,8 +159,9 @@ def load(path: str | Path) -> RecordedData:
     undecodable: dict[str, int] = {}
     wrong_type: dict[str, dict] = {}
     counts: dict[str, int] = {}
+    expected_types = {topic: f"rimd_msgs/msg/{cls.__name__}" for topic, cls in kinds.items()}
     for msg in recording.messages(list(kinds)):
-        expected = _TYPE_NAMES[msg.topic]
+        expected = expected_types[msg.topic]
         if msg.type_name and msg.type_name != expected:
             # Another type under a rig topic name: its bytes may well decode as the rig's type (garbage), so
             # the type is checked, not left to the decoder.

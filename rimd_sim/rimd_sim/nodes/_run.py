@@ -79,20 +79,20 @@ class PolledSubscriptions:
     timer that takes everything waiting (``take_message`` in a loop, one C call per message) serves the
     rig's 600 messages a second in 50 wake-ups. The messages wait at most one period in their DDS history
     (the subscriptions' depth must hold a period of traffic), and the take gives the message info (source
-    timestamp) with the bytes. The executor must not take these subscriptions too: the node hides them from
-    it by overriding ``Node.subscriptions`` with :meth:`visible` (rclpy's executors read that property).
+    timestamp) with the bytes. The executor must not take these subscriptions too: the node is a
+    :class:`PollingNode`, which hides them from it.
     Should an executor dispatch one all the same, the message still reaches its handler (without info).
     """
 
     def __init__(self, node: Node, period: float) -> None:
+        self._node = node
         self._subs: list[tuple[Any, Callable[[bytes, dict], None]]] = []
         self._hidden: set[int] = set()
         self.timer = node.create_timer(period, self.poll)
 
-    def create(self, node: Node, msg_type: type, topic: str, qos: Any,
-               handler: Callable[[bytes, dict], None]) -> Any:
-        """Create a raw subscription of ``node`` whose messages go to ``handler(data, info)``."""
-        sub = node.create_subscription(msg_type, topic, lambda data: handler(data, {}), qos, raw=True)
+    def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None]) -> Any:
+        """Create a raw subscription of the node whose messages go to ``handler(data, info)``."""
+        sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}), qos, raw=True)
         self._hidden.add(id(sub))
         self._subs.append((sub, handler))
         return sub
@@ -119,6 +119,22 @@ class PolledSubscriptions:
     def poll(self) -> int:
         """Take every message waiting in every polled subscription; return how many."""
         return sum(self.take(sub, handler) for sub, handler in self._subs)
+
+
+class PollingNode(Node):
+    """A node whose executor does not take its :class:`PolledSubscriptions` (``self._polled``).
+
+    rclpy's executors read ``Node.subscriptions``; this property leaves the polled ones out. The subclass
+    sets ``self._polled`` in its ``__init__``.
+    """
+
+    _polled: PolledSubscriptions | None = None   # None until the subclass creates it
+
+    @property
+    def subscriptions(self) -> list:
+        """The subscriptions the executor takes: all but the polled ones."""
+        subs = super().subscriptions
+        return list(subs) if self._polled is None else self._polled.visible(subs)
 
 
 def spin_until_stopped(executor: Executor, stop: StopRequest, done: Callable[[], bool] | None = None) -> None:

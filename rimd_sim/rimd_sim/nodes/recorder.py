@@ -49,7 +49,6 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -57,7 +56,7 @@ from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
 from rimd_sim.nodes._params import refuse_unnamed
-from rimd_sim.nodes._run import PolledSubscriptions, run_node
+from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
 from rimd_sim.recording.bag import BagWriter, WriteFailure
 from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
@@ -101,7 +100,7 @@ def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
     }
 
 
-class RecorderNode(Node):
+class RecorderNode(PollingNode):
     """The recorder node. See the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -176,11 +175,6 @@ class RecorderNode(Node):
         self.get_logger().info(f"recording {', '.join(values['topics'])} into {self.output_dir}"
                                + (" (paused: call ~/resume to start)" if self._paused else ""))
 
-    @property
-    def subscriptions(self) -> list:
-        """The subscriptions the executor takes: none of the recorded topics (they are polled)."""
-        polled = getattr(self, "_polled", None)   # None while Node.__init__ runs
-        return list(super().subscriptions) if polled is None else polled.visible(super().subscriptions)
 
     # -- discovery and subscriptions --------------------------------------------------------------------------
     def _wanted(self, topic: str) -> bool:
@@ -212,7 +206,7 @@ class RecorderNode(Node):
             self._types[topic] = type_name
             self._received[topic] = 0
             self._queue.put(("topic", topic, type_name, offered))
-            self._subs[topic] = self._polled.create(self, msg_type, topic, qos, self._make_handler(topic))
+            self._subs[topic] = self._polled.create(msg_type, topic, qos, self._make_handler(topic))
             self.get_logger().info(f"recording {topic} ({type_name}, "
                                    f"{'reliable' if reliable else 'best effort'})")
         self._fetch_rig_parameters()

@@ -16,13 +16,12 @@ from collections import deque
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
 from rimd_sim.nodes._params import refuse_unnamed
-from rimd_sim.nodes._run import PolledSubscriptions, run_node
+from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
 from rimd_sim.recording.cdr import read_block
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
 from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
@@ -68,7 +67,7 @@ def _descriptor(name: str) -> ParameterDescriptor:
     return desc
 
 
-class RerunBridgeNode(Node):
+class RerunBridgeNode(PollingNode):
     """The Rerun bridge node. See the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -99,8 +98,8 @@ class RerunBridgeNode(Node):
         # wake-up per period instead of one dispatch per message.
         self._polled = PolledSubscriptions(self, POLL_PERIOD_S)
         for ch in CHANNELS:
-            self._polled.create(self, SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
-        self._polled.create(self, RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE))
+            self._polled.create(SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
+        self._polled.create(RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE))
         self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._handler(EVENTS_TOPIC), events_qos)
         self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
         if p["status_period"] > 0:
@@ -109,11 +108,6 @@ class RerunBridgeNode(Node):
             f"rerun bridge ready: sink {spec.kind} -> {self.stream.viewer_url}; topics under "
             f"{self.get_namespace()}; analytics {'per user config' if spec.analytics else 'off'}")
 
-    @property
-    def subscriptions(self) -> list:
-        """The subscriptions the executor takes: the impact events only (the block topics are polled)."""
-        polled = getattr(self, "_polled", None)   # None while Node.__init__ runs
-        return list(super().subscriptions) if polled is None else polled.visible(super().subscriptions)
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
         """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
