@@ -43,6 +43,7 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
 
     blocks: dict[str, list[Block]] = {t: [] for t in CHANNEL_TOPICS}
     meta: dict[str, tuple[float, float, float]] = {}
+    zero_ns: dict[str, int] = {}   # per channel: the stamp of its sample 0 (ns)
     events, captures = [], []
     for msg in recording.messages([*CHANNEL_TOPICS, FAULTS, CAPTURE_FORCE]):
         try:
@@ -51,6 +52,9 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
                 blocks[msg.topic].append(Block(int(m.first_index), np.asarray(m.samples, float),
                                                int(m.saturated_count)))
                 meta.setdefault(msg.topic, (m.sample_rate, m.range_min, m.range_max))
+                if msg.topic not in zero_ns and m.sample_rate > 0:
+                    zero_ns[msg.topic] = (int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
+                                          - round(int(m.first_index) * 1e9 / m.sample_rate))
             elif msg.topic == FAULTS:
                 events.append(deserialize_message(msg.data, msgs.FaultEvent))
             else:
@@ -62,9 +66,12 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
         if not bl:
             continue
         rate, lo, hi = meta[topic]
+        # the force channel's impacts in this channel's own time (index / rate)
+        impacts = np.sort(np.asarray(detected_times_s, dtype=float) - (zero_ns.get(topic, origin_ns) - origin_ns)
+                          * 1e-9) if topic != "/rig/impact/force" else None
         report["channels"][CHANNEL_TOPICS[topic]] = [
             {"kind": f.kind, "start_s": f.start, "end_s": f.end, "detail": f.detail}
-            for f in scan_channel(bl, rate, lo, hi)]
+            for f in scan_channel(bl, rate, lo, hi, impacts=impacts)]
     for e in events:
         report["faults"].append({"event": e.event, "id": e.id, "channel": e.channel, "kind": e.kind,
                                  "start_s": e.start, "duration_s": e.duration, "magnitude": e.magnitude,

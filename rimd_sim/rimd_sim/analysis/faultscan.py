@@ -90,8 +90,13 @@ def _noise(x: np.ndarray) -> float:
 def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_max: float, *,
                  reference_s: float = 0.4, stuck_min: int = 10, outlier_fraction: float = 0.1,
                  level_sigmas: float = 20.0, noise_ratio: float = 1.6, merge: int = 3,
-                 late_blocks: float = 3.0, chunk_min: int = 200) -> list[Finding]:
-    """Findings of one channel, blocks in arrival order (see the module docstring)."""
+                 late_blocks: float = 3.0, chunk_min: int = 200, impacts: np.ndarray | None = None) -> list[Finding]:
+    """Findings of one channel, blocks in arrival order (see the module docstring).
+
+    ``impacts``: times (s, the channel's ``first_index / rate``) of impacts seen on another channel: an isolated
+    sample within 2 ms of one is the impact itself (a short contact spans one or two accelerometer samples at
+    20 kHz), not an outlier.
+    """
     if not blocks:
         return []
     n_block = max(len(b.samples) for b in blocks) or 1
@@ -180,6 +185,12 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
                 windows = np.lib.stride_tricks.sliding_window_view(padded, 5)
                 med = np.median(windows, axis=1)
                 dev = np.abs(seg_v - med) > outlier_fraction * span
+                if impacts is not None and len(impacts):
+                    tk = seg_i / rate
+                    j = np.clip(np.searchsorted(impacts, tk), 1, max(len(impacts) - 1, 1))
+                    near = np.minimum(np.abs(impacts[j - 1] - tk), np.abs(impacts[np.minimum(j, len(impacts) - 1)]
+                                                                          - tk)) < 2e-3
+                    dev &= ~near
                 for k in np.flatnonzero(dev):
                     outliers.append((int(seg_i[k]), int(seg_i[k]) + 1))
         findings += _windows(stuck, rate, merge_samples, "stuck", "run(s) of a repeated value")

@@ -204,39 +204,163 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
 
 # ---- recorded analyses (rimd analyze) ---------------------------------------------------------------------
 
+#: How a left-out window is drawn, by its source: a hole in first_index, a fault seen in the data, /rig/faults.
+_WINDOW_STYLE = {"gap": ("#7e57c2", "..", "hole in first_index"), "data": ("#ff9800", None, "fault seen in the data"),
+                 "/rig/faults": ("#e53935", "//", "fault on /rig/faults")}
+
+
+def _draw_windows(ax, windows, topics=None) -> int:  # noqa: ANN001
+    """Shade the excluded windows (of ``topics``, or all) on a time axis; returns how many were drawn."""
+    drawn, labelled = 0, set()
+    for w in windows:
+        if topics is not None and w.topic not in topics and w.topic != "motor":
+            continue
+        key = "gap" if w.kind == "gap" and w.source == "data" else w.source
+        colour, hatch, label = _WINDOW_STYLE.get(key, _WINDOW_STYLE["data"])
+        ax.axvspan(w.start, max(w.end, w.start + 1e-3), color=colour, alpha=0.25, lw=0, hatch=hatch,
+                   label=None if key in labelled else f"left out: {label}")
+        labelled.add(key)
+        drawn += 1
+    return drawn
+
+
 def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
-    """Steady peak force per dwell step versus motor frequency, from the events and from the force channel."""
+    """Steady peak force per dwell step versus motor frequency, from the events and from the force channel.
+
+    Per source: the steady window's largest peak (the paper's F_i, filled marker) and the mean of its peaks with
+    error bars of one standard deviation (the spread per step); impacts per cycle below.
+    """
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
-    for label, marker in (("events", "o"), ("channel", "x")):
-        pts = [(r["frequency_hz"], r[f"peak_force_{label}_n"], r[f"impacts_per_cycle_{label}"]) for r in rows
-               if r[f"peak_force_{label}_n"] is not None]
-        if pts:
-            f, peak, rate = zip(*pts, strict=True)
-            ax.plot(f, peak, marker, ms=6, label=f"from /rig/impact/{'events' if label == 'events' else 'force'}")
-            ax2.plot(f, rate, marker, ms=6)
-    ax.set_ylabel("steady peak force F_i (N)")
+    for label, marker, shift in (("events", "o", -0.01), ("channel", "s", 0.01)):
+        pts = [r for r in rows if r.get(f"peak_force_{label}_n") is not None]
+        if not pts:
+            continue
+        name = "/rig/impact/events" if label == "events" else "/rig/impact/force"
+        f = np.array([r["frequency_hz"] for r in pts])
+        ax.plot(f + shift, [r[f"peak_force_{label}_n"] for r in pts], marker, ms=6, label=f"F_i (largest), {name}")
+        mean = np.array([np.nan if r[f"peak_force_{label}_mean_n"] is None else r[f"peak_force_{label}_mean_n"]
+                         for r in pts])
+        std = np.array([0.0 if r[f"peak_force_{label}_std_n"] is None else r[f"peak_force_{label}_std_n"]
+                        for r in pts])
+        ax.errorbar(f + shift, mean, yerr=std, fmt="_", ms=10, capsize=4, lw=1.2,
+                    label=f"mean +- 1 std of the steady peaks, {name}")
+        ax2.plot(f + shift, [r[f"impacts_per_cycle_{label}"] for r in pts], marker, ms=6)
+    ax.set_ylabel("steady peak force (N)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=7, loc="best")
     ax2.set_ylabel("impacts / cycle")
     ax2.set_xlabel("motor frequency setpoint (Hz)")
     ax2.grid(alpha=0.3)
     return _save(fig, path, title, ax)
 
 
-def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "") -> Path:
-    """Peak force of every impact over time (events and force-channel detections), steps shaded."""
+def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "",
+                          windows=()) -> int:  # noqa: ANN001
+    """Peak force of every impact over time (events and force-channel detections), steps and left-out windows.
+
+    Returns the number of windows drawn.
+    """
     fig, ax = plt.subplots(figsize=(10, 4))
     for s in steps:
         if s.steady_from is not None:
             ax.axvspan(s.steady_from, s.end, color="#dddddd", alpha=0.5, lw=0)
             ax.text(s.steady_from, 0, f"{s.setpoint:g} Hz", fontsize=7, va="bottom")
+    drawn = _draw_windows(ax, windows)
     ax.plot(events_t, events_peak, "o", ms=4, mfc="none", label="/rig/impact/events peak_force")
     ax.plot(det_t, det_peak, "x", ms=4, label="detected in /rig/impact/force")
     ax.set_xlabel("time (s, simulation)")
     ax.set_ylabel("peak force (N)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
-    return _save(fig, path, title, ax)
+    ax.legend(fontsize=7, loc="upper left")
+    _save(fig, path, title, ax)
+    return drawn
+
+
+def plot_recorded_channels(channels: dict, windows, path: Path, title: str = "", bins: int = 1500) -> int:  # noqa: ANN001
+    """The recorded channels over time (envelope of each time bin: min to max), left-out windows shaded.
+
+    ``channels``: label -> :class:`~rimd_sim.analysis.recorded.Channel` (its ``topic`` selects its windows).
+    Returns the number of windows drawn (over all panels).
+    """
+    n = max(1, len(channels))
+    fig, axes = plt.subplots(n, 1, figsize=(11, 1.9 * n + 0.6), sharex=True, squeeze=False)
+    drawn = 0
+    for ax, (label, ch) in zip(axes[:, 0], channels.items(), strict=False):
+        for seg in ch.segments():
+            t, v = ch.time[seg], ch.values[seg]
+            k = max(1, v.size // bins)
+            m = (v.size // k) * k
+            if m >= k:
+                tt = t[:m].reshape(-1, k)[:, 0]
+                ax.fill_between(tt, v[:m].reshape(-1, k).min(axis=1), v[:m].reshape(-1, k).max(axis=1),
+                                color="tab:blue", lw=0.5, step="post")
+        drawn += _draw_windows(ax, windows, (ch.topic,))
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+        handles, labels = ax.get_legend_handles_labels()
+        if handles:
+            ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time (s, simulation)")
+    _save(fig, path, title)
+    return drawn
+
+
+def plot_pulse_zoom(zoom: dict, path: Path, title: str = "") -> Path:
+    """One typical impact: the force and acceleration samples around its onset (ms), the capture when recorded.
+
+    ``zoom``: ``onset`` (s), ``force`` and ``acceleration`` as ``(t, values)`` of the 20 kHz channels (either may
+    be None), ``capture_force`` / ``model_force`` as ``(t, values)`` or None.
+    """
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    t0 = zoom["onset"]
+    if zoom.get("capture_force") is not None:
+        t, v = zoom["capture_force"]
+        ax.plot((t - t0) * 1e3, v, "-", color="0.6", lw=1, label="capture /rig/capture/force")
+    if zoom.get("model_force") is not None:
+        t, v = zoom["model_force"]
+        ax.plot((t - t0) * 1e3, v, "-", color="tab:green", lw=1, label="spring-dashpot pulse fitted")
+    if zoom.get("force") is not None:
+        t, v = zoom["force"]
+        ax.plot((t - t0) * 1e3, v, "o-", ms=4, lw=0.8, label="/rig/impact/force samples")
+    ax.set_ylabel("force (N)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    if zoom.get("acceleration") is not None:
+        t, v = zoom["acceleration"]
+        ax2.plot((t - t0) * 1e3, v, "o-", ms=3, lw=0.8, color="tab:red", label="/rig/rimd/acceleration samples")
+        ax2.legend(fontsize=7)
+    ax2.set_ylabel("acceleration (m/s^2)")
+    ax2.set_xlabel("time from the contact onset (ms)")
+    ax2.grid(alpha=0.3)
+    return _save(fig, path, title)
+
+
+def plot_acceleration_spectrum(spectra: list[dict], path: Path, title: str = "") -> Path:
+    """Power spectral density of the hammer's acceleration, one panel per step (Welch), log-log.
+
+    Each entry: ``label``, ``frequency`` (Hz), ``psd`` ((m/s^2)^2/Hz), ``motor_hz`` (its harmonics are marked:
+    a steady motion of period one cycle puts its power on them).
+    """
+    n = max(1, len(spectra))
+    cols = 2 if n > 1 else 1
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 2.8 * rows), squeeze=False, sharex=True, sharey=True)
+    for ax, sp in zip(axes.flat, spectra, strict=False):
+        f, p = sp["frequency"][1:], sp["psd"][1:]
+        ax.loglog(f, p, lw=0.7, color="tab:blue")
+        for k in range(1, 6):
+            ax.axvline(k * sp["motor_hz"], color="tab:red", ls=":", lw=0.8, label="motor harmonics" if k == 1 else None)
+        ax.set_title(sp["label"], fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+    for ax in list(axes.flat)[len(spectra):]:
+        ax.axis("off")
+    for ax in axes[-1, :]:
+        ax.set_xlabel("frequency (Hz)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("PSD ((m/s^2)^2/Hz)", fontsize=8)
+    if spectra:
+        axes.flat[0].legend(fontsize=7, loc="lower left")
+    return _save(fig, path, title)
 
 
 def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") -> Path:

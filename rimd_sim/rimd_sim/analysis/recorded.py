@@ -10,15 +10,18 @@ Everything here works on what a recording holds (SPEC section 4):
   the sample period. A run that touches a hole in the data (lost blocks, the start or end of the recording)
   is flagged ``complete = False``.
 * **Peak at contact onset (spring-dashpot law).** With the default contact law the force jumps to ``c v0``
-  at contact start and then falls (``dF/dt = v0 (k - c^2/m) < 0`` for the default hammer), by up to 18 %
+  at contact start and then may fall (``dF/dt = v0 (k - c^2/m) < 0`` for the default hammer), by up to 18 %
   within one 50 us sample: the largest sample of a 0.37 ms contact is 0-18 % below the true peak. When the
   recording's metadata (``rimd_rig_parameters``) says ``spring_dashpot`` and gives ``mass``, ``contact.stiffness``
-  and ``contact.damping``, each complete run is fitted (linear least squares, 2 unknowns) with the law's pulse
-  ``F(s) = C e^{-sigma s} cos(omega_d s - phi)`` (``m delta'' + c delta' + k delta = 0`` from ``delta = 0``,
-  ``sigma = c/2m``, ``phi = atan2((k - c sigma)/omega_d, c)``), the onset ``s = 0`` placed within 1.5
-  samples before the first sample above the threshold, and the peak read off the fitted pulse; a fit that
-  fails these checks falls back to the largest sample. ``peak_force`` is that estimate, and
-  ``peak_force_sample`` the largest sample (the paper's raw reading) for comparison.
+  and ``contact.damping``, each complete run is fitted with the law's pulse
+  (:class:`~rimd_sim.analysis.contact_pulse.SpringDashpotPulse`, the one pulse of the analyses and of
+  ``rimd identify``, for any damping of the contact): the onset between the last sample before the contact
+  and the first in it, the scale linear, and the peak read off the fitted pulse; a fit that fails falls back
+  to the largest sample. A contact so damped that its largest sample can be below 70 % of its peak (the force
+  falls from ``c v0`` within one sample: ``c / 2 sqrt(k m)`` above ~1 at 20 kHz) is read by its largest sample
+  too: its peak would be an extrapolation the samples barely hold (the 1 MHz captures resolve it).
+  ``peak_force`` is that estimate, and ``peak_force_sample`` the largest sample (the paper's raw reading) for
+  comparison.
 * **Cross-check** with the recorded ``/rig/impact/events``: an event (contact start ``t``, duration ``d``)
   matches the first unmatched detection whose peak lies in ``[t - 2/rate, t + d + 2/rate]``. Events without
   a detection are misses (split into below-threshold ones and others), detections without an event extras;
@@ -47,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rimd_sim.analysis.contact_pulse import PulseSamples, SpringDashpotPulse, pulse_of, pulse_peaks
 from rimd_sim.recording.reader import Recording, open_recording
 
 FORCE = "/rig/impact/force"
@@ -54,14 +58,17 @@ EVENTS = "/rig/impact/events"
 MOTOR = "/rig/motor/state"
 RIMD_X = "/rig/rimd/displacement"
 CART_X = "/rig/cart/displacement"
-BLOCK_TOPICS = (FORCE, RIMD_X, CART_X)
+ACC = "/rig/rimd/acceleration"
+FAULTS = "/rig/faults"
+CAPTURE_FORCE = "/rig/capture/force"
+BLOCK_TOPICS = (FORCE, RIMD_X, CART_X, ACC)
 
 #: Default detection threshold of the force channel (N).
 DEFAULT_THRESHOLD = 2.0
 
 __all__ = [
-    "Channel", "PulseModel", "RecordedData", "Step", "load", "pulse_model", "detect_impacts", "match_impacts",
-    "common_end", "segment_steps", "settled", "step_table", "phase_plane", "poincare_times", "poincare_points",
+    "Channel", "RecordedData", "Step", "load", "pulse_model", "detect_impacts", "match_impacts",
+    "common_end", "segment_steps", "settled", "phase_plane", "poincare_times", "poincare_points",
 ]
 
 
@@ -99,6 +106,11 @@ class RecordedData:
     counts: dict[str, int] = field(default_factory=dict)
     undecodable: dict[str, int] = field(default_factory=dict)
     wrong_type: dict[str, dict] = field(default_factory=dict)
+    #: ``/rig/faults``: one dict per event (``event``, ``id``, ``channel``, ``kind``, ``time`` s from the origin,
+    #: ``start``, ``duration``, ``magnitude``, ``detail``).
+    fault_events: list[dict] = field(default_factory=list)
+    #: ``/rig/capture/force``: the triggered 1 MHz captures of the force.
+    captures: list[Capture] = field(default_factory=list)
 
     def loss(self) -> dict:
         """What was lost: unreadable file tails, holes in the sampled channels, undecodable messages.
@@ -114,6 +126,17 @@ class RecordedData:
             "undecodable_messages": dict(self.undecodable),
             "wrong_type": {t: dict(v) for t, v in self.wrong_type.items()},
         }
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One triggered capture of the force: times (s from the origin) and values (N) at its own rate."""
+
+    index: int
+    rate: float
+    trigger: float
+    time: np.ndarray
+    values: np.ndarray
 
 
 def loss_text(loss: dict) -> str | None:
@@ -138,6 +161,7 @@ def _stamp_ns(header) -> int:  # noqa: ANN001
 _EVENT_FIELDS = ("duration", "peak_force", "impulse", "impact_velocity", "max_penetration", "excitation_frequency",
                  "excitation_phase", "cycle_index", "index")
 _MOTOR_FIELDS = ("frequency_setpoint", "frequency", "phase", "cycle_index")
+_FAULT_FIELDS = ("event", "id", "channel", "kind", "start", "duration", "magnitude", "detail")
 
 
 def load(path: str | Path) -> RecordedData:
@@ -152,10 +176,13 @@ def load(path: str | Path) -> RecordedData:
 
     recording = open_recording(path)
     kinds = {FORCE: rimd_msgs.msg.SampleBlock, RIMD_X: rimd_msgs.msg.SampleBlock,
-             CART_X: rimd_msgs.msg.SampleBlock, EVENTS: rimd_msgs.msg.ImpactEvent, MOTOR: rimd_msgs.msg.MotorState}
+             CART_X: rimd_msgs.msg.SampleBlock, ACC: rimd_msgs.msg.SampleBlock, EVENTS: rimd_msgs.msg.ImpactEvent,
+             MOTOR: rimd_msgs.msg.MotorState, FAULTS: rimd_msgs.msg.FaultEvent, CAPTURE_FORCE: rimd_msgs.msg.Capture}
     blocks: dict[str, list] = {t: [] for t in BLOCK_TOPICS}
     events: list = []
     motor: list = []
+    faults: list = []
+    captures: list = []
     undecodable: dict[str, int] = {}
     wrong_type: dict[str, dict] = {}
     counts: dict[str, int] = {}
@@ -180,8 +207,13 @@ def load(path: str | Path) -> RecordedData:
                                       float(decoded.sample_rate), np.asarray(decoded.samples, dtype=float)))
         elif msg.topic == EVENTS:
             events.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _EVENT_FIELDS)))
-        else:
+        elif msg.topic == MOTOR:
             motor.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _MOTOR_FIELDS)))
+        elif msg.topic == FAULTS:
+            faults.append((_stamp_ns(decoded.header), {f: getattr(decoded, f) for f in _FAULT_FIELDS}))
+        else:
+            captures.append((_stamp_ns(decoded.header), int(decoded.index), float(decoded.sample_rate),
+                             int(decoded.pre_trigger_samples), np.asarray(decoded.samples, dtype=float)))
     stamps = [b[0][0] for b in blocks.values() if b] + [e[0] for e in events[:1]] + [m[0] for m in motor[:1]]
     origin = min(stamps) if stamps else 0
     data = RecordedData(Path(path), recording, origin, counts=counts, undecodable=undecodable,
@@ -193,6 +225,12 @@ def load(path: str | Path) -> RecordedData:
     data.events = _columns(events, ("time", *_EVENT_FIELDS), origin)
     motor.sort(key=lambda m: m[0])
     data.motor = _columns(motor, ("time", *_MOTOR_FIELDS), origin)
+    data.fault_events = [{**fields, "time": (ns - origin) * 1e-9} for ns, fields in sorted(faults, key=lambda f: f[0])]
+    for ns, index, rate, pre, samples in sorted(captures, key=lambda c: c[0]):
+        if rate > 0 and samples.size:
+            trigger = (ns - origin) * 1e-9
+            data.captures.append(Capture(index, rate, trigger, trigger + (np.arange(samples.size) - pre) / rate,
+                                         samples))
     return data
 
 
@@ -226,64 +264,56 @@ def _channel(topic: str, items: list, origin: int) -> Channel:
 
 # ---- impacts from the force channel ------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class PulseModel:
-    """The spring-dashpot contact pulse of the hammer: ``m delta'' + c delta' + k delta = 0`` from ``delta = 0``."""
+def pulse_model(metadata: dict[str, dict[str, str]]) -> SpringDashpotPulse | None:
+    """The contact pulse of a recording's rig parameters, or None when the law is not spring-dashpot.
 
-    mass: float
-    stiffness: float
-    damping: float
-
-    @property
-    def sigma(self) -> float:
-        """Decay rate ``c / 2m`` (1/s)."""
-        return self.damping / (2.0 * self.mass)
-
-    @property
-    def omega_d(self) -> float:
-        """Damped angular frequency (rad/s); NaN when the contact is overdamped."""
-        value = self.stiffness / self.mass - self.sigma ** 2
-        return math.sqrt(value) if value > 0 else math.nan
-
-    @property
-    def phi(self) -> float:
-        """Phase of the pulse at contact onset: ``F(0) = C cos(phi) = c v0``."""
-        return math.atan2((self.stiffness - self.damping * self.sigma) / self.omega_d, self.damping)
-
-    def peak(self, t: np.ndarray, f: np.ndarray, dt: float) -> float | None:
-        """The pulse's peak fitted to samples ``f`` at times ``t`` (first sample just after the onset).
-
-        Returns None when the fit is not credible (onset not within 1.5 samples before ``t[0]``).
-        """
-        w, sg = self.omega_d, self.sigma
-        if not math.isfinite(w) or t.size < 2:
-            return None
-        tau = t - t[0]
-        basis = np.column_stack([np.exp(-sg * tau) * np.cos(w * tau), np.exp(-sg * tau) * np.sin(w * tau)])
-        (a, b), *_ = np.linalg.lstsq(basis, f, rcond=None)
-        amplitude, psi = math.hypot(a, b), math.atan2(b, a)
-        delta = ((self.phi - psi) % (2 * math.pi)) / w     # onset lies delta before the first sample
-        if amplitude <= 0 or delta > 1.5 * dt:
-            return None
-        c = amplitude * math.exp(sg * delta)
-        s = np.linspace(0.0, delta + tau[-1], 200)          # from the onset to the last sample
-        return float(np.max(c * np.exp(-sg * s) * np.cos(w * s - self.phi)))
-
-
-def pulse_model(metadata: dict[str, dict[str, str]]) -> PulseModel | None:
-    """The contact pulse of a recording's rig parameters, or None when the law is not spring-dashpot."""
+    The pulse of :mod:`rimd_sim.analysis.contact_pulse` (any damping of the contact), with the hammer's
+    ``cos(theta)`` at the gap and the wires' damping ``zeta w_n`` when the parameters give them.
+    """
     params = metadata.get("rimd_rig_parameters", {})
     if params.get("contact.model") != "spring_dashpot":
         return None
     try:
-        model = PulseModel(float(params["mass"]), float(params["contact.stiffness"]), float(params["contact.damping"]))
+        m, k, c = float(params["mass"]), float(params["contact.stiffness"]), float(params["contact.damping"])
     except (KeyError, ValueError):
         return None
-    return model if math.isfinite(model.omega_d) else None
+    if not (m > 0 and k > 0 and c >= 0):
+        return None
+    cos_theta, sigma_free = 1.0, 0.0
+    try:
+        wn = 2 * math.pi * float(params["natural_frequency"])
+        length = float(params.get("gravity", 9.81)) / wn ** 2
+        cos_theta = math.sqrt(max(1.0 - (float(params["gap"]) / length) ** 2, 0.0))
+        sigma_free = float(params["damping_ratio"]) * wn
+    except (KeyError, ValueError, ZeroDivisionError):
+        pass
+    return pulse_of(m, k, c, cos_theta=cos_theta, sigma_free=sigma_free)
+
+
+def force_noise(force: Channel) -> float:
+    """Noise of the force channel (N): the robust spread of its samples, which are 0 between impacts."""
+    if force.values.size == 0:
+        return 0.0
+    return float(np.median(np.abs(force.values))) * 1.4826
+
+
+#: The onset fit reads a peak only where the largest sample is at least this fraction of the pulse's peak at every
+#: sampling phase: below it (a strongly overdamped contact, whose force falls from ``c v0`` within a sample) the
+#: peak is an extrapolation the samples barely hold.
+ONSET_FIT_LIMIT = 0.7
+
+
+def readable_at(pulse: SpringDashpotPulse, dt: float) -> bool:
+    """Whether samples ``dt`` apart determine ``pulse``'s peak (see :data:`ONSET_FIT_LIMIT`)."""
+    release = pulse.release()
+    peak = pulse.features(1.0)[0]
+    worst = min(float(np.max(pulse.shape(np.arange(phase, release, dt)), initial=0.0))
+                for phase in np.linspace(0.0, dt, 20, endpoint=False))
+    return bool(peak > 0 and worst >= ONSET_FIT_LIMIT * peak)
 
 
 def detect_impacts(force: Channel, threshold: float = DEFAULT_THRESHOLD,
-                   pulse: PulseModel | None = None) -> dict[str, np.ndarray]:
+                   pulse: SpringDashpotPulse | None = None) -> dict[str, np.ndarray]:
     """Impacts of the sampled force signal: one per run of samples ``>= threshold`` (see the module doc).
 
     Args:
@@ -297,7 +327,11 @@ def detect_impacts(force: Channel, threshold: float = DEFAULT_THRESHOLD,
         the pulse fit), ``duration`` (s above the threshold), ``impulse`` (N s, over the run), ``complete``.
     """
     rows = []
+    fits: list[tuple[int, PulseSamples]] = []
     dt = 1.0 / force.rate
+    quiet = 5.0 * force_noise(force)
+    if pulse is not None and not readable_at(pulse, dt):
+        pulse = None
     for seg in force.segments():
         v = force.values[seg]
         t = force.time[seg]
@@ -318,10 +352,19 @@ def detect_impacts(force: Channel, threshold: float = DEFAULT_THRESHOLD,
             else:
                 start = t[a]
             complete = a > 0 and b < v.size
-            estimate = pulse.peak(t[a:b], v[a:b], dt) if (pulse is not None and complete) else None
-            peak = estimate if estimate is not None and estimate >= v[k] else v[k]
-            rows.append((start, t[k], peak, v[k], float(estimate is not None), (b - a) * dt,
-                         float(v[a:b].sum()) * dt, float(complete)))
+            if pulse is not None and complete:
+                j = a   # the first sample of the contact: back through the samples above the noise
+                while j > 1 and a - j < 10 and v[j - 1] > quiet:
+                    j -= 1
+                if j > 0:
+                    lo, hi = j - 1, min(b + 1, v.size)
+                    fits.append((len(rows), PulseSamples(t[lo:hi], v[lo:hi], dt, float(t[j - 1]), float(t[j]))))
+            rows.append([start, t[k], v[k], v[k], 0.0, (b - a) * dt, float(v[a:b].sum()) * dt, float(complete)])
+    if fits:
+        peaks = pulse_peaks(pulse, [p for _, p in fits])
+        for (i, _), estimate in zip(fits, peaks, strict=True):
+            if np.isfinite(estimate) and estimate >= rows[i][3]:
+                rows[i][2], rows[i][4] = float(estimate), 1.0
     names = ("start", "peak_time", "peak_force", "peak_force_sample", "fitted", "duration", "impulse", "complete")
     arr = np.array(rows, dtype=float).reshape(-1, len(names))
     return {name: arr[:, i] for i, name in enumerate(names)}
@@ -362,9 +405,9 @@ def match_impacts(detected: dict[str, np.ndarray], events: dict[str, np.ndarray]
                 event_match[i] = order[j]
                 break
     covered = _covered(force, events["time"]) if n_ev else np.zeros(0, dtype=bool)
-    missed = (event_match < 0) & covered
-    below = missed & (events["peak_force"] < threshold) if n_ev else missed
     matched = event_match >= 0
+    missed = ~matched & covered
+    below = missed & (events["peak_force"] < threshold) if n_ev else missed
     rel = np.abs(detected["peak_force"][event_match[matched]] / events["peak_force"][matched] - 1.0)
     # Detections after the events' stream ended (see events_end) are not extras: no event could match them.
     end = events_end(detected, detected_match, events)
@@ -372,7 +415,9 @@ def match_impacts(detected: dict[str, np.ndarray], events: dict[str, np.ndarray]
     return {
         "event_match": event_match, "detected_match": detected_match, "covered": covered,
         "matches": int(matched.sum()), "misses": int(missed.sum()), "misses_below_threshold": int(below.sum()),
-        "not_covered": int((~covered).sum()), "extras": int(((detected_match < 0) & ~beyond).sum()),
+        # An event matched by a detection is matched even where its start lies just outside a stretch of
+        # samples: the counts add up, events = matches + misses + not covered.
+        "not_covered": int((~covered & ~matched).sum()), "extras": int(((detected_match < 0) & ~beyond).sum()),
         "detected_after_events_end": int(beyond.sum()),
         "peak_difference_max": float(rel.max()) if rel.size else None,
         "peak_difference_median": float(np.median(rel)) if rel.size else None,
@@ -493,42 +538,6 @@ def settled(times: np.ndarray, peaks: np.ndarray, start: float, end: float, freq
     (n1, f1), (n2, f2) = halves
     return bool(abs(n1 - n2) <= 1 + SETTLED_IMPACTS_PER_CYCLE * cycles
                 and abs(f1 - f2) <= SETTLED_PEAK_FRACTION * max(f1, f2))
-
-
-def step_table(steps: list[Step], events: dict[str, np.ndarray], detected: dict[str, np.ndarray],
-               force: Channel | None) -> list[dict]:
-    """Per step: steady peak force and impacts per cycle from the events and from the force channel.
-
-    ``settled``: whether the step had settled (:func:`settled`, from the events, else the force channel).
-    """
-    rows = []
-    for s in steps:
-        row = {"step": s.number, "frequency_hz": s.setpoint, "start_s": s.start, "ramp_end_s": s.ramp_end,
-               "steady_from_s": s.steady_from, "end_s": s.end, "steady_seconds": s.steady_seconds}
-        verdict = None
-        if s.steady_from is not None:
-            times, peaks = events.get("time"), events.get("peak_force")
-            if (times is None or times.size == 0) and detected["start"].size:   # no events recorded
-                times, peaks = detected["start"], detected["peak_force"]
-            if times is not None:
-                verdict = settled(times, peaks, s.steady_from, s.end, s.setpoint)
-        row["settled"] = verdict
-        cycles = s.steady_seconds * s.setpoint
-        for label, times, peaks in (("events", events.get("time"), events.get("peak_force")),
-                                    ("channel", detected["start"], detected["peak_force"])):
-            if s.steady_from is None or times is None or (label == "channel" and force is None):
-                row.update({f"peak_force_{label}_n": None, f"impacts_{label}": None,
-                            f"impacts_per_cycle_{label}": None})
-                continue
-            sel = (times >= s.steady_from) & (times < s.end)
-            row[f"peak_force_{label}_n"] = float(peaks[sel].max()) if sel.any() else 0.0
-            if label == "channel" and "peak_force_sample" in detected:
-                raw = detected["peak_force_sample"]
-                row["peak_force_channel_largest_sample_n"] = float(raw[sel].max()) if sel.any() else 0.0
-            row[f"impacts_{label}"] = int(sel.sum())
-            row[f"impacts_per_cycle_{label}"] = float(sel.sum() / cycles) if cycles > 0 else None
-        rows.append(row)
-    return rows
 
 
 # ---- phase plane and Poincare map ------------------------------------------------------------------------

@@ -1,16 +1,18 @@
-"""Shared plumbing of the analysis verbs: argument checks, progress on stderr, CSV and summary files."""
+"""Shared plumbing of the analysis verbs: argument checks and progress on stderr.
+
+The files they write (CSV, strict JSON, parameter files) come from the library, :mod:`rimd_sim.analysis.files`;
+its writers are re-exported here for the verbs.
+"""
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import os
 import sys
 import time
-from pathlib import Path
 from typing import TextIO
 
+from rimd_sim.analysis.files import jsonable, write_csv, write_json, write_summary  # noqa: F401 - re-exported
 from rimd_sim.cli import CommandError
 
 
@@ -144,48 +146,6 @@ def _is_terminal(file: TextIO) -> bool:
 def progress_printer(verb: str, what: str) -> Progress:
     """A ``progress(done, total)`` callable for ``rimd VERB``, counting ``what``, on stderr (see :class:`Progress`)."""
     return Progress(verb, what)
-
-
-def write_csv(path: Path, rows: list[dict]) -> None:
-    """Write ``rows`` (dicts with the same keys) as CSV with a header."""
-    with open(path, "w", newline="") as fh:
-        if not rows:
-            return
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-def jsonable(value):  # noqa: ANN001, ANN201 - any JSON-like tree
-    """``value`` as strict JSON data: NumPy scalars as Python numbers, tuples as lists, NaN and ±inf as null.
-
-    JSON has no NaN or infinity; Python's ``json`` would write the bare tokens ``NaN`` and ``Infinity``,
-    which jq, browsers and most JSON libraries refuse. A value that does not exist (the peak of a capture with
-    no sample, the phase of a step with no impact) is ``null``.
-    """
-    import numpy as np
-
-    if isinstance(value, dict):
-        return {k: jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return [jsonable(v) for v in value.tolist()]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def write_json(path: Path, data) -> None:  # noqa: ANN001 - any JSON-like tree
-    """Write ``data`` to ``path`` as strict JSON (:func:`jsonable`), indented, with a final newline."""
-    path.write_text(json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
-
-
-def write_summary(out: Path, summary: dict) -> None:
-    """Write ``out/summary.json`` (strict JSON: :func:`jsonable`)."""
-    write_json(out / "summary.json", summary)
 
 
 def class_runs(frequencies, labels) -> list[dict]:
