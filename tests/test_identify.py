@@ -1,202 +1,203 @@
-"""``rimd identify``: the round trip through the real rig (simulator, recorder, experiment processes).
+"""``rimd identify``: rigs of the battery's ranges, recorded as a user records them, with faults, with captures.
 
-Hypothesis: a rig whose every physical value differs from the defaults, run as the simulator with instrument
-noise on and recorded by ``rimd experiment`` (a stepped sweep through band A and a velocity kick), is
-identified from the recording alone within 3 % per parameter (gap within 0.05 mm), and the twin re-run from
-``identified.yaml`` under the same schedule reproduces the recording's steady peak forces within 2 % per step.
-The code never sees the rig's file: ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the
-measured channels (it never reads the recording's metadata).
+The rigs are drawn by ``tests/harness/ident_rigs.py`` (the battery of ``benchmarks/bench_identify.py`` runs 14;
+these are a few well-chosen ones); the steps are those ``rimd experiment --for-identification`` picks for the rig
+(rimd_sim.analysis.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the measured channels.
+Hypotheses (issue 24):
+
+* a rig like the issue's "second rig" (every value changed, an overdamped contact, a 1.1 mm gap), run as the
+  simulator process and recorded by ``rimd experiment`` with a velocity kick in free flight, is identified: every
+  parameter within 1 % (the gap within 0.02 mm), or named by the verdict; its 95 % intervals cover the truth; the
+  kick is found; ``identified.yaml`` runs the simulator node; and the validation reads the recording exactly as
+  ``rimd analyze`` does (one reading, compared here number for number);
+* the same rig with a force dropout over an impact, block loss on the RIMD laser and a stuck cart laser gives the
+  clean answer within 1 %, says which windows it left out, and explains no hidden impact as a kick;
+* with the 1 MHz triggered captures a contact too short for the 20 kHz channel (three samples) is identified within
+  0.5 %;
+* a recording that cannot give a parameter is refused in one line naming it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
+import math
 import shutil
 from fractions import Fraction
 from pathlib import Path
 
 import pytest
-import yaml
 
+from harness.ident_rigs import Schedule, draw_rigs, record_through_rig, write_core_recording
 from harness.outputs import read_json
-from harness.ros import call_service
+from rimd_sim.analysis.design import identification_steps
+from rimd_sim.core import SimConfig
 
-pytestmark = pytest.mark.ros
-
-RTF = "8.0"
-START = 2.0          # s: first step (the rig starts paused, from rest, and is resumed once scheduled)
-DWELL = 4.0
-SETTLE = 1.5
-KICK_NEAR = 4.0      # s: a velocity kick of the hammer during the first step, in free flight
-
-#: The hidden rig: every physical value changed from config/rimd.yaml.
-CHANGED = {"mass": 0.2, "damping_ratio": 0.06, "natural_frequency": 1.95, "amplitude": 1.2e-3, "gap": 0.8e-3,
-           "contact": {"stiffness": 7.0e6, "damping": 1.5e3}}
+#: The issue's "second rig": every value off the defaults, an overdamped contact (c / 2 sqrt(k m) = 1.66).
+SECOND_RIG = draw_rigs(14)[0]
+#: A contact the 20 kHz channel cuts short: 0.15 ms, three samples (the battery's stiffest, most damped corner).
+SHORT_CONTACT = {"mass": 0.08, "contact.stiffness": 1e7, "contact.damping": 3000.0, "natural_frequency": 2.0,
+                 "damping_ratio": 0.05, "amplitude": 1.2e-3, "gap": 0.5e-3}
+NAMES = ("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness", "contact.damping")
 
 
-def _rimd(ros_processes, *args: str, name: str):  # noqa: ANN001
-    executable = shutil.which("rimd")
-    assert executable is not None, "rimd is not on PATH: source env.sh"
-    return ros_processes.start([executable, *args], name=name)
+def _error(name: str, value: float, truth: float) -> float:
+    """Relative error, or for the gap the absolute error in mm."""
+    return (value - truth) * 1e3 if name == "gap" else value / truth - 1
 
 
-def _flat(tree: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in tree.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
+def _check_identified(report: dict, truth: dict, target: float = 0.01, gap_mm: float = 0.02) -> list[str]:
+    """Each parameter within its target or named by the verdict; the lines of the table for the message."""
+    poorly = {p["parameter"] for p in report["verdict"]["poorly_determined"]}
+    lines, failures = [], []
+    for name in NAMES:
+        est = report["estimates"][name]
+        err = _error(name, est["value"], truth[name])
+        ok = abs(err) <= (gap_mm if name == "gap" else target)
+        lines.append(f"{name}: {est['value']:.6g} (true {truth[name]:.6g}, error {err:+.3g}"
+                     f"{' mm' if name == 'gap' else ''}, 95 % +-{est['interval_95']:.3g})")
+        if not ok and name not in poorly and "all" not in poorly:
+            failures.append(name)
+    assert not failures, f"not within target and not named by the verdict: {failures}\n" + "\n".join(lines)
+    return lines
 
 
-def _kick_time(rig: dict, freqs: list[float]) -> float:
-    """A stamp near KICK_NEAR far from any impact (the core's run of the rig from rest; the test knows the rig)."""
-    from rimd_sim.core import SimConfig
+def _covered(report: dict, truth: dict) -> int:
+    return sum(abs(report["estimates"][n]["value"] - truth[n]) <= report["estimates"][n]["interval_95"]
+               for n in NAMES)
+
+
+def _kick_time(rig: dict, freqs: list[float], near: float, start: float) -> float:
+    """A stamp near ``near`` far from any impact (the core's run of the rig from rest; the test knows the rig)."""
     from rimd_sim.core.model import RigModel
 
-    config = SimConfig().with_parameters({**_flat(rig), "motor.initial_frequency": freqs[0],
+    config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
                                           "motor.initial_setpoint": freqs[0]})
-    starts = [i.t_start for i in RigModel(config, channels=False, truth=False).advance(KICK_NEAR + 1.0).impacts]
-    candidates = [KICK_NEAR + k * 1e-3 for k in range(-300, 301)]
+    starts = [i.t_start for i in RigModel(config, channels=False, truth=False).advance(near + 1.0).impacts]
+    candidates = [near + k * 1e-3 for k in range(-300, 301)]
     return max(candidates, key=lambda t: min((abs(t - s) for s in starts), default=1.0))
 
 
-def _record(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: list[float], kick: float,
-            kick_at: float) -> Path:
-    """Run the rig from ``rig`` (parameters over the defaults) and record the experiment; return its directory."""
-    import rclpy
-    from builtin_interfaces.msg import Time
+def _identify_in_process(recording: Path, out: Path, *extra: str) -> tuple[int, str, str]:
+    """``rimd identify`` in this process (no ROS needed): status, stdout, stderr."""
+    from rimd_sim.cli import main
 
-    from harness.rig import trigger
-    from rimd_msgs.srv import Perturb
-
-    params = {**rig, "real_time_factor": float(RTF), "start_paused": True,
-              "motor": {"initial_frequency": freqs[0], "initial_setpoint": freqs[0]}}
-    rig_file = tmp_path / "hidden_rig.yaml"
-    rig_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    sim = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(rig_file))
-    sim.wait_for_output(r"rig ready", timeout=60)
-    out = tmp_path / "exp"
-    experiment = _rimd(ros_processes, "experiment", "--frequencies", *map(str, freqs), "--dwell", str(DWELL),
-                       "--settle", str(SETTLE), "--ramp-rate", "2", "--out", str(out), "--start", str(START),
-                       name="experiment")
-    experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
-    node = rclpy.create_node("driver", context=ros_executor.context)
-    ros_executor.add_node(node)
-    client = node.create_client(Perturb, "/rig/perturb")
-    ns = round(kick_at * 1e9)
-    request = Perturb.Request(velocity=kick, start_stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9))
-    response = call_service(ros_executor, node, client, request, 10)
-    assert response.success, response.message
-    assert trigger(ros_executor, node, "/rig/resume").success
-    assert experiment.wait(120) == 0, experiment.tail()
-    return out
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        status = main(["identify", str(recording), "--out", str(out), *extra])
+    return status, stdout.getvalue(), stderr.getvalue()
 
 
-def _rerun_peaks(identified: Path, freqs: list[float], out: Path, kick: float, kick_at: float) -> dict[float, float]:
-    """The core re-run from identified.yaml under the experiment's schedule: steady peak per step."""
+@pytest.mark.ros
+def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, tmp_path):
+    design = identification_steps(SimConfig().with_parameters(SECOND_RIG), steps=4, dwell=6.0, settle=2.0)
+    freqs = design.frequencies
+    kick_at = _kick_time(SECOND_RIG, freqs, 4.0, 2.0)
+    recording = record_through_rig(ros_processes, tmp_path / "rig", SECOND_RIG,
+                                   Schedule(freqs, dwell=6.0, kicks=[(kick_at, -0.03)]))
+    out = tmp_path / "ident"
+    rimd = shutil.which("rimd")
+    run = ros_processes.start([rimd, "identify", str(recording), "--out", str(out), "--settle", "2"], name="identify")
+    assert run.wait(240) == 0, run.tail()
+    report = read_json(out / "identification.json")
+    lines = _check_identified(report, SECOND_RIG)
+    print("\n".join(lines), report["verdict"]["line"], sep="\n")
+    assert _covered(report, SECOND_RIG) >= 6, "\n".join(lines)
+    assert report["residuals"]["converged"]
+    # the kick, in free flight during the first step (recording times count from the earliest stamp)
+    from rimd_sim.analysis.recorded import load
+
+    origin = load(recording).origin_ns * 1e-9
+    (kick,) = report["kicks"]
+    assert abs(kick["time_s"] + origin - kick_at) < 2e-3, (kick, kick_at, origin)
+    assert kick["velocity_m_s"] == pytest.approx(-0.03, rel=0.05)
+    # identified.yaml runs as it is: the core loads it, the simulator node applies it (namespace /rig)
     from rimd_sim.core import load_config
-    from rimd_sim.core.simulator import RigSimulator
 
-    schedule = read_json(out / "experiment.json")["steps"]
-    config = load_config(identified, {"motor.initial_frequency": freqs[0], "motor.initial_setpoint": freqs[0]})
-    core = RigSimulator(config, truth=False)
-    for f, step in zip(freqs, schedule, strict=True):
-        core.set_motor_frequency(f, 2.0, at=Fraction(step["effective_stamp_ns"], 10**9))
-    core.perturb(kick, at=Fraction(round(kick_at * 1e9), 10**9))
-    # The steady windows of the recording's analysis (steps.csv), in the rig's time base.
-    origin = read_json(out / "summary.json")["origin_ns"] * 1e-9
-    with open(out / "steps.csv") as fh:
-        windows = {float(r["frequency_hz"]): (float(r["steady_from_s"]) + origin, float(r["end_s"]) + origin)
-                   for r in csv.DictReader(fh) if r["steady_from_s"] not in ("", "None")}
-    impacts = core.advance(max(hi for _, hi in windows.values()) + 0.1).impacts
-    peaks = {}
-    for f in freqs:
-        lo, hi = windows[f]
-        sel = [i.peak_force for i in impacts if lo <= i.t_start < hi]
-        peaks[f] = max(sel) if sel else 0.0
-    return peaks
-
-
-def _recorded_peaks(out: Path, freqs: list[float]) -> dict[float, float]:
-    """The recording's steady peak per step, as ``rimd analyze`` (run by the experiment) read it."""
-    with open(out / "steps.csv") as fh:
-        rows = [r for r in csv.DictReader(fh)]
-    result = {}
-    for r in rows:
-        f = float(r["frequency_hz"])
-        if f in freqs and r["peak_force_events_n"] not in ("", "None"):
-            result[f] = float(r["peak_force_events_n"])
-    return result
-
-
-def _round_trip(ros_processes, ros_executor, tmp_path: Path, rig: dict, freqs: list[float], kick: float) -> None:
-    from rimd_sim.core import SimConfig
-
-    truth = SimConfig().with_parameters(_flat(rig))
-    kick_at = _kick_time(rig, freqs)
-    out = _record(ros_processes, ros_executor, tmp_path, rig, freqs, kick, kick_at)
-    ident_dir = tmp_path / "ident"
-    run = _rimd(ros_processes, "identify", str(out / "recording"), "--out", str(ident_dir), name="identify")
-    assert run.wait(180) == 0, run.tail()
-    report = read_json(ident_dir / "identification.json")
-    expected = truth.to_parameters()
-    lines = []
-    for name in ("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness",
-                 "contact.damping"):
-        est = report["estimates"][name]
-        lines.append(f"{name}: {est['value']:.6g} +- {est['std_error'] or 0.0:.2g} (true {expected[name]:.6g}; local "
-                     f"{est['local_value']:.6g})")
-    print("\n".join(lines))
-    for name, line in zip(("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness",
-                           "contact.damping"), lines, strict=True):
-        value = report["estimates"][name]["value"]
-        if name == "gap":
-            assert abs(value - expected[name]) <= 0.05e-3, line
-        else:
-            assert abs(value / expected[name] - 1) <= 0.03, line
-    # identified.yaml runs as it is: the core loads it, and it holds the identified values.
-    from rimd_sim.core import load_config
-    loaded = load_config(ident_dir / "identified.yaml")
+    loaded = load_config(out / "identified.yaml")
     assert loaded.rig.mass == pytest.approx(report["estimates"]["mass"]["value"])
-    for name in ("validation.png", "validation.csv"):
-        assert (ident_dir / name).stat().st_size > 100
-    # ... and the simulator node applies it as it is (--params-file, namespace /rig): its ready line shows the gap.
-    node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(ident_dir / "identified.yaml"),
+    node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(out / "identified.yaml"),
                                     "-r", "__ns:=/twin", "-p", "start_paused:=true", name="twin")
     ready = node.wait_for_output(r"rig ready: gap ([0-9.e+-]+) mm", timeout=60)
     assert float(ready.group(1)) == pytest.approx(loaded.rig.gap * 1e3, abs=1e-4)
     node.stop()
-    # The twin from identified.yaml, re-run under the experiment's schedule, against the recording's peaks.
-    recorded = _recorded_peaks(out, freqs)
-    twin = _rerun_peaks(ident_dir / "identified.yaml", freqs, out, kick, kick_at)
-    print("steady peaks, recorded vs twin:", {f: (recorded.get(f), twin[f]) for f in freqs})
-    for f in freqs:
-        if recorded.get(f, 0.0) > 1.0:
-            assert abs(twin[f] / recorded[f] - 1) <= 0.02, (f, recorded[f], twin[f])
-    assert sum(1 for f in freqs if recorded.get(f, 0.0) > 1.0) >= len(freqs) - 1
+    # One reading of the recording: rimd analyze's step table is the validation's recorded column, number for number
+    from rimd_sim import cli
+
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert cli.main(["analyze", str(recording), "--out", str(tmp_path / "an"), "--settle", "2"]) == 0
+    steps = {int(r["step"]): r for r in csv.DictReader(open(tmp_path / "an" / "steps.csv"))}
+    assert report["validation"], report["validation"]
+    for row in report["validation"]:
+        mine = steps[row["step"]]
+        assert float(mine["peak_force_channel_n"]) == row["peak_force_recorded_n"]
+        assert float(mine["impacts_per_cycle_channel"]) == row["impacts_per_cycle_recorded"]
+        assert float(mine["impacts_per_cycle_events"]) == row["impacts_per_cycle_events_recorded"]
+        # ... and the twin, read the same way, gives the recording's impacts per cycle and (the events' exact peaks)
+        # its steady peaks within 1 %
+        assert row["impacts_per_cycle_twin"] == pytest.approx(row["impacts_per_cycle_recorded"], abs=0.02), row
+        assert row["peak_force_difference_of"] == "events" and abs(row["peak_force_difference"]) <= 0.01, row
 
 
-def test_identify_recovers_a_changed_rig(ros_processes, ros_executor, tmp_path):
-    _round_trip(ros_processes, ros_executor, tmp_path, CHANGED, [1.0, 3.0, 3.5, 4.0], -0.03)
+def _impact_near(rig: dict, freqs: list[float], near: float, dwell: float, start: float = 2.0) -> float:
+    """The start of the core's impact nearest ``near`` s, in the experiment's timeline."""
+    from rimd_sim.analysis.design import predict  # noqa: F401 - the same timeline
+    from rimd_sim.core.model import RigModel
+
+    config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
+                                          "motor.initial_setpoint": freqs[0]})
+    model = RigModel(config, channels=False, truth=False)
+    impacts = list(model.advance(Fraction(repr(start))).impacts)
+    for k, f in enumerate(freqs):
+        if k:
+            impacts += model.set_motor_frequency(f, 2.0)
+        impacts += model.advance(Fraction(repr(start + (k + 1) * dwell))).impacts
+    return min((i.t_start for i in impacts), key=lambda t: abs(t - near))
 
 
-def test_identify_recovers_the_defaults(ros_processes, ros_executor, tmp_path):
-    _round_trip(ros_processes, ros_executor, tmp_path, {}, [3.25, 3.75, 4.25], -0.03)
+def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp_path):
+    from rimd_sim.analysis.identify import identify
+
+    rig = SECOND_RIG
+    design = identification_steps(SimConfig().with_parameters(rig), steps=4, dwell=6.0, settle=2.0)
+    hidden = _impact_near(rig, design.frequencies, 15.0, 6.0)
+    faults = [{"channel": "impact_force", "kind": "dropout", "start": round(hidden - 0.15, 3), "duration": 0.3},
+              {"channel": "rimd_displacement", "kind": "block_loss", "start": 19.0, "duration": 3.0,
+               "magnitude": 0.3},
+              {"channel": "cart_displacement", "kind": "stuck", "start": 8.0, "duration": 0.5}]
+    results = {}
+    for name, extra in (("clean", []), ("faulted", faults)):
+        path = tmp_path / f"{name}.mcap"
+        write_core_recording(path, rig, Schedule(design.frequencies, dwell=6.0, faults=extra, seed=3))
+        results[name] = identify(path, SimConfig(), {}, resamples=100)
+    clean, faulted = results["clean"], results["faulted"]
+    for name in NAMES:
+        a, b = clean.estimates[name].value, faulted.estimates[name].value
+        assert abs(_error(name, b, a)) <= (0.02 if name == "gap" else 0.01), (name, a, b)
+    # every fault left out and said, each from the data or the rig's word
+    said = {(w.topic, w.kind) for w in faulted.windows}
+    assert ("/rig/impact/force", "dropout") in said and ("/rig/impact/force", "gap") in said
+    assert ("/rig/rimd/displacement", "block_loss") in said and ("/rig/rimd/displacement", "gap") in said
+    assert ("/rig/cart/displacement", "stuck") in said
+    # the impact hidden in the dropout is not explained as a kick (issue 24: "-0.1292 m/s at 18.9542 s")
+    assert not any(hidden - 0.2 < t < hidden + 0.2 for t, _ in faulted.kicks), faulted.kicks
+    assert any(line.startswith("left out: ") for line in faulted.log)
 
 
-def _identify(tmp_path: Path, recording: Path, *extra: str) -> tuple[int, str, str]:
-    """``rimd identify`` in this process (no ROS needed): status, stdout, stderr."""
-    import contextlib
-    import io
+def test_captures_pin_a_short_contact_within_half_a_percent(tmp_path):
+    from rimd_sim.analysis.identify import identify
 
-    from rimd_sim.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        status = main(["identify", str(recording), "--out", str(tmp_path / "id"), *extra])
-    return status, out.getvalue(), err.getvalue()
+    rig = SHORT_CONTACT
+    design = identification_steps(SimConfig().with_parameters(rig), steps=3, dwell=5.0, settle=2.0)
+    path = tmp_path / "captured.mcap"
+    written = write_core_recording(path, rig, Schedule(design.frequencies, dwell=5.0, capture=True, seed=4))
+    assert written.captures > 20
+    result = identify(path, SimConfig(), {}, resamples=100)
+    assert "captures" in result.data["pulse"]["source"]
+    for name in ("contact.stiffness", "contact.damping", "mass"):
+        err = _error(name, result.estimates[name].value, rig[name])
+        assert abs(err) <= 0.005, (name, err, result.estimates[name].half_width_95 / rig[name])
 
 
 def test_identify_refuses_what_the_recording_cannot_give(tmp_path):
@@ -205,23 +206,23 @@ def test_identify_refuses_what_the_recording_cannot_give(tmp_path):
     # No force channel: the contact parameters, the mass and the gap cannot be identified; the line says which.
     no_force = tmp_path / "no_force.mcap"
     write_rig_mcap(no_force, 2.0, 3.75, skip=("/rig/impact/force",))
-    status, _, err = _identify(tmp_path, no_force)
+    status, _, err = _identify_in_process(no_force, tmp_path / "id")
     line = err.strip().splitlines()[-1]
     assert status == 1 and line.startswith("rimd identify: the recording lacks channels"), err
     assert "gap, mass, contact.stiffness, contact.damping need /rig/impact/force" in line and "--fix" in line
     # No impact (a gap the hammer never reaches): contact parameters refused, --fix suggested.
     no_impact = tmp_path / "no_impact.mcap"
     write_rig_mcap(no_impact, 3.0, 1.0, overrides={"gap": 0.01})
-    status, _, err = _identify(tmp_path, no_impact)
+    status, _, err = _identify_in_process(no_impact, tmp_path / "id")
     line = err.strip().splitlines()[-1]
     assert status == 1 and "no impact in the recording" in line and "--fix gap=VALUE" in line, err
     # A --fix that is not a parameter, or not a number: one line.
-    status, _, err = _identify(tmp_path, no_impact, "--fix", "colour=3")
+    status, _, err = _identify_in_process(no_impact, tmp_path / "id", "--fix", "colour=3")
     assert status == 1 and "--fix 'colour=3' refused" in err.strip().splitlines()[-1]
     # With the contact held fixed, the same recording gives A0, f_n and zeta (free flight from rest at 1 Hz).
     fixes = ["--fix", "gap=0.01", "--fix", "mass=0.15", "--fix", "contact.stiffness=5.5e6",
              "--fix", "contact.damping=1200"]
-    status, out, err = _identify(tmp_path, no_impact, *fixes)
+    status, out, err = _identify_in_process(no_impact, tmp_path / "id", *fixes)
     assert status == 0, err
     report = read_json(tmp_path / "id" / "identification.json")
     assert set(report["estimates"]) == {"amplitude", "natural_frequency", "damping_ratio"}
@@ -240,15 +241,13 @@ def test_identify_uses_the_valid_part_of_a_damaged_recording_without_motor_state
     cut = tmp_path / "cut.mcap"
     data = full.read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.7)])
-    status, out, err = _identify(tmp_path, cut)
+    status, out, err = _identify_in_process(cut, tmp_path / "id")
     assert status == 0, err
     assert out.startswith("LOSS: identified from the valid part"), out
     assert "no /rig/motor/state: one constant motor frequency fitted to the cart laser, 3.7500" in err, err
     report = read_json(tmp_path / "id" / "identification.json")
     assert not report["data"]["recording_loss"]["complete"]
-    est = {k: v["value"] for k, v in report["estimates"].items()}
     truth = {"amplitude": 1e-3, "natural_frequency": 1.82, "damping_ratio": 0.08, "mass": 0.15,
-             "contact.stiffness": 5.5e6, "contact.damping": 1.2e3}
-    for name, value in truth.items():
-        assert abs(est[name] / value - 1) < 0.03, (name, est[name], value)
-    assert abs(est["gap"]) < 0.05e-3
+             "contact.stiffness": 5.5e6, "contact.damping": 1.2e3, "gap": 0.0}
+    _check_identified(report, truth, target=0.01)
+    assert math.isfinite(report["estimates"]["mass"]["interval_95"])

@@ -1,4 +1,4 @@
-"""Figures of ``rimd identify`` and ``rimd fit-table`` (kept apart from the computations)."""
+"""Figures of ``rimd identify`` (kept apart from the computations)."""
 
 from __future__ import annotations
 
@@ -17,14 +17,19 @@ def _figure(rows: int, cols: int, size: tuple[float, float]):  # noqa: ANN202
 
 
 def plot_validation(result, path: Path, title: str) -> Path:  # noqa: ANN001
-    """Recording and twin side by side: displacement, peak forces per impact and per step, impact phase."""
+    """Recording and twin side by side.
+
+    The displacement, the peak force of every impact (left-out windows shaded), the steady peaks per step and the
+    impacts per cycle per step.
+    """
+    from rimd_sim.analysis.plots import _draw_windows
+
     plt, fig, axes = _figure(2, 2, (13, 8))
     s = result.series
     ax = axes[0, 0]
     if s:
         steps = [st for st in s["steps"] if st.steady_from is not None]
-        # The last 3 cycles of the last steady step: the orbit, recorded and re-simulated.
-        if steps:
+        if steps:   # the last 3 cycles of the last steady step: the orbit, recorded and re-simulated
             st = steps[-1]
             lo = max(st.end - 3.0 / max(st.setpoint, 0.1), st.steady_from)
             sel = (s["t"] >= lo) & (s["t"] < st.end)
@@ -33,41 +38,43 @@ def plot_validation(result, path: Path, title: str) -> Path:  # noqa: ANN001
             ax.set_title(f"relative displacement, {st.setpoint:g} Hz")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("x_rimd - x_cart (mm)")
-        ax.legend()
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
         ax = axes[0, 1]
-        ax.plot(s["r_on"], s["r_peak"], ".", ms=3, label="recorded (fitted pulse)")
+        _draw_windows(ax, s.get("windows", ()))
+        ax.plot(s["r_on"], s["r_peak"], ".", ms=3, label="recorded (force channel)")
         ax.plot(s["m_on"], s["m_peak"], "x", ms=3, label="twin")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("peak force (N)")
         ax.set_title("peak force per impact")
-        ax.legend()
+        ax.legend(fontsize=7)
     rows = result.validation
-    ax = axes[1, 0]
     if rows:
         f = np.array([r["frequency_hz"] for r in rows])
         idx = np.arange(len(rows))
-        ax.bar(idx - 0.2, [r["peak_force_recorded_n"] for r in rows], 0.4, label="recorded")
-        ax.bar(idx + 0.2, [r["peak_force_twin_n"] for r in rows], 0.4, label="twin")
+        ax = axes[1, 0]
+        ax.bar(idx - 0.2, [r["peak_force_recorded_n"] or 0.0 for r in rows], 0.4, label="recorded")
+        ax.bar(idx + 0.2, [r["peak_force_twin_n"] or 0.0 for r in rows], 0.4, label="twin")
         ax.set_xticks(idx, [f"{v:g} Hz" for v in f])
         for i, r in enumerate(rows):
             if r["peak_force_difference"] is not None:
                 ax.annotate(f"{r['peak_force_difference'] * 100:+.2f} %", (i, r["peak_force_recorded_n"]),
                             ha="center", va="bottom", fontsize=8)
         ax.set_ylabel("steady peak force (N)")
-        ax.set_title("steady peak force per step")
-        ax.legend()
+        ax.set_title("steady peak force per step (as rimd analyze reads it)")
+        ax.legend(fontsize=8)
         ax = axes[1, 1]
-        ph_r = [r["impact_phase_recorded_rad"] for r in rows]
-        ph_t = [r["impact_phase_twin_rad"] for r in rows]
-        ax.plot(idx, [np.nan if p is None else p for p in ph_r], "o", label="recorded")
-        ax.plot(idx, [np.nan if p is None else p for p in ph_t], "x", label="twin")
+        ax.plot(idx, [np.nan if r["impacts_per_cycle_recorded"] is None else r["impacts_per_cycle_recorded"]
+                      for r in rows], "o", label="recorded")
+        ax.plot(idx, [np.nan if r["impacts_per_cycle_twin"] is None else r["impacts_per_cycle_twin"]
+                      for r in rows], "x", ms=8, label="twin")
         ax.set_xticks(idx, [f"{v:g} Hz" for v in f])
-        ax.set_ylabel("mean impact phase (rad)")
-        ax.set_title("impact phase per step")
-        ax.legend()
+        ax.set_ylabel("impacts per cycle")
+        ax.set_title("impacts per cycle per step")
+        ax.legend(fontsize=8)
     res = result.residuals
     fig.suptitle(f"{title}: displacement residual {res.get('displacement_rms_um') or 0:.2f} um rms "
-                 f"(laser noise {res.get('laser_noise_um') or 0:.2f} um)")
+                 f"(laser noise {res.get('laser_noise_um') or 0:.2f} um)\n{result.verdict.line()[:160]}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

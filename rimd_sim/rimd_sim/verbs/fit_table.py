@@ -29,12 +29,12 @@ def main(args: argparse.Namespace) -> int:
     """Fit and write the results."""
     import time
 
+    from rimd_sim.analysis.files import write_parameter_file
     from rimd_sim.analysis.fit_table import SCALES, TableError, fit_table, read_table
     from rimd_sim.cli import CommandError
     from rimd_sim.core.config import find_config_file, load_config
     from rimd_sim.core.errors import ConfigError
     from rimd_sim.verbs._analysis_io import write_csv, write_summary
-    from rimd_sim.verbs.identify import write_parameter_file
 
     for p in args.parameters:
         if p not in SCALES:

@@ -1,0 +1,123 @@
+"""The joint fit of ``rimd identify`` (rimd_sim.analysis.joint_fit.JointFit) on a short recording of a known rig.
+
+The recording is the core's run of a rig that differs from the defaults (battery rig 5 of
+``tests/harness/ident_rigs.py``), two motor steps of 5 s, instrument noise on, written as the recorder writes it;
+the JointFit is the one ``rimd identify`` builds (``local_stages``). Hypotheses:
+
+* packing and unpacking the unknowns are inverse;
+* the residuals are scaled by the data's own noise: at the true parameters (the shots' initial states fitted)
+  each kind has a mean square of about 1 (the lasers' and the force sensor's noise are white);
+* the Jacobian (forward differences, segment columns re-running one shot) equals central differences;
+* from a start 5 % off in mass, stiffness and damping the fit converges (by its tolerances, not a budget) back to
+  the truth within its standard errors;
+* with white-noise residuals the cluster bootstrap and the Jacobian covariance agree (ratio of standard errors
+  within 0.6-1.6).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness.ident_rigs import Schedule, draw_rigs, write_core_recording
+from rimd_sim.analysis import ident_local as loc
+from rimd_sim.analysis import recorded as rec
+from rimd_sim.analysis.identify import local_stages
+from rimd_sim.core import SimConfig
+
+RIG = draw_rigs(14)[5]
+
+
+@pytest.fixture(scope="module")
+def prepared(tmp_path_factory):
+    path = tmp_path_factory.mktemp("joint") / "rig5.mcap"
+    write_core_recording(path, RIG, Schedule([2.5, 2.25], dwell=5.0, seed=5))
+    return local_stages(rec.load(path), SimConfig(), {})
+
+
+def _fit(prepared):  # noqa: ANN001, ANN202
+    from rimd_sim.analysis.joint_fit import JointFit
+
+    return JointFit(SimConfig(), list(prepared.estimates), {}, prepared.segments, prepared.obs)
+
+
+def _truth_x(fit, prepared):  # noqa: ANN001, ANN202
+    """The unknowns at the true parameters, each shot's initial state (and kicks) fitted."""
+    from scipy.optimize import least_squares
+
+    x = fit.pack({**prepared.params, **RIG}, [s.initial for s in fit.segments], [k for s in fit.segments
+                                                                                  for k in s.kicks])
+    free = np.arange(fit.n_par, fit.n)
+
+    def f(z: np.ndarray) -> np.ndarray:
+        xx = x.copy()
+        xx[free] = z
+        return fit.residuals(xx)
+
+    x[free] = least_squares(f, x[free], x_scale="jac", xtol=1e-10, ftol=1e-10).x
+    return x
+
+
+def test_packing_round_trips(prepared):
+    fit = _fit(prepared)
+    values = {p: RIG[p] * 1.01 for p in fit.names}
+    states = [(0.01 * (i + 1), -0.1 * i) for i in range(len(fit.segments))]
+    kicks = [(t + 1e-4, v) for s in fit.segments for t, v in s.kicks]
+    got_values, got_states, got_kicks = fit.unpack(fit.pack(values, states, kicks))
+    assert all(got_values[p] == pytest.approx(values[p], rel=1e-12) for p in fit.names)
+    assert np.allclose(got_states, states, rtol=1e-12, atol=0) and np.allclose(np.reshape(got_kicks, (-1, 2)),
+                                                                            np.reshape(kicks, (-1, 2)), rtol=1e-12)
+
+
+def test_residuals_at_the_truth_are_the_data_noise(prepared):
+    fit = _fit(prepared)
+    parts = fit.parts(_truth_x(fit, prepared))
+    for kind in ("displacement", "cart", "samples"):
+        assert 0.6 < float(np.mean(parts[kind] ** 2)) < 1.4, (kind, float(np.mean(parts[kind] ** 2)))
+    # the impacts' onsets and scales: within their floors at the truth (mean square of order 1 or less)
+    assert float(np.mean(parts["onset"] ** 2)) < 2.0 and float(np.mean(parts["scale"] ** 2)) < 2.0
+
+
+def test_jacobian_equals_central_differences(prepared):
+    fit = _fit(prepared)
+    x = _truth_x(fit, prepared)
+    jac = fit.jacobian(x)
+    for i in (fit.names.index("mass"), fit.names.index("contact.stiffness"), fit.n_par, fit.n_par + 3):
+        h = 1e-5 * max(1.0, abs(x[i]))
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        central = (fit.residuals(xp) - fit.residuals(xm)) / (2 * h)
+        scale = np.linalg.norm(central)
+        assert np.linalg.norm(jac[:, i] - central) < 0.02 * scale, (i, np.linalg.norm(jac[:, i] - central) / scale)
+
+
+def test_the_fit_converges_back_to_the_truth_from_5_percent_off(prepared):
+    fit = _fit(prepared)
+    start = {**prepared.params, **{p: RIG[p] * f for p, f in (("mass", 1.05), ("contact.stiffness", 0.95),
+                                                             ("contact.damping", 1.05))}}
+    result = fit.solve(fit.pack(start, [s.initial for s in fit.segments], [k for s in fit.segments for k in s.kicks]))
+    assert result.converged, result.message
+    runs = fit.run(result.x)
+    r = fit.residuals(result.x, runs)
+    cov = fit.covariance(fit.jacobian(result.x, runs, r), r)
+    from rimd_sim.analysis.joint_fit import SCALES
+
+    for i, p in enumerate(fit.names):
+        se = float(np.sqrt(cov[i, i])) * SCALES[p]
+        err = result.values[p] - RIG[p]
+        assert abs(err) <= 4 * se + (1e-9 if p == "gap" else 0.0), (p, err / (RIG[p] or 1.0), se)
+
+
+def test_cluster_bootstrap_agrees_with_the_jacobian_for_white_noise(prepared):
+    fit = _fit(prepared)
+    x = _truth_x(fit, prepared)
+    runs = fit.run(x)
+    r = fit.residuals(x, runs)
+    jac = fit.jacobian(x, runs, r)
+    cov_j = fit.covariance(jac, r)
+    motor = prepared.motor
+    cov_b, dxs = fit.bootstrap(jac, r, fit.clusters(motor["time"], loc.unwrapped_phase(motor)), resamples=300)
+    assert dxs.shape == (300, fit.n)
+    ratio = np.sqrt(np.diag(cov_b)[: fit.n_par] / np.diag(cov_j)[: fit.n_par])
+    assert np.all((ratio > 0.6) & (ratio < 1.6)), dict(zip(fit.names, ratio.round(2), strict=True))
