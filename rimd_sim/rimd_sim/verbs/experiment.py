@@ -56,6 +56,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "same way gives the same data")
     parser.add_argument("--timeout", type=float, default=30.0,
                         help="wall seconds to wait for the rig, the recorder, or the simulation time to advance")
+    parser.add_argument("--for-identification", nargs="?", const="", default=None, metavar="CONFIG",
+                        help="choose 6 steps that make every parameter identifiable by rimd identify for the rig of "
+                             "CONFIG (its parameter file as you believe it is; default config/rimd.yaml): steady "
+                             "band-A steps spread across the band (rimd_sim.analysis.design)")
 
 
 def schedule(args: argparse.Namespace) -> list[float]:
@@ -67,7 +71,15 @@ def schedule(args: argparse.Namespace) -> list[float]:
     from rimd_sim.cli import CommandError
     from rimd_sim.verbs._analysis_io import check_positive, check_range
 
-    if args.frequencies:
+    if getattr(args, "for_identification", None) is not None:
+        from rimd_sim.analysis.design import steps_for_identification
+
+        try:
+            freqs = steps_for_identification(args.for_identification, frequencies=args.frequencies, dwell=args.dwell,
+                                             settle=args.settle, ramp_rate=args.ramp_rate)
+        except ValueError as exc:
+            raise CommandError(str(exc)) from None
+    elif args.frequencies:
         freqs = list(args.frequencies)
         for f in freqs:
             if not (math.isfinite(f) and f >= 0):
@@ -230,14 +242,14 @@ def main(args: argparse.Namespace) -> int:  # noqa: C901 - one linear procedure
     if target is None:
         print(f"experiment done ({len(freqs)} steps, not recorded here); schedule in {out / 'experiment.json'}")
         return 0
+    from rimd_sim.analysis.report import ReportError, analyze, format_report
     from rimd_sim.recording.reader import RecordingError
-    from rimd_sim.verbs.analyze import analyze, print_report
 
     try:
         summary = analyze(target, out, settle=args.settle, log=lambda text: log(f"analyze: {text}"))
-    except RecordingError as exc:
+    except (RecordingError, ReportError) as exc:
         raise CommandError(f"the experiment ran but its recording cannot be analysed: {exc}") from None
-    print_report(summary)
+    print("\n".join(format_report(summary)))
     print(f"recording in {target}; analysis in {out}")
     return 0
 
