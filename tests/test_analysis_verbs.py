@@ -27,7 +27,6 @@ def _reference_class(frequency: float) -> str:
     scipy's DOP853 written from the paper's equations): impacts per cycle and distinct peak levels over 24 cycles
     after 60 from rest."""
     import numpy as np
-
     from core.reference import simulate
 
     impacts = simulate(frequency=frequency, gap=0.0, duration=84 / frequency)

@@ -503,8 +503,8 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
     cov_j = fit.covariance(jac, r)
     cov_b, _ = fit.bootstrap(jac, r, fit.clusters(motor["time"], loc.unwrapped_phase(motor)), resamples=resamples)
     integ = fit.base.integrator
-    tight = JointFit(fit.base.with_parameters({"integrator.rtol": integ.rtol / 100, "integrator.atol": integ.atol / 100}),
-                     fit.names, fit.fixed, fit.segments, fit.obs)
+    tighter = fit.base.with_parameters({"integrator.rtol": integ.rtol / 100, "integrator.atol": integ.atol / 100})
+    tight = JointFit(tighter, fit.names, fit.fixed, fit.segments, fit.obs)
     shift = np.linalg.lstsq(jac, -(tight.residuals(result.x) - r), rcond=None)[0]
     out = {}
     for i, p in enumerate(fit.names):
