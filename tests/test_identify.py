@@ -180,8 +180,13 @@ def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp
     assert ("/rig/impact/force", "dropout") in said and ("/rig/impact/force", "gap") in said
     assert ("/rig/rimd/displacement", "block_loss") in said and ("/rig/rimd/displacement", "gap") in said
     assert ("/rig/cart/displacement", "stuck") in said
-    # the impact hidden in the dropout is not explained as a kick (issue 24: "-0.1292 m/s at 18.9542 s")
-    assert not any(hidden - 0.2 < t < hidden + 0.2 for t, _ in faulted.kicks), faulted.kicks
+    # the impact hidden in the dropout is not explained as a kick (issue 24: "velocity kicks without contact:
+    # -0.1292 m/s at 18.9542 s", inside the hole): neither found nor kept
+    import re
+
+    found = [float(t) for line in faulted.log if line.startswith("velocity kicks")
+             for t in re.findall(r"m/s at ([0-9.]+) s", line)]
+    assert not any(hidden - 0.2 < t < hidden + 0.2 for t in found + [t for t, _ in faulted.kicks]), faulted.log
     assert any(line.startswith("left out: ") for line in faulted.log)
 
 
