@@ -6,10 +6,11 @@ the JointFit is the one ``rimd identify`` builds (``local_stages``). Hypotheses:
 
 * packing and unpacking the unknowns are inverse;
 * the residuals are scaled by the data's own noise: at the true parameters (the shots' initial states fitted)
-  each kind has a mean square of about 1 (the lasers' and the force sensor's noise are white);
+  the lasers' have a mean square of about 1 (their noise is white), the impacts' samples at most 1 (their spread
+  is the sensor's noise and the pulse model's accuracy, 0.1 % of the impact's peak);
 * the Jacobian (forward differences, segment columns re-running one shot) equals central differences;
-* from a start 5 % off in mass, stiffness and damping the fit converges (by its tolerances, not a budget) back to
-  the truth within its standard errors;
+* from a start 5 % off in mass, stiffness and damping the fit as ``rimd identify`` runs it (a robust loss, then
+  least squares) converges (by its tolerances, not a budget) back to the truth within its standard errors;
 * with white-noise residuals the cluster bootstrap and the Jacobian covariance agree (ratio of standard errors
   within 0.6-1.6).
 """
@@ -72,8 +73,9 @@ def test_packing_round_trips(prepared):
 def test_residuals_at_the_truth_are_the_data_noise(prepared):
     fit = _fit(prepared)
     parts = fit.parts(_truth_x(fit, prepared))
-    for kind in ("displacement", "cart", "samples"):
+    for kind in ("displacement", "cart"):
         assert 0.6 < float(np.mean(parts[kind] ** 2)) < 1.4, (kind, float(np.mean(parts[kind] ** 2)))
+    assert float(np.mean(parts["samples"] ** 2)) < 1.4
     # the impacts' onsets and scales: within their floors at the truth (mean square of order 1 or less)
     assert float(np.mean(parts["onset"] ** 2)) < 2.0 and float(np.mean(parts["scale"] ** 2)) < 2.0
 
@@ -96,7 +98,9 @@ def test_the_fit_converges_back_to_the_truth_from_5_percent_off(prepared):
     fit = _fit(prepared)
     start = {**prepared.params, **{p: RIG[p] * f for p, f in (("mass", 1.05), ("contact.stiffness", 0.95),
                                                              ("contact.damping", 1.05))}}
-    result = fit.solve(fit.pack(start, [s.initial for s in fit.segments], [k for s in fit.segments for k in s.kicks]))
+    robust = fit.solve(fit.pack(start, [s.initial for s in fit.segments], [k for s in fit.segments for k in s.kicks]),
+                       loss="soft_l1")
+    result = fit.solve(robust.x)
     assert result.converged, result.message
     runs = fit.run(result.x)
     r = fit.residuals(result.x, runs)

@@ -98,6 +98,7 @@ class Estimate:
     jacobian_std_error: float | None = None
     bootstrap_std_error: float | None = None
     numerical_error: float | None = None
+    jackknife_std_error: float | None = None
 
     @property
     def half_width_95(self) -> float | None:
@@ -109,7 +110,7 @@ class Estimate:
         return {"value": self.value, "std_error": self.std_error, "interval_95": self.half_width_95,
                 "source": self.source, "local_value": self.local_value, "local_std_error": self.local_std_error,
                 "jacobian_std_error": self.jacobian_std_error, "bootstrap_std_error": self.bootstrap_std_error,
-                "numerical_error": self.numerical_error}
+                "numerical_error": self.numerical_error, "jackknife_std_error": self.jackknife_std_error}
 
 
 @dataclass
@@ -491,7 +492,8 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
                 resamples: int = 400) -> dict[str, Estimate]:
     """The estimates with their standard errors.
 
-    The larger of the Jacobian's and the cluster bootstrap's (the data's noise and the misfit's structure), with
+    The largest of the Jacobian's, the cluster bootstrap's over the excitation cycles (the data's noise and the
+    misfit's structure within a cycle) and the delete-a-segment jackknife's (how far the segments disagree), with
     the forward model's numerical error in quadrature: how far the solution moves when the integrator's
     tolerances are a hundred times tighter (one Gauss-Newton step from the solution with the tighter model's
     residuals). A simulated rig integrates at its tolerance; its impacts then differ from the exact model's by a
@@ -502,6 +504,7 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
     jac = fit.jacobian(result.x, runs, r)
     cov_j = fit.covariance(jac, r)
     cov_b, _ = fit.bootstrap(jac, r, fit.clusters(motor["time"], loc.unwrapped_phase(motor)), resamples=resamples)
+    cov_k = fit.jackknife(jac, r, fit.segment_ids())
     integ = fit.base.integrator
     tighter = fit.base.with_parameters({"integrator.rtol": integ.rtol / 100, "integrator.atol": integ.atol / 100})
     tight = JointFit(tighter, fit.names, fit.fixed, fit.segments, fit.obs)
@@ -511,9 +514,10 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
         e = local[p]
         sj = float(math.sqrt(max(cov_j[i, i], 0.0))) * SCALES[p]
         sb = float(math.sqrt(max(cov_b[i, i], 0.0))) * SCALES[p]
+        sk = float(math.sqrt(max(cov_k[i, i], 0.0))) * SCALES[p]
         sn = abs(float(shift[i])) * SCALES[p]
-        out[p] = Estimate(result.values[p], math.hypot(max(sj, sb), sn), "joint fit with the core's integrator "
-                          "(starting from: " + e.source + ")", e.local_value, e.local_std_error, sj, sb, sn)
+        out[p] = Estimate(result.values[p], math.hypot(max(sj, sb, sk), sn), "joint fit with the core's integrator "
+                          "(starting from: " + e.source + ")", e.local_value, e.local_std_error, sj, sb, sn, sk)
         if p in ("gap", "damping_ratio") and result.values[p] <= 1e-12:
             out[p].source += "; at its bound 0 (the interval is one-sided)"
     return out

@@ -385,8 +385,9 @@ class JointFit:
             ose, sse, _ = onset_scale_errors(pulse, impacts, o, sc, noise)
             onset[use], scale[use], on_se[use], sc_se[use] = o, sc, ose, sse
             # each impact's samples by the sensor's noise and the pulse model's own accuracy (a fraction of the
-            # impact's peak): the samples resolve the force to 1e-4 of its peak, finer than the model is exact
-            peak = pulse.features(1.0)[0] * np.abs(sc)
+            # impact's largest sample: the data's, so that the weights do not move with the parameters): the
+            # samples resolve the force to 1e-4 of its peak, finer than the model is exact
+            peak = np.array([float(np.max(p.f)) for p in impacts])
             spread = np.sqrt(noise ** 2 + (PULSE_MODEL_FLOOR * peak) ** 2)
             samples = pulse_residuals(pulse, impacts, o, sc) / np.repeat(spread, [p.t.size for p in impacts])
         else:
@@ -541,6 +542,40 @@ class JointFit:
         for i in self._in_fit:
             ids.append(np.full(obs.impacts[i].t.size, obs.cycle_ids(obs.onsets[i:i + 1], motor_t, motor_phase)[0]))
         return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+
+    def segment_ids(self) -> np.ndarray:
+        """Per residual (order of :meth:`residuals`): the segment it belongs to (an impact's samples: its own)."""
+        ids = []
+        for s in range(len(self.segments)):
+            n = int(self._y_sel[s].sum() + self._c_sel[s].sum() + 2 * self._i_sel[s].sum())
+            ids.append(np.full(n, s, dtype=np.int64))
+        for i in self._in_fit:
+            owner = next(s for s in range(len(self.segments)) if self._i_sel[s][i])
+            ids.append(np.full(self.obs.impacts[i].t.size, owner, dtype=np.int64))
+        return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+
+    def jackknife(self, jac: np.ndarray, r: np.ndarray, groups: np.ndarray) -> np.ndarray:
+        """Delete-a-group jackknife covariance, linearised at the solution (Efron and Tibshirani 1993, ch. 11).
+
+        Each group (a segment) left out in turn: one Gauss-Newton step from the solution without it. The spread of
+        those estimates says how far the segments disagree, which the cycles' bootstrap cannot see when the
+        misfit is correlated over a whole segment (the model's error over a transient).
+        """
+        ids = np.unique(groups)
+        n = jac.shape[1]
+        a_all, g_all = jac.T @ jac, jac.T @ r
+        dxs = []
+        for g in ids:
+            sel = groups == g
+            jg = jac[sel]
+            a = a_all - jg.T @ jg
+            b = g_all - jg.T @ r[sel]
+            dxs.append(-np.linalg.lstsq(a, b, rcond=None)[0])
+        if len(dxs) < 3:
+            return np.zeros((n, n))
+        d = np.array(dxs)
+        d -= d.mean(axis=0)
+        return (len(dxs) - 1) / len(dxs) * (d.T @ d)
 
     def covariance(self, jac: np.ndarray, r: np.ndarray) -> np.ndarray:
         """``s^2 (J^T J)^-1``, ``s^2`` the residuals' mean square per degree of freedom."""
