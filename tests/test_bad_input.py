@@ -467,7 +467,7 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
     # ---- services ----
     frequency = node.create_client(SetMotorFrequency, "/rig/set_motor_frequency")
     perturb = node.create_client(Perturb, "/rig/perturb")
-    applied = re.compile(r"(set_motor_frequency|perturb) at t = ")
+    applied = re.compile(r"(set_motor_frequency|perturb) at simulation time ")
 
     def setpoint_is(expected: float) -> None:
         assert motor.wait_more(), "the rig stopped publishing"

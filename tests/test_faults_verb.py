@@ -30,8 +30,8 @@ def test_faults_verb_schedules_a_scenario_and_the_rig_publishes_it(tmp_path, ros
     assert "faults[0]: fault 0: offset on impact_force" in done.stdout
     assert "faults[1]: fault 1: dropout on cart_displacement" in done.stdout
     assert "2 fault(s) scheduled" in done.stdout
-    sim.wait_for_output(r"fault 0 end at t = .*duration elapsed", timeout=30)
-    sim.wait_for_output(r"fault 1 end at t = .*duration elapsed", timeout=30)
+    sim.wait_for_output(r"fault 0 end at simulation time .*duration elapsed", timeout=30)
+    sim.wait_for_output(r"fault 1 end at simulation time .*duration elapsed", timeout=30)
 
     # refused by the rig: one line naming the entry, the field and the rule; the rig keeps running
     bad = tmp_path / "bad.yaml"

@@ -127,7 +127,7 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     assert spin_until(ros_executor, lambda: motor[-1].frequency == 5.0, timeout=20)
     before = [m for m in motor if _ns(m.header.stamp) <= effective]
     assert before and all(m.frequency == 3.75 for m in before)
-    assert f"set_motor_frequency at t = {effective / 1e9:.6f} s" in rig.output()
+    assert f"set_motor_frequency at simulation time {effective / 1e9:.6f} s" in rig.output()
 
     # start_stamp: a stamp already passed, or more than a day ahead, is refused naming the field and the rule.
     from builtin_interfaces.msg import Time
@@ -145,7 +145,8 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     pause, resume = (node.create_client(Trigger, f"/rig/{name}") for name in ("pause", "resume"))
     paused = call_service(ros_executor, node, pause, Trigger.Request(), timeout=10)
     assert paused.success, paused.message
-    paused_at = round(float(re.search(r"paused at t = (\S+) s", paused.message).group(1)) * 1e9)  # t0 = 0 here
+    # t0 = 0 here: the simulation time is the stamp
+    paused_at = round(float(re.search(r"paused at simulation time (\S+) s", paused.message).group(1)) * 1e9)
     at = paused_at + 3_000_000_000 + 123_457
     request = SetMotorFrequency.Request(frequency_hz=4.0, ramp_rate=1000.0,
                                         start_stamp=Time(sec=at // 10**9, nanosec=at % 10**9))
@@ -238,7 +239,7 @@ def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     assert paused.success, paused.message
     # The simulation time where it froze (stamps are simulation time here): every block published before
     # the pause arrives (an observable condition, however loaded the machine), and none after it.
-    frozen_ns = round(float(re.search(r"paused at t = (\S+) s", paused.message).group(1)) * 1e9)
+    frozen_ns = round(float(re.search(r"paused at simulation time (\S+) s", paused.message).group(1)) * 1e9)
 
     def end_ns(blk: SampleBlock) -> int:
         return _ns(blk.header.stamp) + round(len(blk.samples) * 1e9 / blk.sample_rate)
@@ -262,12 +263,12 @@ def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     after = next(i for i, (ts, _) in enumerate(samples) if ts >= when)
     assert samples[after][0] == when  # the kick lands exactly on a truth sample (block boundary)
     assert samples[after][1] - samples[after - 1][1] == pytest.approx(0.2, abs=0.01)
-    assert f"perturb at t = {when / 1e9:.6f} s" in rig.output() or spin_until(
-        ros_executor, lambda: f"perturb at t = {when / 1e9:.6f} s" in rig.output(), timeout=5)
+    assert f"perturb at simulation time {when / 1e9:.6f} s" in rig.output() or spin_until(
+        ros_executor, lambda: f"perturb at simulation time {when / 1e9:.6f} s" in rig.output(), timeout=5)
 
     reset = call_service(ros_executor, node, trig["reset"], Trigger.Request(), timeout=10)
     assert reset.success and "reset" in reset.message
-    t_reset = float(reset.message.split("t = ")[1].split(" s")[0])
+    t_reset = float(reset.message.split("simulation time ")[1].split(" s")[0])
     target = round(t_reset * 1e9)
     assert spin_until(ros_executor, lambda: _ns(truth[-1].header.stamp) > target, timeout=10)
     at_reset = next(t for t in truth if _ns(t.header.stamp) == target)

@@ -83,10 +83,13 @@ def test_bad_faults_are_refused_naming_the_field_and_nothing_is_scheduled(fault,
 
 def test_scenario_entries_and_capture_parameters_are_checked():
     assert parse_fault_entry("channel=impact_force kind=stuck start=1 duration=2", "faults[0]") == {
-        "channel": "impact_force", "kind": "stuck", "start": 1.0, "duration": 2.0, "magnitude": 0.0}
+        "channel": "impact_force", "kind": "stuck", "start": 1.0, "after": 0.0, "duration": 2.0, "magnitude": 0.0}
+    assert parse_fault_entry({"channel": "impact_force", "kind": "offset", "after": 2}, "faults[1]")["after"] == 2.0
+    with pytest.raises(CommandError, match=r"faults\[2\]: give start .* or after"):
+        parse_fault_entry({"channel": "impact_force", "kind": "offset", "start": 1.0, "after": 2.0}, "faults[2]")
     with pytest.raises(CommandError, match=r"faults\[3\] = 'channel=x oops' refused: 'oops' is not key=value"):
         parse_fault_entry("channel=x oops", "faults[3]")
-    with pytest.raises(ConfigError, match=r"parameter 'capture.sample_rate' = 5.0 refused: must be within"):
+    with pytest.raises(ConfigError, match=r"parameter 'capture.sample_rate' = 5.0 refused: must be >= 20000"):
         CaptureConfig.from_parameters({"capture.sample_rate": 5.0})
     with pytest.raises(ConfigError, match=r"'capture.threshold' = nan refused"):
         CaptureConfig.from_parameters({"capture.threshold": float("nan")})

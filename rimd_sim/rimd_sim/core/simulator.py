@@ -187,15 +187,17 @@ class RigSimulator:
         return self._push(when, "set_parameters", dict(params))
 
     def inject_fault(self, channel: str, kind: str, start: float = 0.0, duration: float = 0.0,
-                     magnitude: float = 0.0) -> FaultSpec:
-        """Schedule a fault (see :mod:`rimd_sim.core.faults`); ``start`` 0 = now (the next block boundary).
+                     magnitude: float = 0.0, after: float = 0.0) -> FaultSpec:
+        """Schedule a fault (see :mod:`rimd_sim.core.faults`).
+
+        ``start``: simulation time, 0 = now (the next block boundary); or ``after``: seconds from now.
 
         Raises:
             CommandError: Naming the field and its rule; nothing is scheduled.
         """
         channel, kind, t_start, duration_t, magnitude = validate_fault(
             channel, kind, start, duration, magnitude, now=self.time,
-            channels={c.name: c for c in self._config.channels})
+            channels={c.name: c for c in self._config.channels}, after=after)
         if kind == "motor_slip":
             if self._config.rig.structure.model != "rigid":
                 raise CommandError("kind = 'motor_slip' refused: not supported with structure.model "
