@@ -138,7 +138,7 @@ def test_services_and_refusals(ros_processes, ros_executor, tmp_path):
     bad = ros_processes.start_node("rimd_recorder", "--ros-args", "-p", "compression:=rar",
                                    "-p", f"output_dir:={tmp_path / 'x'}", name="bad_recorder")
     assert bad.wait(30) == 2
-    assert "compression: 'rar' refused: must be one of zstd, lz4, none" in bad.output()
+    assert "parameter 'compression' = 'rar' refused: must be one of: zstd, lz4, none" in bad.output()
     assert "Traceback" not in bad.output()
 
     out = tmp_path / "rec"

@@ -125,12 +125,27 @@ def test_bad_reports_are_ignored_with_a_reason():
     assert not verdict.accepted and verdict.reason == "future" and "beyond what was published" in verdict.log
     verdict = pacer.lockstep.progress("daq", 0, topics={"/elsewhere": 0})
     assert not verdict.accepted and verdict.reason == "topics" and "/elsewhere" in verdict.log
+    verdict = pacer.lockstep.progress("daq", 0, topics={"/elsewhere": 0, "/rig/impact/force": 0})
+    assert verdict.accepted and "/elsewhere left out" in verdict.log   # the topics published here count
+    pacer.lockstep.consumers["daq"].done.clear()
     assert pacer.lockstep.progress("daq", 0, instance="a").joined
     pacer.published(30 * MS)
     assert pacer.lockstep.progress("daq", 30 * MS, instance="a").accepted
     verdict = pacer.lockstep.progress("daq", 10 * MS, instance="a")
     assert not verdict.accepted and verdict.reason == "back"
     assert pacer.lockstep.consumers["daq"].done_ns == 30 * MS
+
+
+def test_a_consumer_may_switch_from_one_report_to_reports_per_topic():
+    """The progress reporter joins with one report (zero: nothing taken yet), then reports per topic."""
+    pacer = Pacer(0.0, lockstep("daq"), topics=["/a", "/b"], clock=FakeClock())
+    pacer.lockstep.progress("daq", 0)
+    for end in blocks(0, 3):
+        pacer.published(end, "/a")
+        pacer.published(end, "/b")
+    pacer.lockstep.progress("daq", 0, topics={"/a": 30 * MS, "/b": 20 * MS})
+    assert pacer.lockstep.consumers["daq"].done == {"/a": 30 * MS, "/b": 20 * MS}
+    assert pacer.next(blocks(30)) == Go(4)         # /b at 20 ms: up to 70 ms
 
 
 def test_a_restarted_consumer_joins_where_the_run_stands():
@@ -170,6 +185,8 @@ def test_a_silent_consumer_is_named_and_the_timeout_policy_applies(policy):
     else:
         assert isinstance(decision, Hold) and pacer.lockstep.consumers["daq"].timed_out
         assert events == [("error", events[0][1])] and "still waiting" in events[0][1]
+        assert pacer.lockstep.progress("daq", 0).log == ""       # a heartbeat: no progress, still timed out
+        assert pacer.lockstep.consumers["daq"].timed_out
         assert "answers again" in pacer.lockstep.progress("daq", 10 * MS).log
 
 

@@ -299,11 +299,17 @@ class Lockstep:
             return ProgressVerdict(False, f"progress from '{consumer}' ignored: not a registered consumer "
                                           f"(lockstep.consumers: {', '.join(self.settings.consumers)})", "unknown")
         report = {ALL_TOPICS: int(done_ns)} if not topics else {t: int(v) for t, v in topics.items()}
-        if self.topics is not None:
-            unknown = sorted(t for t in report if t != ALL_TOPICS and t not in self.topics)
+        note = ""
+        if self.topics is not None and topics:
+            # A consumer may take topics of other publishers too (the recorder records /diagnostics): those
+            # entries are left out, the others count.
+            unknown = sorted(t for t in report if t not in self.topics)
+            report = {t: v for t, v in report.items() if t in self.topics}
             if unknown:
-                return ProgressVerdict(False, f"progress from '{consumer}' ignored: {', '.join(unknown)} "
-                                              "not published here (topics: " + ", ".join(sorted(self.topics)) + ")",
+                note = f"{', '.join(unknown)} left out of the progress of '{consumer}': not published here"
+            if not report:
+                return ProgressVerdict(False, f"progress from '{consumer}' ignored: {', '.join(unknown)} not "
+                                              "published here (topics: " + ", ".join(sorted(self.topics)) + ")",
                                        "topics")
         future = sorted(t or "all topics" for t, v in report.items() if v > self._published(t))
         if future:
@@ -320,18 +326,24 @@ class Lockstep:
             c.done = {t: max(v, self._published(t)) for t, v in report.items()}
             c.instance, c.last_heard, c.dropped, c.timed_out = instance, now, False, False
             c.joins += 1
-            return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_ns / 1e9:.9f} s", joined=True)
+            return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_ns / 1e9:.9f} s"
+                                   + (f"; {note}" if note else ""), joined=True)
         back = sorted(t or "all topics" for t, v in report.items() if v < c.done.get(t, v))
         if back:
             return ProgressVerdict(False, f"progress from '{consumer}' ignored: done_through goes back on "
                                           f"{', '.join(back)} (from {c.done_ns / 1e9:.9f} s; a restart must report a "
                                           "new instance)", "back")
-        returned = c.timed_out
-        c.done.update(report)
-        c.last_heard, c.timed_out = now, False
+        advanced = any(v > c.done.get(t, -1) for t, v in report.items())
+        if (ALL_TOPICS in report) != (ALL_TOPICS in c.done):
+            c.done = dict(report)   # from one report for all topics to reports per topic, or back
+        else:
+            c.done.update(report)
+        returned = c.timed_out and advanced
+        if advanced:   # a report that repeats itself (a heartbeat) is no progress: the timeout runs on
+            c.last_heard, c.timed_out = now, False
         if returned:
             return ProgressVerdict(True, f"consumer '{consumer}' answers again at {c.done_ns / 1e9:.9f} s")
-        return ProgressVerdict(True)
+        return ProgressVerdict(True, note, "topics" if note else "")
 
     def limit(self, c: ConsumerStatus) -> float:
         """The data time up to which consumer ``c`` lets the publisher go (``inf``: no limit; ``-inf``: none)."""

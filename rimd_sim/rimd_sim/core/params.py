@@ -54,7 +54,8 @@ class Param:
         zero: A number may also be exactly 0, outside the bounds; a string names what 0 means ("rigid").
         choices: Allowed strings.
         extra_rule: Words of a rule that :attr:`check` tests besides the bounds.
-        check: Predicate on the converted value; False breaks :attr:`extra_rule`.
+        check: Test of the converted value: True (or None) passes; False breaks :attr:`extra_rule`; a string
+            breaks it and says how.
         read_only: Read at start only: refused at run time.
         attr: Attribute path from the root settings object.
     """
@@ -70,7 +71,7 @@ class Param:
     zero: bool | str = False
     choices: tuple[str, ...] = ()
     extra_rule: str = ""
-    check: Callable[[Any], bool] | None = None
+    check: Callable[[Any], bool | str | None] | None = None
     read_only: bool = False
     attr: tuple[str, ...] = ()
 
@@ -147,10 +148,14 @@ class Param:
         elif not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
             raise ConfigError(self.name, value, "must be a list of strings")
         else:
-            value = tuple(value)
-        if not self._in_range(value) or (self.choices and value not in self.choices) \
-                or (self.check is not None and not self.check(value)):
+            value = tuple(v for v in value if v)   # empty entries mean nothing (ROS has no empty string list)
+        if not self._in_range(value) or (self.choices and value not in self.choices):
             raise ConfigError(self.name, value, self.rule)
+        verdict = True if self.check is None else self.check(value)
+        if verdict is False:
+            raise ConfigError(self.name, value, self.rule)
+        if isinstance(verdict, str):   # the check says what is wrong
+            raise ConfigError(self.name, value, f"{self.rule} ({verdict})")
         return value
 
     def _in_range(self, value: Any) -> bool:
@@ -174,12 +179,13 @@ def _unit_ok(unit: str) -> bool:
 
 def param(default: Any, description: str, *, unit: str = "", ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, zero: bool | str = False, choices: tuple[str, ...] = (),
-          rule: str = "", check: Callable[[Any], bool] | None = None, read_only: bool = False,
+          rule: str = "", check: Callable[[Any], bool | str | None] | None = None, read_only: bool = False,
           name: str | None = None) -> Any:
     """A dataclass field that is a parameter (see :class:`Param` for the arguments).
 
     ``name``: the parameter's name within its group when it is not the field's name (``truth.sample_rate``).
-    A list of strings is declared and held as a tuple.
+    A list of strings is declared and held as a tuple; its empty entries are dropped (a ROS parameter file
+    cannot give an empty list of strings: ``[""]`` says "none").
     """
     if isinstance(default, list):
         default = tuple(default)

@@ -90,7 +90,14 @@ def declare(node: Node, table: Mapping[str, Param]) -> dict[str, Any]:
     The values are as ROS holds them (a list for a list of strings, an integer where one was given for a real
     number): build the node's settings from them (:func:`rimd_sim.core.params.build`), which checks each one.
     """
+    values = {}
     for name, p in table.items():
-        default = list(p.default) if p.kind == "str[]" else p.default
+        default = p.default
+        if p.kind == "str[]":
+            # rclpy types an empty list as a byte array (and then refuses a list of strings given for it), and
+            # a parameter declared by its type alone stays unset, which breaks get_parameters for every name
+            # asked with it: an empty list is declared as [""], and empty entries mean nothing (Param.validate).
+            default = list(default) or [""]
         node.declare_parameter(name, default, descriptor(p))
-    return {name: node.get_parameter(name).value for name in table}
+        values[name] = node.get_parameter(name).value
+    return values

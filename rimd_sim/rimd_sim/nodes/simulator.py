@@ -104,6 +104,11 @@ def to_time(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
+def show_stamp(ns: int) -> str:
+    """A stamp in seconds, exact to the nanosecond (a float would round a 2026 epoch stamp to ~100 ns)."""
+    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
+
+
 def from_time(t: Time) -> int:
     """Integer nanoseconds of a ``builtin_interfaces/Time``."""
     return int(t.sec) * 1_000_000_000 + int(t.nanosec)
@@ -285,7 +290,7 @@ class SimulatorNode(Node):
         self._sessions += 1
         self._pub_session.publish(msg)
         self.get_logger().info(f"run {self._run_id} ({reason}, session {msg.sequence}) from simulation time "
-                               f"{float(t):.6f} s, stamp {from_time(msg.start_stamp) / 1e9:.9f} "
+                               f"{float(t):.6f} s, stamp {show_stamp(from_time(msg.start_stamp))} "
                                f"({msg.time_base} time base)")
 
     # ---- pacing ------------------------------------------------------------------------------------
@@ -337,8 +342,14 @@ class SimulatorNode(Node):
                                         f"{traceback.format_exc()}")
 
     def _log(self, level: str, line: str) -> None:
+        # One call site per severity: rclpy's logger refuses a call site that changes severity between calls.
         logger = self.get_logger()
-        {"error": logger.error, "warning": logger.warning}.get(level, logger.info)(line)
+        if level == "error":
+            logger.error(line)
+        elif level == "warning":
+            logger.warning(line)
+        else:
+            logger.info(line)
 
     def _on_hold(self, hold: Hold) -> None:
         """Say which consumers hold the run and since when: once it has lasted HOLD_REPORT_S, then every REPEAT s."""
@@ -471,7 +482,7 @@ class SimulatorNode(Node):
             self._send(self._pub_faults, fe, stamp)
             self._fault_events += 1
             self.get_logger().info(f"fault {spec.number} {event.event} at simulation time {float(event.time):.6f} s "
-                                   f"(stamp {stamp / 1e9:.9f}): {event.detail}")
+                                   f"(stamp {show_stamp(stamp)}): {event.detail}")
         if block.truth is not None:
             msg = self._truth_message(block)
             self._send(self._pub_truth, msg, from_time(msg.header.stamp))
@@ -507,7 +518,7 @@ class SimulatorNode(Node):
             self._send(self._pub_clock, self._clock_msg, end)
         for cmd in block.commands:
             self.get_logger().info(f"{cmd.kind} at simulation time {float(cmd.time):.6f} s "
-                                   f"(stamp {stamp_ns(t0, cmd.time) / 1e9:.9f}): {cmd.detail}")
+                                   f"(stamp {show_stamp(stamp_ns(t0, cmd.time))}): {cmd.detail}")
         self._published += 1
         if last_due is not None:
             self._measure_lateness(last_due)
@@ -636,7 +647,7 @@ class SimulatorNode(Node):
         rule = "must be zero (next block boundary) or a stamp from now to one day ahead in the rig's time base"
         if t < now:
             raise CommandError(f"start_stamp {stamp.sec}.{stamp.nanosec:09d} refused: already passed "
-                               f"(the rig is at stamp {stamp_ns(self._t0_ns, now) / 1e9:.9f}, simulation time "
+                               f"(the rig is at stamp {show_stamp(stamp_ns(self._t0_ns, now))}, simulation time "
                                f"{float(now):.6f} s); {rule}")
         if t - now > MAX_SCHEDULE_AHEAD_S:
             raise CommandError(f"start_stamp {stamp.sec}.{stamp.nanosec:09d} refused: {float(t - now):.6g} s "
@@ -645,7 +656,7 @@ class SimulatorNode(Node):
 
     def _when(self, t: Fraction) -> str:
         """A time as users read it: simulation time and stamp, each naming its base."""
-        return f"simulation time {float(t):.6f} s (stamp {stamp_ns(self._t0_ns, t) / 1e9:.9f})"
+        return f"simulation time {float(t):.6f} s (stamp {show_stamp(stamp_ns(self._t0_ns, t))})"
 
     def _on_set_motor_frequency(self, request, response):
         with self._lock:

@@ -109,7 +109,7 @@ def _plan(args: argparse.Namespace, config_path: Path) -> list[tuple[RigNode, li
             try:
                 check_recorder_parameters(section)
             except RecorderConfigError as exc:
-                raise ConfigError("rimd_recorder", str(config_path), str(exc)) from None
+                raise CommandError(f"{config_path}, section rimd_recorder: {exc}") from None
             output_dir = Path(section.get("output_dir", "recordings")).expanduser().resolve()
             extra = ["-p", f"output_dir:={output_dir}"]
         elif node.name == "rimd_rerun":
@@ -121,7 +121,7 @@ def _plan(args: argparse.Namespace, config_path: Path) -> list[tuple[RigNode, li
             try:
                 spec_from_parameters(section).validate()
             except SinkError as exc:
-                raise ConfigError("rimd_rerun", str(config_path), str(exc)) from None
+                raise CommandError(f"{config_path}, section rimd_rerun: {exc}") from None
         plan.append((node, extra))
     return plan
 
