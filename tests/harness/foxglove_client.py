@@ -18,6 +18,7 @@ import struct
 import threading
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,8 +49,9 @@ class FoxgloveClient:
     """Connects to ``url`` and records what the server sends; a context manager."""
 
     def __init__(self, url: str, timeout: float = 10.0) -> None:
-        self._ws = connect(url, subprotocols=[SUBPROTOCOL], open_timeout=timeout, max_size=None, compression=None,
-                           proxy=None)
+        self._stack = ExitStack()
+        self._ws = self._stack.enter_context(connect(url, subprotocols=[SUBPROTOCOL], open_timeout=timeout,
+                                                     max_size=None, compression=None, proxy=None))
         self.subprotocol = self._ws.subprotocol
         self.received = Received()
         self._cond = threading.Condition()
@@ -163,7 +165,7 @@ class FoxgloveClient:
         return condition
 
     def close(self) -> None:
-        self._ws.close()
+        self._stack.close()
         self._reader.join(5)
 
     def __enter__(self) -> FoxgloveClient:
