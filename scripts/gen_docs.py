@@ -64,6 +64,7 @@ VERB_PAGES = {
     "pulse": "docs/physics.md",
     "info": "docs/development.md",
     "faults": "docs/faults.md",
+    "crop": "docs/recording.md",
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.
 DEFAULT_VERB_PAGE = "docs/analyses.md"

@@ -12,7 +12,7 @@ import pytest
 from rimd_sim import cli
 
 SPEC_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "sweep", "bifurcation", "peterka",
-              "poincare", "basins", "pulse", "faults", "rerun", "node", "info")
+              "poincare", "basins", "pulse", "faults", "rerun", "crop", "node", "info")
 #: Verbs whose issue has not landed: none left (the Rerun verb, issue 6, was the last).
 NOT_IMPLEMENTED: dict[str, tuple[int, str]] = {}
 

@@ -80,6 +80,8 @@ VERBS: tuple[Verb, ...] = (
     Verb("faults", "run a fault scenario (SCENARIO.yaml) against a running rig through /rig/inject_fault",
          "rimd_sim.verbs.faults"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
+    Verb("crop", "a time window of a recording (REC) as a new rosbag2 MCAP recording, like ros2 bag convert",
+         "rimd_sim.verbs.crop"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),
 )

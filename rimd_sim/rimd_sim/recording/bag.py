@@ -456,11 +456,16 @@ class BagWriter:
         self._previous = self._read_previous_metadata()
 
     # -- topics and metadata ---------------------------------------------------------------------------------
-    def add_topic(self, name: str, type_name: str, qos_profiles: Sequence[Mapping[str, Any]]) -> TopicInfo:
-        """Declare a topic (its definition is looked up now; raises MessageDefinitionError if unknown)."""
+    def add_topic(self, name: str, type_name: str, qos_profiles: Sequence[Mapping[str, Any]],
+                  definition: MessageDefinition | None = None) -> TopicInfo:
+        """Declare a topic; its definition is looked up now unless given (raises MessageDefinitionError if unknown).
+
+        ``definition``: the schema to write, e.g. the one a recording being copied carries.
+        """
         topic = self.topics.get(name)
         if topic is None:
-            topic = TopicInfo(name, type_name, [dict(p) for p in qos_profiles], message_definition(type_name))
+            topic = TopicInfo(name, type_name, [dict(p) for p in qos_profiles],
+                              definition if definition is not None else message_definition(type_name))
             self.topics[name] = topic
         current = self._current
         if current is not None:

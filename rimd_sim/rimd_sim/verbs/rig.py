@@ -63,6 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="record into this directory (default: the recorder's output_dir in the config)")
     parser.add_argument("--no-record", action="store_true", help="do not start the recorder")
     parser.add_argument("--no-rerun", action="store_true", help="do not start the Rerun bridge")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="serve the rig to Foxglove (ws://127.0.0.1:8765 by default; the bridge's foxglove.* "
+                             "parameters); with --no-rerun the bridge serves Foxglove only")
 
 
 def _stop(proc: subprocess.Popen, name: str) -> int | None:
@@ -113,17 +116,37 @@ def _plan(args: argparse.Namespace, config_path: Path) -> list[tuple[RigNode, li
             output_dir = Path(section.get("output_dir", "recordings")).expanduser().resolve()
             extra = ["-p", f"output_dir:={output_dir}"]
         elif node.name == "rimd_rerun":
-            section = _section(config_path, node.name)
-            if args.no_rerun or section is None or not section.get("enabled", False):
+            section = _section(config_path, node.name) or {}
+            rerun = not args.no_rerun and bool(section.get("enabled", False))
+            foxglove = _foxglove_address(args, section, config_path)
+            if not rerun and foxglove is None:
                 continue
-            from rimd_sim.viz.sinks import SinkError, spec_from_parameters
+            if rerun:
+                from rimd_sim.viz.sinks import SinkError, spec_from_parameters
 
-            try:
-                spec_from_parameters(section).validate()
-            except SinkError as exc:
-                raise CommandError(f"{config_path}, section rimd_rerun: {exc}") from None
+                try:
+                    spec_from_parameters(section).validate()
+                except SinkError as exc:
+                    raise CommandError(f"{config_path}, section rimd_rerun: {exc}") from None
+            if foxglove is not None:
+                extra = ["-p", "foxglove.enabled:=true", *([] if rerun else ["-p", "rerun:=false"])]
         plan.append((node, extra))
     return plan
+
+
+def _foxglove_address(args: argparse.Namespace, section: dict, config_path: Path) -> str | None:
+    """The ws:// address the bridge will serve Foxglove on (``--foxglove`` or ``foxglove.enabled``), or None."""
+    if not (args.foxglove or bool(section.get("foxglove.enabled", False))):
+        return None
+    from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT, FoxgloveError, check_address, websocket_url
+
+    host = section.get("foxglove.host", DEFAULT_HOST)
+    port = section.get("foxglove.port", DEFAULT_PORT)
+    try:
+        check_address(host, port)
+    except FoxgloveError as exc:
+        raise ConfigError("rimd_rerun", str(config_path), str(exc)) from None
+    return websocket_url(host, port) if port else "the ws:// address the bridge logs (foxglove.port 0: a free port)"
 
 
 def _subscribed(node, topic: str, consumers: tuple[str, ...]) -> bool:  # noqa: ANN001
@@ -185,6 +208,12 @@ def main(args: argparse.Namespace) -> int:
             if node.name == "rimd_recorder":
                 recording_dir = extra[-1].split(":=", 1)[1]
             procs.append((node.name, subprocess.Popen(cmd, start_new_session=True)))
+        for node, extra in plan:
+            if "foxglove.enabled:=true" in extra:
+                address = _foxglove_address(argparse.Namespace(foxglove=True), _section(Path(config_path), node.name)
+                                            or {}, Path(config_path))
+                print(f"rimd rig: Foxglove: open {address} in Foxglove (Open connection > Foxglove WebSocket; "
+                      "layout: config/foxglove/rig_layout.json)", flush=True)
         print(f"rimd rig: running {', '.join(n for n, _ in procs)} with {config_path} "
               f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
               f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
