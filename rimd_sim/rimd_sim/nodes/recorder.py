@@ -39,7 +39,6 @@ from __future__ import annotations
 import os
 import signal
 import socket
-import struct
 import sys
 import time
 from pathlib import Path
@@ -60,17 +59,15 @@ from rimd_sim.core.params import build
 from rimd_sim.nodes._params import declare, refuse_unnamed
 from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
 from rimd_sim.recording.bag import BagWriter
+from rimd_sim.recording.cdr import HEADER_FIRST_TYPES, header_stamp
 from rimd_sim.recording.session import RecordingSession
 from rimd_sim.recording.settings import PARAMETERS, RecorderConfigError, RecorderSettings, compile_patterns
 
 __all__ = ["PROGRESS_STAMP_KEY", "RecorderNode", "main"]
 
-#: Message types whose first field is a std_msgs/Header (or, for Clock, a Time): the recorder reads their stamp
-#: from the raw CDR bytes (no deserialisation) to report how far each topic has reached it.
-STAMPED_TYPES = frozenset({"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState", "rimd_msgs/msg/MotorState",
-                           "rimd_msgs/msg/ImpactEvent", "rimd_msgs/msg/FaultEvent", "rimd_msgs/msg/Capture",
-                           "diagnostic_msgs/msg/DiagnosticArray", "rosgraph_msgs/msg/Clock"})
-_STAMP_LE, _STAMP_BE = struct.Struct("<iI"), struct.Struct(">iI")
+#: Message types whose stamp the recorder reads from the raw CDR bytes (no deserialisation) to report how far each
+#: topic is written (/diagnostics, lockstep progress).
+STAMPED_TYPES = HEADER_FIRST_TYPES
 
 #: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
 #: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.
@@ -84,14 +81,6 @@ POLL_PERIOD_S = 0.02
 WRITER_BATCH_S = 0.02
 #: While the writing is stopped by a write error, the log reminds of it this often (s).
 FAILURE_REMINDER_S = 30.0
-
-
-def header_stamp(data: bytes) -> int | None:
-    """The header stamp (ns) of a serialized stamped message (its first field), or None if too short."""
-    if len(data) < 12:
-        return None
-    sec, nanosec = _STAMP_LE.unpack_from(data, 4) if data[1] == 1 else _STAMP_BE.unpack_from(data, 4)
-    return sec * 1_000_000_000 + nanosec
 
 
 def _duration_dict(duration: Duration) -> dict[str, int]:

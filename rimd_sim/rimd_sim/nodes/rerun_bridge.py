@@ -18,17 +18,21 @@ import time
 from collections import deque
 from typing import Any
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
-from rimd_sim.nodes._params import refuse_unnamed
+from rimd_sim.client import ProgressReporter
+from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.params import build, to_flat
+from rimd_sim.nodes._params import declare, refuse_unnamed
 from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
-from rimd_sim.recording.cdr import read_block
-from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT, FoxgloveError
+from rimd_sim.recording.cdr import header_stamp, read_block
+from rimd_sim.viz.bridge_settings import PARAMETERS, BridgeSettings
+from rimd_sim.viz.foxglove_sink import FoxgloveError
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TRUTH_TOPIC, RigMapper, blueprint, stamp_ns
-from rimd_sim.viz.sinks import SINKS, RerunStream, SinkError, spec_from_parameters
+from rimd_sim.viz.sinks import RerunStream, SinkError, spec_from_parameters
 
 __all__ = ["RerunBridgeNode", "main"]
 
@@ -38,52 +42,6 @@ POLL_PERIOD_S = 0.02
 SAMPLE_BLOCK, RIG_STATE = "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 DEFAULT_NAMESPACE = "rig"
 
-#: name -> (default, description, (low, high) or None). Fixed after start (the sink is opened once).
-PARAMETERS: dict[str, tuple[Any, str, tuple[float, float] | None]] = {
-    "enabled": (True, "read by `rimd rig`: whether the bring-up starts this node (the node ignores it)", None),
-    "sink": ("serve_web", f"where the stream goes: one of {', '.join(SINKS)}", None),
-    "save_path": ("", "sink save: .rrd file to write ('' = ./rimd_<UTC timestamp>.rrd)", None),
-    "url": ("rerun+http://127.0.0.1:9876/proxy", "sink connect: gRPC URL of a running viewer or server", None),
-    "grpc_port": (0, "sinks spawn/serve_web: gRPC port of the viewer/server started (0 = a free port)", (0, 65535)),
-    "web_port": (0, "sink serve_web: HTTP port of the web viewer on 127.0.0.1 (0 = a free port)", (0, 65535)),
-    "memory_limit": ("1GiB", "sinks spawn/serve_web: memory limit of the viewer/server (oldest data dropped)", None),
-    "analytics": (False, "let Rerun report usage per the user's Rerun configuration (default: off)", None),
-    "natural_frequency": (1.82, "Hz: the phase plane's velocity axis is v_rel / (2 pi f)", (0.01, 1000.0)),
-    "window": (2.0, "s of channel data the time-series views show", (0.01, 3600.0)),
-    "trail": (1.0, "s of phase-plane trajectory shown (trailing line)", (0.01, 3600.0)),
-    "batch_blocks": (10, "blocks of a channel sent per send_columns call (1 = one call per block; more = less CPU, "
-                     "up to that many block periods of latency)", (1, 1000)),
-    "reliable": (True, "reliable subscriptions (false: best effort, matches best-effort channels)", None),
-    "status_period": (10.0, "s between status lines (0 = none)", (0.0, 3600.0)),
-    "rerun": (True, "stream to Rerun (false: the Foxglove server only, which foxglove.enabled must then turn on)",
-              None),
-    "foxglove.enabled": (False, "serve the Foxglove WebSocket protocol: the rig topics (cdr, ros2msg schemas), "
-                         "the rig's services, the parameters of foxglove.parameter_nodes, the rig clock", None),
-    "foxglove.host": (DEFAULT_HOST, "IP address the Foxglove server binds (127.0.0.1 = this machine only)", None),
-    "foxglove.port": (DEFAULT_PORT, "TCP port of the Foxglove server (0 = a free port, logged)", (0, 65535)),
-    "foxglove.topics": (["/rig/.*", "/clock", "/diagnostics"], "topics offered to Foxglove: regular expressions "
-                        "(full match)", None),
-    "foxglove.parameter_nodes": (["/rig/rimd_simulator"], "nodes whose parameters Foxglove reads and sets, "
-                                 "through their own parameter services ('' entries ignored)", None),
-    "foxglove.call_timeout": (3.0, "s to wait for the answer of a forwarded service call or parameter request",
-                              (0.1, 60.0)),
-}
-_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING,
-          list: ParameterType.PARAMETER_STRING_ARRAY}
-
-
-def _descriptor(name: str) -> ParameterDescriptor:
-    default, description, bounds = PARAMETERS[name]
-    desc = ParameterDescriptor(name=name, type=_TYPES[type(default)], description=description, read_only=True,
-                               dynamic_typing=isinstance(default, float))
-    if bounds is not None and isinstance(default, float):
-        desc.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
-    elif bounds is not None:
-        desc.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=0)]
-    return desc
-
-
 class RerunBridgeNode(PollingNode):
     """The Rerun bridge node. See the module docstring."""
 
@@ -91,9 +49,8 @@ class RerunBridgeNode(PollingNode):
         """Declare parameters, open the sink (SinkError: caught in main), subscribe."""
         kwargs.setdefault("namespace", DEFAULT_NAMESPACE)
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, _, _) in PARAMETERS.items():
-            self.declare_parameter(name, default, _descriptor(name))
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        settings = build(BridgeSettings, declare(self, PARAMETERS))   # ConfigError: caught in main
+        p = to_flat(settings)
         if not p["rerun"] and not p["foxglove.enabled"]:
             raise FoxgloveError("rerun and foxglove.enabled are both false: the bridge would serve nothing")
         spec = spec_from_parameters(p)
@@ -137,13 +94,20 @@ class RerunBridgeNode(PollingNode):
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=500, reliability=reliability)
         events_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=reliability)
         # The impact events (a few per second) are an ordinary subscription.
-        for ch in CHANNELS:
-            self._polled.create(SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
-        self._polled.create(RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE))
+        # Lockstep (docs/rig.md): once these subscriptions have matched, the bridge joins a rig or replay in
+        # lockstep under its node name and reports how far it has taken each topic.
+        self._progress = ProgressReporter(self, self.get_name())
+        subs = [self._polled.create(SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
+                for ch in CHANNELS]
+        subs.append(self._polled.create(RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE)))
         if self.foxglove is not None:
-            self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._raw_events_handler(), events_qos, raw=True)
+            subs.append(self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._raw_events_handler(), events_qos,
+                                                 raw=True))
         else:
-            self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._handler(EVENTS_TOPIC), events_qos)
+            subs.append(self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._handler(EVENTS_TOPIC),
+                                                 events_qos))
+        for sub in subs:
+            self._progress.add_subscription(sub)
         if self.mapper is not None:
             self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
         if p["status_period"] > 0:
@@ -171,19 +135,23 @@ class RerunBridgeNode(PollingNode):
         if relay is not None and not relay.wanted(full):
             relay = None
 
+        progress = self._progress
+
         def on_raw(data: bytes, info: dict) -> None:  # noqa: ARG001 - the message info is not used
             if relay is not None:
                 relay.on_message(full, data)
-            if self.mapper is None:
-                return
-            try:
-                view = read_block(data, type_name)
-            except ValueError as exc:
-                self._undecodable += 1
-                if self._undecodable <= 5:
-                    self.get_logger().error(f"{topic}: a message that is not a {type_name} ({exc}): skipped")
-                return
-            on_message(view)
+            if self.mapper is not None:
+                try:
+                    view = read_block(data, type_name)
+                except ValueError as exc:
+                    self._undecodable += 1
+                    if self._undecodable <= 5:
+                        self.get_logger().error(f"{topic}: a message that is not a {type_name} ({exc}): skipped")
+                    return
+                on_message(view)
+            stamp = header_stamp(data)
+            if stamp is not None:
+                progress.done(stamp, topic=full)
 
         return on_raw
 
@@ -200,15 +168,23 @@ class RerunBridgeNode(PollingNode):
                 relay.on_message(full, data)
             if self.mapper is not None:
                 on_message(deserialize_message(data, ImpactEvent))
+            else:
+                stamp = header_stamp(data)
+                if stamp is not None:
+                    self._progress.done(stamp, topic=full)
 
         return on_raw
 
     def _handler(self, topic: str):
+        full = f"{self.get_namespace().rstrip('/')}/{topic}"
+
         def on_message(msg: Any) -> None:
             self._received += 1
             start = time.perf_counter()
             self.mapper.log_message(topic, msg)
             self._slowest = max(self._slowest, time.perf_counter() - start)
+            if topic == EVENTS_TOPIC:   # the blocks are reported by their raw handler
+                self._progress.done(msg.header.stamp, topic=full)
             if topic == "impact/force":
                 end_ns = stamp_ns(msg.header.stamp) + round(len(msg.samples) * 1e9 / msg.sample_rate)
                 self._lags.append((time.time_ns() - end_ns) / 1e9)
@@ -261,7 +237,7 @@ def main(args: list[str] | None = None) -> int:
                   + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
         return status
 
-    return run_node("rimd_rerun", RerunBridgeNode, (SinkError, FoxgloveError), args=args, refused_status=1,
+    return run_node("rimd_rerun", RerunBridgeNode, (SinkError, FoxgloveError, ConfigError), args=args, refused_status=1,
                     close=close)
 
 if __name__ == "__main__":

@@ -19,6 +19,32 @@ _U32 = {0: struct.Struct("<I"), 1: struct.Struct(">I")}
 _U64 = {0: struct.Struct("<Q"), 1: struct.Struct(">Q")}
 
 
+_STAMP = {0: struct.Struct("<iI"), 1: struct.Struct(">iI")}
+
+#: Types whose first field is a ``std_msgs/Header`` (or, for Clock, a ``builtin_interfaces/Time``): their stamp
+#: is the CDR body's first 8 bytes (:func:`header_stamp`, :func:`with_header_stamp`).
+HEADER_FIRST_TYPES = frozenset({
+    "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState", "rimd_msgs/msg/MotorState", "rimd_msgs/msg/ImpactEvent",
+    "rimd_msgs/msg/FaultEvent", "rimd_msgs/msg/Capture", "rimd_msgs/msg/RigSession",
+    "diagnostic_msgs/msg/DiagnosticArray", "rosgraph_msgs/msg/Clock", "std_msgs/msg/Header",
+})
+
+
+def header_stamp(data: bytes) -> int | None:
+    """The stamp (ns) of a serialized message whose first field is a header (or a ``Time``), None if too short."""
+    if len(data) < 12:
+        return None
+    sec, nanosec = _STAMP[0 if data[1] & 1 else 1].unpack_from(data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def with_header_stamp(data: bytes, stamp_ns: int) -> bytes:
+    """The serialized message with its leading stamp replaced by ``stamp_ns`` (same byte order, same length)."""
+    out = bytearray(data)
+    _STAMP[0 if data[1] & 1 else 1].pack_into(out, 4, stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+    return bytes(out)
+
+
 def block_span(data: bytes) -> tuple[int, int]:
     """Return ``(first_index, sample_count)`` of a serialized SampleBlock or RigState.
 
