@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from rimd_sim import __version__
@@ -28,8 +29,54 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 
-class CommandError(Exception):
-    """A verb failed for a reason the user can act on; the message is printed as one line."""
+# The product's one exception family (rimd_sim.core.errors): a verb raises CommandError (or lets a library's
+# RimdError through) for a failure the user can act on; main() prints it as one line and exits 1.
+from rimd_sim.core.errors import CommandError, RimdError  # noqa: E402, F401 - CommandError: the verbs' import
+
+
+def number(option: str, unit: str = "", *, ge: float | None = None, gt: float | None = None,
+           le: float | None = None, lt: float | None = None, zero: str = "",
+           integer: bool = False) -> Callable[[str], float]:
+    """An argparse ``type`` for a numeric option: finite, within its bounds, refused naming the option as typed.
+
+    The bounds are in the option's own unit (``--gap-mm`` in mm), and so is the refusal:
+    ``--gap-mm 2400 refused: must be >= 0 and <= 50 mm``. ``zero``: 0 is also allowed and means that.
+    """
+    parts = [f"{op} {b:g}" for op, b in ((">=", ge), (">", gt), ("<=", le), ("<", lt)) if b is not None]
+    rule = ("must be " + (f"0 ({zero}) or " if zero else "") + " and ".join(parts) + (f" {unit}" if unit else "")
+            if parts else "must be a finite number")
+
+    def convert(text: str) -> float:
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} {text!r} refused: must be "
+                                             + ("an integer" if integer else "a number")) from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{option} {text} refused: must be finite; {rule}")
+        if zero and value == 0:
+            return value
+        if ((ge is not None and value < ge) or (gt is not None and value <= gt) or (le is not None and value > le)
+                or (lt is not None and value >= lt)):
+            raise argparse.ArgumentTypeError(f"{option} {text} refused: {rule}")
+        return value
+
+    convert.__name__ = "integer" if integer else "number"   # what argparse says for a value it cannot convert
+    return convert
+
+
+def nonnegative_float(option: str, unit: str = "") -> Callable[[str], float]:
+    """A number >= 0 (see :func:`number`)."""
+    return number(option, unit, ge=0)
+
+
+def positive_float(option: str, unit: str = "") -> Callable[[str], float]:
+    """A number > 0 (see :func:`number`)."""
+    return number(option, unit, gt=0)
+
+
+#: The simulator's real_time_factor as an option: 0 (as fast as possible) or within [0.001, 1e6].
+real_time_factor = number("--real-time-factor", zero="as fast as possible", ge=1e-3, le=1e6)
 
 
 @dataclass(frozen=True)
@@ -135,7 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     try:
         return int(args._main(args) or EXIT_OK)
-    except CommandError as error:
+    except RimdError as error:
         print(f"rimd {args.verb}: {error}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:

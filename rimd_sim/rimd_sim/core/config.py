@@ -30,6 +30,7 @@ from typing import Any
 from .capture import CaptureConfig
 from .contact import CONTACT_LAWS
 from .errors import ConfigError
+from .files import read_yaml
 from .pacing import LockstepSettings
 from .params import Param, build, group, keyed, param, parameters, to_flat
 
@@ -43,6 +44,7 @@ __all__ = [
     "SimConfig",
     "SimulatorNodeSettings",
     "StructureParams",
+    "check_simulator_section",
     "find_config_file",
     "flatten_parameters",
     "load_config",
@@ -328,6 +330,16 @@ PARAMETERS: dict[str, Param] = parameters(SimConfig)
 NODE_PARAMETERS: dict[str, Param] = parameters(SimulatorNodeSettings)
 
 
+def check_simulator_section(values: Mapping[str, Any]) -> tuple[SimConfig, SimulatorNodeSettings]:
+    """The simulator's configuration and node settings from a parameter-file section, each value checked.
+
+    Raises:
+        ConfigError: Naming the first refused parameter (an unknown one included) and its rule.
+    """
+    config = SimConfig.from_parameters(values)
+    return config, build(SimulatorNodeSettings, {k: v for k, v in values.items() if is_node_parameter(k)})
+
+
 def is_node_parameter(name: str) -> bool:
     """Whether ``name`` is a parameter of the simulator node's own, not of :class:`SimConfig` (the node checks it)."""
     return name in NODE_PARAMETERS
@@ -359,15 +371,8 @@ def read_ros_parameters(path: str | Path, node: str = NODE_NAME) -> dict[str, An
     Raises:
         ConfigError: When the file cannot be read or parsed, or has no section for the node.
     """
-    import yaml
-
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ConfigError("config file", str(path), f"cannot be read: {exc.strerror}") from exc
-    except yaml.YAMLError as exc:
-        raise ConfigError("config file", str(path), f"is not valid YAML: {exc}") from exc
+    doc = read_yaml(path, what="config file")
     if not isinstance(doc, Mapping):
         raise ConfigError("config file", str(path), "must be a mapping of node names to 'ros__parameters'")
     flat: dict[str, Any] = {}
