@@ -8,7 +8,6 @@ advertised, never with the rig's own code.
 
 from __future__ import annotations
 
-import argparse
 import re
 from pathlib import Path
 
@@ -155,18 +154,17 @@ def test_bad_addresses_and_a_taken_port_are_refused_in_one_line():
             FoxgloveSink(port=first.port)
 
 
-def test_rig_foxglove_starts_the_bridge_with_foxglove_only_when_asked(repo_root):
-    from rimd_sim.verbs import rig
+def test_rig_foxglove_starts_the_bridge_with_foxglove_only_when_asked(repo_root, tmp_path):
+    from rimd_sim.bringup import plan_rig
 
     config = Path(repo_root) / "config" / "rimd.yaml"
 
-    def plan(*argv: str) -> dict[str, list[str]]:
-        parser = argparse.ArgumentParser()
-        rig.add_arguments(parser)
-        return {node.name: extra for node, extra in rig._plan(parser.parse_args(list(argv)), config)}
+    def plan(**options) -> dict[str, list[str]]:
+        nodes = plan_rig(config, output_dir=tmp_path / "rec", **options).nodes
+        return {node.name: list(node.args[node.args.index(str(config)) + 1:]) for node in nodes}
 
     assert "foxglove.enabled:=true" not in plan()["rimd_rerun"]   # off by default (config/rimd.yaml)
-    assert plan("--foxglove")["rimd_rerun"] == ["-p", "foxglove.enabled:=true"]
-    assert plan("--foxglove", "--no-rerun")["rimd_rerun"] == ["-p", "foxglove.enabled:=true", "-p", "rerun:=false"]
-    assert "rimd_rerun" not in plan("--no-rerun")
+    assert plan(foxglove=True)["rimd_rerun"] == ["-p", "foxglove.enabled:=true"]
+    assert plan(foxglove=True, rerun=False)["rimd_rerun"] == ["-p", "foxglove.enabled:=true", "-p", "rerun:=false"]
+    assert "rimd_rerun" not in plan(rerun=False)
 
