@@ -54,7 +54,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
-from rimd_sim.client import ProgressReporter
+from rimd_sim.client import PROGRESS_TOPIC, ProgressReporter
 from rimd_sim.core.params import build
 from rimd_sim.nodes._params import declare, refuse_unnamed
 from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
@@ -148,8 +148,7 @@ class RecorderNode(PollingNode):
         self._written_stamp: dict[str, int] = {}   # and written (writer thread)
         self._skipped_paused = 0
         self._unknown: dict[str, str] = {}
-        self._new_topics = True   # the last discovery pass subscribed to something
-        self._progress = ProgressReporter(self, self.get_name(), ready=lambda: not self._new_topics)
+        self._progress = ProgressReporter(self, self.get_name(), ready=self._lockstep_ready)
 
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         for name, handler in (("start", self._on_start), ("stop", self._on_stop), ("split", self._on_split),
@@ -181,7 +180,6 @@ class RecorderNode(PollingNode):
                 and not any(p.fullmatch(topic) for p in self._exclude))
 
     def _discover(self) -> None:
-        new = False
         for topic, types in self.get_topic_names_and_types():
             if topic in self._subs or topic in self._unknown or not self._wanted(topic):
                 continue
@@ -206,11 +204,23 @@ class RecorderNode(PollingNode):
             self._session.add_topic(topic, type_name, offered)
             self._subs[topic] = sub = self._polled.create(msg_type, topic, qos, self._make_handler(topic, type_name))
             self._progress.add_subscription(sub)
-            new = True
             self.get_logger().info(f"recording {topic} ({type_name}, "
                                    f"{'reliable' if reliable else 'best effort'})")
-        self._new_topics = new
         self._fetch_rig_parameters()
+
+    def _lockstep_ready(self) -> bool:
+        """Whether it subscribes to every topic it records of each lockstep publisher (those on /rig/progress).
+
+        Only then may it join: the publisher would go on without it having those topics otherwise.
+        """
+        for info in self.get_subscriptions_info_by_topic(PROGRESS_TOPIC):
+            try:
+                topics = self.get_publisher_names_and_types_by_node(info.node_name, info.node_namespace)
+            except Exception:  # noqa: BLE001 - the node left the graph meanwhile
+                return False
+            if any(self._wanted(t) and t not in self._subs and t not in self._unknown for t, _ in topics):
+                return False
+        return True
 
     def _make_handler(self, topic: str, type_name: str):
         """Return the handler of one topic's messages, taken by :attr:`_polled` (every ``POLL_PERIOD_S``).

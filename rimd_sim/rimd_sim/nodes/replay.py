@@ -306,7 +306,7 @@ class ReplayNode(Node):
                                                                              strict=True)}
         done = msg.done_through.sec * 1_000_000_000 + msg.done_through.nanosec
         verdict = self.player.progress(msg.consumer, done, msg.instance, topics)
-        if verdict.log and verdict.accepted:
+        if verdict.log and verdict.accepted and verdict.reason != "topics":
             self.get_logger().info(f"lockstep: {verdict.log}")
         elif verdict.log and (msg.consumer, verdict.reason) not in self._warned:
             self._warned.add((msg.consumer, verdict.reason))

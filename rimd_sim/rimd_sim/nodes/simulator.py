@@ -240,7 +240,7 @@ class SimulatorNode(Node):
 
     def _all_publishers(self) -> list[Any]:
         return [*self._pubs.values(), self._pub_events, self._pub_motor, self._pub_truth, self._pub_faults,
-                self._pub_clock, *self._pub_captures.values()]
+                self._pub_clock, self._pub_session, *self._pub_captures.values()]
 
     # ---- life cycle --------------------------------------------------------------------------------
 
@@ -288,7 +288,7 @@ class SimulatorNode(Node):
         msg.header.stamp = msg.start_stamp
         msg.header.frame_id = SESSION_FRAME
         self._sessions += 1
-        self._pub_session.publish(msg)
+        self._send(self._pub_session, msg, from_time(msg.start_stamp))
         self.get_logger().info(f"run {self._run_id} ({reason}, session {msg.sequence}) from simulation time "
                                f"{float(t):.6f} s, stamp {show_stamp(from_time(msg.start_stamp))} "
                                f"({msg.time_base} time base)")
@@ -404,9 +404,9 @@ class SimulatorNode(Node):
             verdict = self._pacer.lockstep.progress(msg.consumer, from_time(msg.done_through), msg.instance, topics)
         if verdict.joined:
             self._match_pending = True   # its subscriptions may be newer than its report: let DDS match them
-        if verdict.log and verdict.accepted:
+        if verdict.log and verdict.accepted and verdict.reason != "topics":
             self.get_logger().info(f"lockstep: {verdict.log}")
-        elif verdict.log:
+        elif verdict.log:   # ignored, or topics of other publishers left out: said once per consumer and reason
             self._warn_once(msg.consumer, verdict.reason, f"lockstep: {verdict.log}")
         self._wake.set()
 

@@ -61,9 +61,10 @@ class RecorderSettings:
     topics: tuple[str, ...] = param(("/rig/.*", "/diagnostics", "/clock"),
                                     "topics to record: regular expressions (full match)",
                                     rule="a list of regular expressions", check=_patterns_problem, read_only=True)
-    exclude: tuple[str, ...] = param((), "topics never recorded: regular expressions (full match); empty "
-                                            "entries are ignored", rule="a list of regular expressions",
-                                     check=_patterns_problem, read_only=True)
+    exclude: tuple[str, ...] = param(("/rig/progress",), "topics never recorded: regular expressions (full "
+                                                         "match); empty entries are ignored (default: the lockstep "
+                                                         "consumers' progress reports)",
+                                     rule="a list of regular expressions", check=_patterns_problem, read_only=True)
     max_duration: float = param(0.0, "start a new file when the current one spans this long (0 = no split)",
                                 unit="s", ge=0, le=1e9, read_only=True)
     max_size: int = param(0, "start a new file when the current one reaches this size (0 = no split)",
