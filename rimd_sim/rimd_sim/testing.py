@@ -221,6 +221,22 @@ class RigHandle:
         """``/rig/clear_faults``."""
         return self.trigger("clear_faults")
 
+    def session(self, timeout: float = 30.0) -> Any:
+        """The rig's current run (``rimd_msgs/msg/RigSession`` from /rig/session: run id, seed, configuration hash)."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        from rimd_msgs.msg import RigSession
+
+        node = self._ros()
+        got: list[Any] = []
+        sub = node.create_subscription(RigSession, "/rig/session", got.append, QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        try:
+            assert self._spin_until(lambda: got, timeout), f"no /rig/session in {timeout:g} s"
+            return got[-1]
+        finally:
+            node.destroy_subscription(sub)
+
     def wait_until_simulated(self, seconds: float, timeout: float = 120.0) -> None:
         """Wait until the rig's simulation time (its /clock) reaches ``seconds``.
 
