@@ -237,6 +237,12 @@ class RigHandle:
         finally:
             node.destroy_subscription(sub)
 
+    def simulated(self) -> float:
+        """The rig's simulation time as last heard on its /clock (s; -1e-9 before any)."""
+        self._ros()
+        self._executor.spin_once(timeout_sec=0.0)
+        return self._clock_ns / 1e9
+
     def wait_until_simulated(self, seconds: float, timeout: float = 120.0) -> None:
         """Wait until the rig's simulation time (its /clock) reaches ``seconds``.
 

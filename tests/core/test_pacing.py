@@ -160,6 +160,16 @@ def test_a_restarted_consumer_joins_where_the_run_stands():
     assert isinstance(pacer.next(blocks(50)), Go)
 
 
+def test_a_consumer_that_has_not_joined_yet_is_waited_for_however_long():
+    """A consumer still starting (imports, discovery) is never timed out or dropped: the first block waits."""
+    clock = FakeClock()
+    pacer = Pacer(0.0, lockstep("daq", timeout=1.0, on_timeout="drop"), clock=clock)
+    for _ in range(5):
+        clock.advance(10.0)
+        assert isinstance(pacer.next(blocks(0)), Hold)
+    assert not pacer.lockstep.take_events() and not pacer.lockstep.consumers["daq"].dropped
+
+
 @pytest.mark.parametrize("policy", ["wait", "drop"])
 def test_a_silent_consumer_is_named_and_the_timeout_policy_applies(policy):
     clock = FakeClock()

@@ -26,9 +26,10 @@ Consumer protocol (``rimd_msgs/msg/ConsumerProgress`` on ``/rig/progress``; :met
   done with it. A consumer restarted after a crash therefore resumes where the run stands.
 * Within one instance, progress never goes back: a report below the last one is ignored (and said). A report
   beyond what the publisher has published is ignored too (it is from the future: another run, a clock bug).
-* A registered consumer that has not joined holds the run from its first block. When the run has been held by
-  a consumer for ``timeout`` seconds without progress from it, ``on_timeout`` applies: ``wait`` keeps holding
-  (the debugger case; it is reported as timed out), ``drop`` stops waiting for it until it reports again.
+* A registered consumer that has not joined holds the run from its first block, however long it takes to start.
+  When the run has been held by a consumer that had joined for ``timeout`` seconds without progress from it,
+  ``on_timeout`` applies: ``wait`` keeps holding (the debugger case; it is reported as timed out), ``drop``
+  stops waiting for it until it reports again.
 
 Every time here is an integer number of nanoseconds on the data's axis, except wall times (float seconds of
 the injected monotonic clock).
@@ -383,6 +384,8 @@ class Lockstep:
                 continue
             if c.held_since is None:
                 c.held_since = now
+            if not c.joins:
+                continue   # not there yet (still starting): waited for, never dropped (the first block waits)
             quiet_since = c.held_since if c.last_heard is None else max(c.held_since, c.last_heard)
             silent = now - quiet_since
             if silent < self.settings.timeout:

@@ -197,9 +197,10 @@ class SimulatorNode(Node):
         self._pub_events = self.create_publisher(ImpactEvent, "impact/events", events_qos)
         self._pub_motor = self.create_publisher(MotorState, "motor/state", reliable)
         self._pub_truth = self.create_publisher(RigState, "truth", reliable)
-        # Reliable: compatible with the best-effort subscription of ROS time sources and with reliable ones.
+        # Reliable: compatible with the best-effort subscription of ROS time sources and with reliable ones. One
+        # per block, so the same depth as the blocks' (a recorder that lags must not lose ticks either).
         self._pub_clock = self.create_publisher(Clock, "/clock", QoSProfile(
-            depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
+            depth=depth, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_faults = self.create_publisher(FaultEvent, "faults", latched)
         self._pub_session = self.create_publisher(RigSession, "session", QoSProfile(
@@ -389,8 +390,8 @@ class SimulatorNode(Node):
 
     def _unmatched(self) -> list[str]:
         """Topics with a subscription in the ROS graph that its publisher has not matched yet (DDS discovery)."""
-        pubs = [*self._pubs.values(), self._pub_events, self._pub_motor, self._pub_truth, *self._pub_captures.values()]
-        return [p.topic_name for p in pubs if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
+        return [p.topic_name for p in self._all_publishers()
+                if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
 
     def _on_progress(self, msg: ConsumerProgress) -> None:
         topics = None
