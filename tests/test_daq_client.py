@@ -110,5 +110,5 @@ def test_two_rigs_in_one_test_do_not_hear_each_other(rimd_rig):
     session_a, session_b = a.session(), b.session()
     assert session_a.run_id != session_b.run_id and (session_a.seed, session_b.seed) == (1, 2)
     assert a.motor(5.0).success
-    node = a._ros()
+    node = a.client().node
     assert node.count_publishers("/rig/session") == 1   # rig b is not in rig a's domain

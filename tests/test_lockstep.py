@@ -156,7 +156,7 @@ def test_a_killed_consumer_is_named_then_dropped_and_joins_again(rimd_rig, tmp_p
 
     rig = rimd_rig(consumers=["daq"], timeout=4.0, on_timeout="drop")
     holding: list[float] = []
-    node = rig._ros()
+    node = rig.client().node
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
@@ -177,7 +177,7 @@ def test_a_killed_consumer_is_named_then_dropped_and_joins_again(rimd_rig, tmp_p
     # Named within 1 s, in the log and in /diagnostics.
     log_after = _wait_for(lambda: "waiting for daq" in rig.log(), 5.0)
     assert log_after is not None and log_after <= 1.0, f"named in the log after {log_after} s"
-    assert rig._spin_until(lambda: holding, 5.0) and holding[0] - killed <= 1.0, holding[:1]
+    assert rig.client().spin_until(lambda: holding, 5.0) and holding[0] - killed <= 1.0, holding[:1]
     # The drop policy: after the timeout (4 s) the rig goes on without it.
     assert _wait_for(lambda: "consumer 'daq' dropped" in rig.log(), 10.0) is not None, rig.log()[-2000:]
     rig.wait_until_simulated(3.0, timeout=60)

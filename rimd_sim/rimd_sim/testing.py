@@ -22,9 +22,8 @@ import fcntl
 import itertools
 import os
 import tempfile
-import time
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -111,10 +110,7 @@ class RigHandle:
     consumers: tuple[str, ...]
     rig: Any
     _lease: DomainLease
-    _context: Any = None
-    _node: Any = None
-    _executor: Any = None
-    _clients: dict[str, Any] = field(default_factory=dict)
+    _client: Any = None
     _clock_ns: int = -1
 
     @property
@@ -128,98 +124,58 @@ class RigHandle:
         return path.read_text(errors="replace") if path.exists() else ""
 
     # -- rclpy in this process, on the rig's domain ------------------------------------------------------------
-    def _ros(self) -> Any:
-        if self._node is None:
-            import rclpy
-            from rclpy.executors import SingleThreadedExecutor
+    def client(self) -> Any:
+        """The rig's services and a node on its domain (:class:`rimd_sim.rigclient.RigClient`, made once)."""
+        if self._client is None:
             from rclpy.qos import QoSProfile, ReliabilityPolicy
-            from rclpy.signals import SignalHandlerOptions
             from rosgraph_msgs.msg import Clock
 
-            self._context = rclpy.Context()
-            rclpy.init(context=self._context, domain_id=self.domain_id,
-                       signal_handler_options=SignalHandlerOptions.NO)
-            self._node = rclpy.create_node("rimd_test_rig", context=self._context)
-            self._executor = SingleThreadedExecutor(context=self._context)
-            self._executor.add_node(self._node)
+            from rimd_sim.rigclient import RigClient
+
+            self._client = RigClient(domain_id=self.domain_id, timeout=30.0, name="rimd_test_rig")
 
             def on_clock(msg: Clock) -> None:
                 self._clock_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
 
-            self._node.create_subscription(Clock, "/clock", on_clock,
-                                           QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        return self._node
+            self._client.node.create_subscription(Clock, "/clock", on_clock,
+                                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        return self._client
+
+    def _ros(self) -> Any:
+        """A node of this process on the rig's domain (for subscriptions of the test's own)."""
+        return self.client().node
 
     def _spin_until(self, condition: Any, timeout: float) -> bool:
-        self._ros()
-        deadline = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > deadline:
-                return False
-            self._executor.spin_once(timeout_sec=0.05)
-        return True
-
-    def call(self, service: str, srv_type: Any, request: Any, timeout: float = 30.0) -> Any:
-        """Call one of the rig's services; the response (AssertionError with the service named if none)."""
-        node = self._ros()
-        client = self._clients.get(service) or self._clients.setdefault(service, node.create_client(srv_type,
-                                                                                                      service))
-        assert self._spin_until(client.service_is_ready, timeout), f"{service} is not available"
-        future = client.call_async(request)
-        assert self._spin_until(future.done, timeout), f"{service} did not answer in {timeout:g} s"
-        return future.result()
-
-    @staticmethod
-    def _stamp(at: float | None) -> Any:
-        from builtin_interfaces.msg import Time
-
-        ns = 0 if at is None else round(at * 1e9)
-        return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        return self.client().spin_until(condition, timeout)
 
     def motor(self, frequency_hz: float, ramp_rate: float = 0.0, at: float | None = None) -> Any:
         """Set the motor frequency (at simulation time ``at`` s, else the next block); the response."""
-        from rimd_msgs.srv import SetMotorFrequency
-
-        return self.call("/rig/set_motor_frequency", SetMotorFrequency, SetMotorFrequency.Request(
-            frequency_hz=float(frequency_hz), ramp_rate=float(ramp_rate), start_stamp=self._stamp(at)))
+        return self.client().motor(frequency_hz, ramp_rate, at)
 
     def perturb(self, velocity: float, at: float | None = None) -> Any:
         """Add ``velocity`` (m/s) to the hammer (at simulation time ``at`` s); the response."""
-        from rimd_msgs.srv import Perturb
-
-        return self.call("/rig/perturb", Perturb, Perturb.Request(velocity=float(velocity),
-                                                                   start_stamp=self._stamp(at)))
+        return self.client().perturb(velocity, at)
 
     def inject(self, channel: str, kind: str, *, start: float = 0.0, after: float = 0.0, duration: float = 0.0,
                magnitude: float = 0.0) -> Any:
         """Inject a fault (docs/faults.md); the response."""
-        from rimd_msgs.srv import InjectFault
-
-        return self.call("/rig/inject_fault", InjectFault, InjectFault.Request(
-            channel=channel, kind=kind, start=float(start), after=float(after), duration=float(duration),
-            magnitude=float(magnitude)))
-
-    def trigger(self, name: str) -> Any:
-        """Call ``/rig/<name>`` (pause, resume, reset, clear_faults); the response."""
-        from std_srvs.srv import Trigger
-
-        return self.call(f"/rig/{name}", Trigger, Trigger.Request())
+        return self.client().inject(channel, kind, start=start, after=after, duration=duration, magnitude=magnitude)
 
     def pause(self) -> Any:
         """``/rig/pause``."""
-        return self.trigger("pause")
+        return self.client().trigger("pause")
 
     def resume(self) -> Any:
         """``/rig/resume``."""
-        return self.trigger("resume")
+        return self.client().trigger("resume")
 
     def reset(self) -> Any:
         """``/rig/reset``."""
-        return self.trigger("reset")
+        return self.client().trigger("reset")
 
     def clear_faults(self) -> Any:
         """``/rig/clear_faults``."""
-        return self.trigger("clear_faults")
+        return self.client().trigger("clear_faults")
 
     def session(self, timeout: float = 30.0) -> Any:
         """The rig's current run (``rimd_msgs/msg/RigSession`` from /rig/session: run id, seed, configuration hash)."""
@@ -239,8 +195,7 @@ class RigHandle:
 
     def simulated(self) -> float:
         """The rig's simulation time as last heard on its /clock (s; -1e-9 before any)."""
-        self._ros()
-        self._executor.spin_once(timeout_sec=0.0)
+        self.client().executor.spin_once(timeout_sec=0.0)
         return self._clock_ns / 1e9
 
     def wait_until_simulated(self, seconds: float, timeout: float = 120.0) -> None:
@@ -259,11 +214,9 @@ class RigHandle:
     def stop(self) -> int:
         """Stop the rig (the recorder finishes its file) and give the domain back; the rig's exit status."""
         status = self.rig.stop()
-        if self._context is not None:
-            self._executor.shutdown()
-            self._node.destroy_node()
-            self._context.try_shutdown()
-            self._context = self._node = None
+        if self._client is not None:
+            self._client.close()
+            self._client = None
         self._lease.release()
         return status
 
