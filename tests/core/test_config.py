@@ -159,3 +159,27 @@ def test_an_integer_is_accepted_where_a_real_number_is_meant():
     cfg = SimConfig().with_parameters({"real_time_factor": 2, "gap": 0, "contact.stiffness": 6000000})
     assert cfg.real_time_factor == 2.0 and isinstance(cfg.real_time_factor, float)
     assert cfg.rig.contact.stiffness == 6e6 and isinstance(cfg.rig.contact.stiffness, float)
+
+
+def test_yaml_errors_name_the_file_line_and_column(tmp_path):
+    """Every YAML the product reads reports where it is broken, as a compiler would (issue 22)."""
+    path = tmp_path / "rig.yaml"
+    path.write_text("/**/rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n    mass: [0.1\n")
+    with pytest.raises(ConfigError, match=rf"config file is not valid YAML: {path}:5:1: "):
+        load_config(path)
+
+
+def test_a_relative_config_is_found_from_anywhere(tmp_path, monkeypatch):
+    """`rimd rig --config config/paper_model.yaml` typed outside the repository finds the shipped preset; a file
+    found nowhere is refused saying where it was looked for (issue 22)."""
+    from rimd_sim.core.files import resolve_config
+
+    monkeypatch.chdir(tmp_path)
+    assert resolve_config("config/paper_model.yaml") == find_config_file("paper_model.yaml")
+    (tmp_path / "mine.yaml").write_text("x: 1\n")
+    assert resolve_config("mine.yaml") == tmp_path / "mine.yaml"          # the working directory first
+    with pytest.raises(ConfigError) as refused:
+        resolve_config("config/nope.yaml")
+    message = str(refused.value)
+    assert message.startswith("--config config/nope.yaml: not found; looked in ")
+    assert str(tmp_path / "config" / "nope.yaml") in message and str(find_config_file().parent / "nope.yaml") in message

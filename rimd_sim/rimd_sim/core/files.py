@@ -41,7 +41,7 @@ def read_yaml(path: str | Path, *, what: str = "file") -> Any:
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         context = getattr(exc, "context", None)
-        raise InputError(f"{what} {path} is not valid YAML: {where}: {problem}"
+        raise InputError(f"{what} is not valid YAML: {where}: {problem}"
                          + (f" ({context})" if context else "")) from None
 
 
