@@ -215,7 +215,7 @@ class ChannelConfig:
     reliable: bool = param(True, "reliable QoS (else best effort); read at start")
     frame_id: str = param("", "sensor id in header.frame_id",
                           rule="a non-empty string without NUL characters (a ROS 2 string is a C string)",
-                          check=lambda v: bool(v) and "\0" not in v)
+                          check=lambda v: bool(v) and "\0" not in v, breaks=("", "force\0sensor"))
 
     def __post_init__(self) -> None:
         """Rules between the fields."""

@@ -30,7 +30,8 @@ from typing import Any
 
 from .errors import ConfigError
 
-__all__ = ["Param", "build", "defaults", "group", "keyed", "param", "parameters", "to_flat", "validate_all"]
+__all__ = ["BAD_REGEX_LISTS", "Param", "build", "defaults", "group", "keyed", "param", "parameters",
+           "regex_list_problem", "to_flat", "validate_all"]
 
 _PARAM, _GROUP, _KEYED = "rimd.param", "rimd.group", "rimd.keyed"
 
@@ -57,6 +58,8 @@ class Param:
         check: Test of the converted value: True (or None) passes; False breaks :attr:`extra_rule`; a string
             breaks it and says how.
         read_only: Read at start only: refused at run time.
+        breaks: Values that break :attr:`extra_rule` (for the generated bad-input tests; the bounds and choices
+            give theirs by themselves).
         attr: Attribute path from the root settings object.
     """
 
@@ -73,6 +76,7 @@ class Param:
     extra_rule: str = ""
     check: Callable[[Any], bool | str | None] | None = None
     read_only: bool = False
+    breaks: tuple[Any, ...] = ()
     attr: tuple[str, ...] = ()
 
     @property
@@ -177,10 +181,27 @@ def _unit_ok(unit: str) -> bool:
 # ---- declaring -----------------------------------------------------------------------------------------------
 
 
+def regex_list_problem(patterns: tuple[str, ...]) -> bool | str:
+    """A ``check`` for a list of regular expressions: True, or which one is not and why."""
+    import re
+
+    for pattern in patterns:
+        if pattern:
+            try:
+                re.compile(pattern)
+            except re.error as exc:
+                return f"'{pattern}' is not a regular expression: {exc}"
+    return True
+
+
+#: Values that break :func:`regex_list_problem` (for the generated bad-input tests).
+BAD_REGEX_LISTS = (("(",), ("[z-a]",), ("*",), ("ok", "?+"))
+
+
 def param(default: Any, description: str, *, unit: str = "", ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, zero: bool | str = False, choices: tuple[str, ...] = (),
           rule: str = "", check: Callable[[Any], bool | str | None] | None = None, read_only: bool = False,
-          name: str | None = None) -> Any:
+          breaks: tuple[Any, ...] = (), name: str | None = None) -> Any:
     """A dataclass field that is a parameter (see :class:`Param` for the arguments).
 
     ``name``: the parameter's name within its group when it is not the field's name (``truth.sample_rate``).
@@ -190,7 +211,7 @@ def param(default: Any, description: str, *, unit: str = "", ge: float | None = 
     if isinstance(default, list):
         default = tuple(default)
     decl = Param(name or "", default, description, unit, ge, gt, le, lt, zero, tuple(choices), rule, check,
-                 read_only)
+                 read_only, tuple(breaks))
     return dataclasses.field(default=default, metadata={_PARAM: decl})
 
 

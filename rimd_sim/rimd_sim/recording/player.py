@@ -25,11 +25,16 @@ from dataclasses import dataclass
 
 from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.pacing import Go, Hold, LockstepSettings, Pacer, Wait
-from rimd_sim.core.params import group, param, parameters
+from rimd_sim.core.params import BAD_REGEX_LISTS, group, param, parameters, regex_list_problem
 from rimd_sim.recording.cdr import HEADER_FIRST_TYPES, header_stamp, with_header_stamp
 from rimd_sim.recording.reader import RecordedMessage, Recording
 
 __all__ = ["Finished", "Outgoing", "Paused", "Player", "ReplaySettings"]
+
+
+def _remap_entry(entry: str) -> bool:
+    source, sep, target = entry.partition(":=")
+    return bool(sep) and source.startswith("/") and target.startswith("/")
 
 
 @dataclass(frozen=True)
@@ -45,8 +50,13 @@ class ReplaySettings:
     playback_duration: float = param(0.0, "how much of the recording is played from the start offset (0 = to "
                                           "the end), as rosbag2's --playback-duration", unit="s", ge=0, le=1e9,
                                      read_only=True)
-    topics: tuple[str, ...] = param((".*",), "topics to replay: regular expressions (full match)", read_only=True)
-    remap: tuple[str, ...] = param((), "topic renames, entries '/from:=/to'", read_only=True)
+    topics: tuple[str, ...] = param((".*",), "topics to replay: regular expressions (full match)",
+                                    rule="a list of regular expressions", check=regex_list_problem,
+                                    breaks=BAD_REGEX_LISTS, read_only=True)
+    remap: tuple[str, ...] = param((), "topic renames, entries '/from:=/to'",
+                                   rule="a list of '/from:=/to' entries with absolute topic names",
+                                   check=lambda entries: all(_remap_entry(e) for e in entries),
+                                   breaks=(("x:=/y",), ("/a=/b",)), read_only=True)
     clock: bool = param(False, "publish /clock from the recorded log time (a recorded /clock is then not replayed; "
                                "always on in lockstep)", read_only=True)
     clock_frequency: float = param(100.0, "/clock publications per second of recorded time", unit="Hz", gt=0,
@@ -59,7 +69,8 @@ class ReplaySettings:
                                          "waits for)", ge=0, le=1000, read_only=True)
     wait_topics: tuple[str, ...] = param((), "topics wait_for_subscribers waits on: regular expressions (full "
                                              "match) of replayed topics (empty: the topics that have a subscriber)",
-                                         read_only=True)
+                                         rule="a list of regular expressions", check=regex_list_problem,
+                                         breaks=BAD_REGEX_LISTS, read_only=True)
     skip_unknown: bool = param(False, "replay the other topics when some message types are not installed",
                                read_only=True)
     restamp: bool = param(False, "shift every header stamp so that the first message carries the wall time it is "

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.params import Param, build, param, parameters
+from rimd_sim.core.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 from rimd_sim.recording.bag import COMPRESSIONS
 
 __all__ = ["PARAMETERS", "RecorderConfigError", "RecorderSettings", "check_parameter", "check_recorder_parameters",
@@ -25,17 +25,6 @@ RecorderConfigError = ConfigError
 
 #: A ROS node name, relative or absolute (what ``rig_node`` must be when not empty).
 _NODE_NAME = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
-
-
-def _patterns_problem(patterns: tuple[str, ...]) -> bool | str:
-    """True when every non-empty entry is a regular expression; else which one is not, and why."""
-    for pattern in patterns:
-        if pattern:
-            try:
-                re.compile(pattern)
-            except re.error as exc:
-                return f"'{pattern}' is not a regular expression: {exc}"
-    return True
 
 
 def compile_patterns(key: str, patterns: tuple[str, ...] | list[str]) -> list[re.Pattern[str]]:
@@ -54,17 +43,21 @@ class RecorderSettings:
                           read_only=True)
     output_dir: str = param("recordings", "directory of the recording (created if needed); files are "
                                           "<prefix>_<UTC timestamp>_<n>.mcap, plus a rosbag2 metadata.yaml",
-                            rule="a non-empty path", check=lambda v: bool(v.strip()), read_only=True)
+                            rule="a non-empty path", check=lambda v: bool(v.strip()), breaks=("", "   "),
+                            read_only=True)
     # A prefix is part of a file name in output_dir: '../x' wrote outside it.
     prefix: str = param("rimd", "file name prefix", rule="a file name prefix: no '/', '\\' or NUL",
-                        check=lambda v: not any(c in v for c in "/\\\0"), read_only=True)
+                        check=lambda v: not any(c in v for c in "/\\\0"), breaks=("../escaped", "a/b", "nul\0"),
+                        read_only=True)
     topics: tuple[str, ...] = param(("/rig/.*", "/diagnostics", "/clock"),
                                     "topics to record: regular expressions (full match)",
-                                    rule="a list of regular expressions", check=_patterns_problem, read_only=True)
+                                    rule="a list of regular expressions", check=regex_list_problem,
+                                    breaks=BAD_REGEX_LISTS, read_only=True)
     exclude: tuple[str, ...] = param(("/rig/progress",), "topics never recorded: regular expressions (full "
                                                          "match); empty entries are ignored (default: the lockstep "
                                                          "consumers' progress reports)",
-                                     rule="a list of regular expressions", check=_patterns_problem, read_only=True)
+                                     rule="a list of regular expressions", check=regex_list_problem,
+                                    breaks=BAD_REGEX_LISTS, read_only=True)
     max_duration: float = param(0.0, "start a new file when the current one spans this long (0 = no split)",
                                 unit="s", ge=0, le=1e9, read_only=True)
     max_size: int = param(0, "start a new file when the current one reaches this size (0 = no split)",
@@ -83,7 +76,8 @@ class RecorderSettings:
     # An invalid name stopped the recorder at start with a traceback (its parameter client's service names).
     rig_node: str = param("/rig/rimd_simulator", "node whose parameters are stored in the recording's metadata",
                           rule="empty or a ROS node name such as /rig/rimd_simulator",
-                          check=lambda v: v == "" or _NODE_NAME.fullmatch(v) is not None, read_only=True)
+                          check=lambda v: v == "" or _NODE_NAME.fullmatch(v) is not None,
+                          breaks=("bad name", "/rig/", "1abc", "a//b"), read_only=True)
 
 
 #: The recorder's parameters by name.
