@@ -129,9 +129,9 @@ class ReplayNode(Node):
         for report in self._recording.reports:
             (log.info if report.complete else log.warning)(report.describe())
         self._lockstep = p.lockstep.enabled
-        self._clock = p.clock or self._lockstep
+        self._with_clock = p.clock or self._lockstep
         # The replay names its own runs on /rig/session: a recorded session is not replayed.
-        skip = {SESSION_TOPIC} | ({"/clock"} if self._clock else set())
+        skip = {SESSION_TOPIC} | ({"/clock"} if self._with_clock else set())
         selected = {name: topic for name, topic in self._recording.topics.items()
                     if any(x.fullmatch(name) for x in patterns) and name not in skip}
         unknown = {}
@@ -159,7 +159,7 @@ class ReplayNode(Node):
                                  published_name=lambda t: self._pubs[t].topic_name)
         except ConfigError as exc:
             raise ReplayError(str(exc)) from None
-        self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self._clock else None
+        self._clock_pub = self.create_publisher(Clock, "/clock", 1000) if self._with_clock else None
         self._session_pub = self.create_publisher(RigSession, remap.get(SESSION_TOPIC, SESSION_TOPIC), SESSION_QOS)
         if self._lockstep:
             self.create_subscription(ConsumerProgress, remap.get(PROGRESS_TOPIC, PROGRESS_TOPIC), self._on_progress,
