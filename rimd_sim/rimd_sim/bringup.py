@@ -266,10 +266,11 @@ class Rig:
         consumers = tuple(n.name for n in self.plan.nodes if n.consumer)
         if self.plan.lockstep_consumers or not consumers:
             return True
-        if _resume_when_connected(consumers, self.processes, timeout):
+        domain = int(self.env["ROS_DOMAIN_ID"]) if self.env and self.env.get("ROS_DOMAIN_ID") else None
+        if _resume_when_connected(consumers, self.processes, timeout, domain):
             return True
         if self.failed() is None:
-            _resume_when_connected((), self.processes, 10.0)
+            _resume_when_connected((), self.processes, 10.0, domain)
         return False
 
     def failed(self) -> tuple[str, int] | None:
@@ -315,14 +316,18 @@ def _subscribed(node: Any, topic: str, consumers: tuple[str, ...]) -> bool:
 
 
 def _resume_when_connected(consumers: tuple[str, ...], procs: Mapping[str, subprocess.Popen],
-                           timeout: float = 20.0) -> bool:
-    """Wait until each consumer node subscribes to every rig topic, then call /rig/resume. True when resumed."""
+                           timeout: float = 20.0, domain_id: int | None = None) -> bool:
+    """Wait until each consumer node subscribes to every rig topic, then call /rig/resume. True when resumed.
+
+    ``domain_id``: the rig's ROS domain (default: this process's ``ROS_DOMAIN_ID``).
+    """
     import rclpy
     from rclpy.signals import SignalHandlerOptions
     from std_srvs.srv import Trigger
 
     context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO,
+               **({} if domain_id is None else {"domain_id": domain_id}))
     try:
         node = rclpy.create_node("rimd_rig", context=context, start_parameter_services=False)
         deadline = time.monotonic() + timeout
