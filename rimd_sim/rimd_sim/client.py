@@ -38,6 +38,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -101,6 +102,7 @@ class ProgressReporter:
         self._overall: int | None = None
         self._dirty = False
         self._joined = False
+        self._left = False
         self._last_sent = 0.0
         self._run_id = ""
         self.reports = 0
@@ -156,6 +158,28 @@ class ProgressReporter:
             self.reports += 1
         self._pub.publish(msg)
 
+    def leave(self, timeout: float = 1.0) -> bool:
+        """Say that the consumer stops cleanly: its progress so far, then its last report, ``leaving``.
+
+        A lockstep publisher then stops waiting for it (a consumer that just vanishes holds the run until
+        ``lockstep.timeout``). Call it once the consumer has finished with everything it will take. Waits (at
+        most ``timeout`` s) until the publishers acknowledged the report; returns whether they did.
+        """
+        with self._lock:
+            if not self._joined and self._pub.get_subscription_count() == 0:
+                return True   # nobody waits for it
+            joined = self._joined
+        if joined:
+            self.flush()
+        with self._lock:
+            self._joined, self._left = False, True   # no report after the leave (it would join again)
+            msg = ConsumerProgress(consumer=self.name, instance=self.instance, leaving=True)
+        self._pub.publish(msg)
+        try:
+            return bool(self._pub.wait_for_all_acked(Duration(nanoseconds=round(timeout * 1e9))))
+        except Exception:  # noqa: BLE001 - the context is going down: best effort
+            return False
+
     def _can_join(self) -> bool:
         if self._pub.get_subscription_count() == 0:
             return False   # no lockstep publisher listens (yet)
@@ -164,6 +188,8 @@ class ProgressReporter:
         return self._ready is None or bool(self._ready())
 
     def _tick(self) -> None:
+        if self._left:
+            return
         if not self._joined:
             if self._can_join():
                 with self._lock:

@@ -22,6 +22,21 @@ __all__ = ["RigClient", "TRIGGERS"]
 TRIGGERS = ("pause", "resume", "reset", "clear_faults")
 
 
+def _srv(name: str) -> Any:
+    def load() -> Any:
+        import std_srvs.srv
+
+        import rimd_msgs.srv
+
+        return getattr(rimd_msgs.srv, name, None) or getattr(std_srvs.srv, name)
+    return load
+
+
+#: The rig's services by name, their types loaded on use (rclpy's message modules are imported lazily).
+_SERVICE_TYPES = {"set_motor_frequency": _srv("SetMotorFrequency"), "perturb": _srv("Perturb"),
+                  "inject_fault": _srv("InjectFault"), **{name: _srv("Trigger") for name in TRIGGERS}}
+
+
 def stamp(seconds: float | None) -> Any:
     """A ``builtin_interfaces/Time`` of ``seconds`` (zero for None: the next block boundary)."""
     from builtin_interfaces.msg import Time
@@ -81,12 +96,7 @@ class RigClient:
             self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
         return True
 
-    def call(self, service: str, srv_type: Any, request: Any) -> Any:
-        """Call ``service`` (relative names are in the rig's namespace) and return the response.
-
-        Raises:
-            CommandError: No such service within the timeout (no rig), or no answer within it.
-        """
+    def _client(self, service: str, srv_type: Any) -> tuple[str, Any]:
         name = service if service.startswith("/") else f"{self.namespace}/{service}"
         client = self._clients.get(name)
         if client is None:
@@ -94,6 +104,25 @@ class RigClient:
         if not self.spin_until(client.service_is_ready, self.timeout):
             raise CommandError(f"no rig: service {name} not available after {self.timeout:g} s on ROS_DOMAIN_ID "
                                f"{self.domain_id} (start it with `rimd rig`, on the same ROS_DOMAIN_ID)")
+        return name, client
+
+    def wait_for_service(self, service: str, srv_type: Any = None) -> None:
+        """Wait (bounded) until ``service`` is served (default type: the rig's service of that name).
+
+        Raises:
+            CommandError: No such service within the timeout (no rig), naming it and the domain.
+        """
+        if srv_type is None:
+            srv_type = _SERVICE_TYPES[service.rsplit("/", 1)[-1]]()
+        self._client(service, srv_type)
+
+    def call(self, service: str, srv_type: Any, request: Any) -> Any:
+        """Call ``service`` (relative names are in the rig's namespace) and return the response.
+
+        Raises:
+            CommandError: No such service within the timeout (no rig), or no answer within it.
+        """
+        name, client = self._client(service, srv_type)
         future = client.call_async(request)
         if not self.spin_until(future.done, self.timeout):
             client.remove_pending_request(future)

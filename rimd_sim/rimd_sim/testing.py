@@ -114,6 +114,15 @@ class RigHandle:
     _clock_ns: int = -1
 
     @property
+    def config(self) -> Any:
+        """The simulator's configuration as started (a :class:`rimd_sim.core.SimConfig`).
+
+        The core reproduces the run offline from it: ``RigSimulator(rig.config)`` with the same commands at the
+        same stamps.
+        """
+        return self.rig.plan.config
+
+    @property
     def node_names(self) -> list[str]:
         """The rig's node names."""
         return self.rig.plan.names

@@ -160,6 +160,32 @@ def test_a_restarted_consumer_joins_where_the_run_stands():
     assert isinstance(pacer.next(blocks(50)), Go)
 
 
+def test_a_consumer_that_leaves_cleanly_is_no_longer_waited_for_until_it_reports_again():
+    clock = FakeClock()
+    pacer = Pacer(0.0, lockstep("daq", "recorder", timeout=1e9), clock=clock)
+    pacer.lockstep.progress("daq", 0, instance="a")
+    pacer.lockstep.progress("recorder", 0)
+    for end in blocks(0, 5):
+        pacer.published(end)
+    pacer.lockstep.progress("recorder", 50 * MS)
+    assert isinstance(pacer.next(blocks(50)), Hold)                   # daq stands at 0
+    stale = pacer.lockstep.progress("daq", 0, instance="old", leaving=True)
+    assert not stale.accepted and stale.reason == "stale"             # an earlier process's leave: no effect
+    assert isinstance(pacer.next(blocks(50)), Hold)
+    left = pacer.lockstep.progress("daq", 0, instance="a", leaving=True)
+    assert left.accepted and "left at 0.000000000 s" in left.log and pacer.lockstep.consumers["daq"].left
+    assert isinstance(pacer.next(blocks(50)), Go)                     # no timeout needed: the recorder decides
+    clock.advance(1e10)
+    assert not pacer.lockstep.take_events()                           # and no timeout fires for it
+    back = pacer.lockstep.progress("daq", 0, instance="b")            # it starts again: waited for again
+    assert back.joined and "returned after leaving" in back.log and not pacer.lockstep.consumers["daq"].left
+    # A consumer that leaves before it ever joined does not hold the first block either.
+    pacer = Pacer(0.0, lockstep("daq"), clock=FakeClock())
+    assert isinstance(pacer.next(blocks(0)), Hold)
+    assert "before joining" in pacer.lockstep.progress("daq", 0, leaving=True).log
+    assert isinstance(pacer.next(blocks(0)), Go)
+
+
 def test_a_consumer_that_has_not_joined_yet_is_waited_for_however_long():
     """A consumer still starting (imports, discovery) is never timed out or dropped: the first block waits."""
     clock = FakeClock()

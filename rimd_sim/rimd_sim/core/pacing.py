@@ -26,6 +26,8 @@ Consumer protocol (``rimd_msgs/msg/ConsumerProgress`` on ``/rig/progress``; :met
   done with it. A consumer restarted after a crash therefore resumes where the run stands.
 * Within one instance, progress never goes back: a report below the last one is ignored (and said). A report
   beyond what the publisher has published is ignored too (it is from the future: another run, a clock bug).
+* A consumer that stops cleanly says so (``leaving``): the publisher stops waiting for it until it reports
+  again (it joins again then). A stale instance's leave does not count against a newer instance.
 * A registered consumer that has not joined holds the run from its first block, however long it takes to start.
   When the run has been held by a consumer that had joined for ``timeout`` seconds without progress from it,
   ``on_timeout`` applies: ``wait`` keeps holding (the debugger case; it is reported as timed out), ``drop``
@@ -203,7 +205,8 @@ class ConsumerStatus:
             it joins.
         instance: The ``instance`` of its last report ('' when it gives none).
         last_heard: Wall time of its last accepted report (None: never).
-        dropped: Dropped by the ``drop`` policy (not waited for until it reports again).
+        dropped: Not waited for until it reports again: dropped by the ``drop`` policy, or it left.
+        left: It left cleanly (its last report said ``leaving``).
         timed_out: Held the run ``timeout`` s without progress under the ``wait`` policy.
         held_since: Wall time since which it holds the run (None: it does not).
         joins: How many times it joined (a restart joins again).
@@ -214,6 +217,7 @@ class ConsumerStatus:
     instance: str = ""
     last_heard: float | None = None
     dropped: bool = False
+    left: bool = False
     timed_out: bool = False
     held_since: float | None = None
     joins: int = 0
@@ -286,7 +290,7 @@ class Lockstep:
         return self.published_ns if topic == ALL_TOPICS else self.published_on.get(topic, 0)
 
     def progress(self, consumer: str, done_ns: int, instance: str = "",
-                 topics: dict[str, int] | None = None) -> ProgressVerdict:
+                 topics: dict[str, int] | None = None, leaving: bool = False) -> ProgressVerdict:
         """Take one progress report; the verdict says whether it counted and what to log.
 
         Args:
@@ -294,11 +298,22 @@ class Lockstep:
             done_ns: Data time it has finished with, everything it takes.
             instance: Identifies the consumer's process: a new value is a restart.
             topics: Per topic, the data time it has finished with there (replaces ``done_ns``).
+            leaving: Its last report: it stops cleanly (see the module docstring).
         """
         c = self.consumers.get(consumer)
         if c is None:
             return ProgressVerdict(False, f"progress from '{consumer}' ignored: not a registered consumer "
                                           f"(lockstep.consumers: {', '.join(self.settings.consumers)})", "unknown")
+        if leaving:
+            if c.joins and instance != c.instance:
+                return ProgressVerdict(False, f"leave of '{consumer}' ignored: from an earlier instance (the "
+                                              "consumer restarted since)", "stale")
+            if c.left:
+                return ProgressVerdict(True)
+            c.dropped, c.left, c.timed_out, c.held_since = True, True, False, None
+            where = f" at {c.done_ns / 1e9:.9f} s" if c.joined else " before joining"
+            return ProgressVerdict(True, f"consumer '{consumer}' left{where} (it stopped cleanly): the run goes on "
+                                         "without it until it reports again", "left")
         report = {ALL_TOPICS: int(done_ns)} if not topics else {t: int(v) for t, v in topics.items()}
         note = ""
         if self.topics is not None and topics:
@@ -321,11 +336,11 @@ class Lockstep:
                                    "future")
         now = self.clock()
         if not c.joined or c.dropped or instance != c.instance:
-            was = ("returned after being dropped" if c.dropped else
+            was = ("returned after leaving" if c.left else "returned after being dropped" if c.dropped else
                    "restarted (new instance)" if c.joined else "joined")
             # Data published before it joined can never reach it (volatile topics): counted as done.
             c.done = {t: max(v, self._published(t)) for t, v in report.items()}
-            c.instance, c.last_heard, c.dropped, c.timed_out = instance, now, False, False
+            c.instance, c.last_heard, c.dropped, c.left, c.timed_out = instance, now, False, False, False
             c.joins += 1
             return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_ns / 1e9:.9f} s"
                                    + (f"; {note}" if note else ""), joined=True)

@@ -311,6 +311,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         with open(args.json, "w") as f:
             f.write(text)
+    if reporter is not None:
+        reporter.leave()   # a rig in lockstep stops waiting for this client
     node.destroy_node()
     rclpy.try_shutdown()
     return 0 if report["reached_s"] >= args.until else 1

@@ -61,7 +61,13 @@ from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
 from rimd_sim.recording.bag import BagWriter
 from rimd_sim.recording.cdr import HEADER_FIRST_TYPES, header_stamp
 from rimd_sim.recording.session import RecordingSession
-from rimd_sim.recording.settings import PARAMETERS, RecorderConfigError, RecorderSettings, compile_patterns
+from rimd_sim.recording.settings import (
+    PARAMETERS,
+    PROGRESS_STAMP_KEY,
+    RecorderConfigError,
+    RecorderSettings,
+    compile_patterns,
+)
 
 __all__ = ["PROGRESS_STAMP_KEY", "RecorderNode", "main"]
 
@@ -69,10 +75,6 @@ __all__ = ["PROGRESS_STAMP_KEY", "RecorderNode", "main"]
 #: topic is written (/diagnostics, lockstep progress).
 STAMPED_TYPES = HEADER_FIRST_TYPES
 
-#: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
-#: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.
-#: `rimd experiment` waits on it before stopping its recorder (a declared interface, not a convention).
-PROGRESS_STAMP_KEY = " last_stamp_ns"
 
 NODE_NAME = "rimd_recorder"
 #: Period of the takes from the subscriptions (s): the messages of one period are taken at once.
@@ -392,6 +394,8 @@ class RecorderNode(PollingNode):
                         break
         self._recording = False
         self._session.close()
+        if self.context.ok():
+            self._progress.leave()   # everything is written: a rig in lockstep stops waiting for the recorder
         print("\n".join(self._session.summary()), flush=True)
 
 

@@ -305,7 +305,7 @@ class ReplayNode(Node):
             topics = {t: d.sec * 1_000_000_000 + d.nanosec for t, d in zip(msg.topics, msg.topics_done_through,
                                                                              strict=True)}
         done = msg.done_through.sec * 1_000_000_000 + msg.done_through.nanosec
-        verdict = self.player.progress(msg.consumer, done, msg.instance, topics)
+        verdict = self.player.progress(msg.consumer, done, msg.instance, topics, leaving=msg.leaving)
         if verdict.log and verdict.accepted and verdict.reason != "topics":
             self.get_logger().info(f"lockstep: {verdict.log}")
         elif verdict.log and (msg.consumer, verdict.reason) not in self._warned:

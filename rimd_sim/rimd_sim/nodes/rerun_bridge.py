@@ -211,7 +211,12 @@ class RerunBridgeNode(PollingNode):
             f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}")
 
     def close(self) -> str:
-        """Close the Rerun stream and the Foxglove server (idempotent); "" or why the last data was not delivered."""
+        """Close the Rerun stream and the Foxglove server (idempotent); "" or why the last data was not delivered.
+
+        Leaves the lockstep first (a rig in lockstep stops waiting for the bridge).
+        """
+        if self.context.ok():
+            self._progress.leave()
         if self.foxglove is not None:
             self.foxglove.close()
         if self.stream is None:

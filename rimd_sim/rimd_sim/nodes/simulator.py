@@ -402,7 +402,8 @@ class SimulatorNode(Node):
                 return
             topics = {t: from_time(d) for t, d in zip(msg.topics, msg.topics_done_through, strict=True)}
         with self._pace_lock:
-            verdict = self._pacer.lockstep.progress(msg.consumer, from_time(msg.done_through), msg.instance, topics)
+            verdict = self._pacer.lockstep.progress(msg.consumer, from_time(msg.done_through), msg.instance, topics,
+                                                    leaving=msg.leaving)
         if verdict.joined:
             self._match_pending = True   # its subscriptions may be newer than its report: let DDS match them
         if verdict.log and verdict.accepted and verdict.reason != "topics":
@@ -604,8 +605,9 @@ class SimulatorNode(Node):
             with self._pace_lock:
                 for c in self._pacer.lockstep.consumers.values():
                     values[f"lockstep {c.name} done_through_s"] = "" if c.done_ns is None else f"{c.done_ns / 1e9:.6f}"
-                    values[f"lockstep {c.name} state"] = ("dropped" if c.dropped else "timed out" if c.timed_out
-                                                          else "not joined" if c.done_ns is None else "joined")
+                    values[f"lockstep {c.name} state"] = (
+                        "left" if c.left else "dropped" if c.dropped else "timed out" if c.timed_out
+                        else "not joined" if c.done_ns is None else "joined")
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -247,10 +247,11 @@ class Player:
             lockstep = self._pacer.lockstep
             return lockstep.take_events() if lockstep is not None else []
 
-    def progress(self, consumer: str, done_ns: int, instance: str = "", topics: dict[str, int] | None = None):  # noqa: ANN201
+    def progress(self, consumer: str, done_ns: int, instance: str = "", topics: dict[str, int] | None = None,  # noqa: ANN201
+                 leaving: bool = False):
         """A lockstep consumer's report (see :meth:`rimd_sim.core.pacing.Lockstep.progress`)."""
         with self._lock:
-            return self._pacer.lockstep.progress(consumer, done_ns, instance, topics)
+            return self._pacer.lockstep.progress(consumer, done_ns, instance, topics, leaving)
 
     def holders_text(self) -> str:
         """Who holds the run (lockstep), for a person."""

@@ -17,8 +17,14 @@ from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 from rimd_sim.recording.bag import COMPRESSIONS
 
-__all__ = ["PARAMETERS", "RecorderConfigError", "RecorderSettings", "check_parameter", "check_recorder_parameters",
+__all__ = ["PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings", "check_parameter",
+           "check_recorder_parameters",
            "compile_patterns"]
+
+#: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
+#: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.
+#: ``rimd experiment`` waits on it before stopping its recorder (a declared interface, not a convention).
+PROGRESS_STAMP_KEY = " last_stamp_ns"
 
 #: A recorder parameter refused (the same exception as every configuration refusal).
 RecorderConfigError = ConfigError
