@@ -1,10 +1,12 @@
 """A DAQ-style client in its own process: subscribes to the rig's channels over DDS and saves what it got.
 
-    python daq_client.py OUT.pkl --until 6.5 [--mode store|impacts] [--topics T ...] [--timeout S] [--resume]
+    python daq_client.py OUT.pkl --until 6.5 [--margin 0.3] [--mode store|impacts] [--topics T ...] [--timeout S]
+                         [--resume]
                          [--lockstep NAME [--work-ms MS] [--jitter-ms MS] [--seed N]]
 
 It prints ``daq ready`` once every topic has a publisher (then the test resumes the paused rig) and exits 0
-after every channel has delivered samples up to ``--until`` s of simulation time, having written ``OUT.pkl``:
+after every channel has delivered samples up to ``--until`` s of simulation time (and ``--margin`` s more, for
+what was still in flight), having written ``OUT.pkl``:
 
 * ``store``: per topic, the serialized messages in arrival order with the simulation time the client had
   seen when each arrived (the largest end time of any channel block received so far; at
@@ -43,6 +45,8 @@ def main() -> int:
     parser.add_argument("--topics", nargs="*", default=list(CHANNELS))
     parser.add_argument("--extra", nargs="*", default=["/rig/faults"], help="other topics stored (store mode)")
     parser.add_argument("--timeout", type=float, default=120.0)
+    parser.add_argument("--margin", type=float, default=0.3,
+                        help="simulation seconds received past --until before it stops (what was in flight)")
     parser.add_argument("--resume", action="store_true", help="call /rig/resume once subscribed (a paused rig)")
     parser.add_argument("--lockstep", default="", help="report progress under this name (a lockstep consumer)")
     parser.add_argument("--work-ms", type=float, default=0.0, help="time spent on each block (lockstep)")
@@ -115,16 +119,18 @@ def main() -> int:
     for topic in args.topics:
         subs[topic] = node.create_subscription(msgs.SampleBlock, topic, lambda d, t=topic: on_block(d, t), qos,
                                                raw=True)
-    reporter = None
-    if args.lockstep:
-        from rimd_sim.client import ProgressReporter
-
-        reporter = ProgressReporter(node, args.lockstep, subscriptions=list(subs.values()))
+    extra = []
     for topic in args.extra:
         kind = {"/rig/faults": msgs.FaultEvent, "/rig/impact/events": msgs.ImpactEvent,
                 "/rig/motor/state": msgs.MotorState}.get(topic, msgs.Capture)
-        node.create_subscription(kind, topic, lambda d, t=topic: stored[t].append((d, state["now"], time.time_ns())),
-                                 latched if topic == "/rig/faults" else qos, raw=True)
+        extra.append(node.create_subscription(
+            kind, topic, lambda d, t=topic: stored[t].append((d, state["now"], time.time_ns())),
+            latched if topic == "/rig/faults" else qos, raw=True))
+    reporter = None
+    if args.lockstep:   # it joins once every subscription matched: the rig's first messages reach each of them
+        from rimd_sim.client import ProgressReporter
+
+        reporter = ProgressReporter(node, args.lockstep, subscriptions=[*subs.values(), *extra])
 
     deadline = time.monotonic() + args.timeout
     while time.monotonic() < deadline and not all(node.count_publishers(t) for t in [*args.topics, *args.extra]):
@@ -140,10 +146,9 @@ def main() -> int:
         while time.monotonic() < deadline and not future.done():
             rclpy.spin_once(node, timeout_sec=0.05)
         print(f"resume: {future.result().message if future.done() else 'no answer'}", flush=True)
-    while time.monotonic() < deadline and min(reached.values()) < args.until:
-        rclpy.spin_once(node, timeout_sec=0.05)
-    end = time.monotonic() + 0.5   # anything still in flight (delayed blocks, the last fault events)
-    while time.monotonic() < end:
+    # Past --until by --margin of simulation time on every channel: what was still in flight at --until (delayed
+    # blocks, the last fault events) has arrived by then. An observable condition, not a wall-clock wait.
+    while time.monotonic() < deadline and min(reached.values()) < args.until + args.margin:
         rclpy.spin_once(node, timeout_sec=0.05)
     if min(reached.values()) < args.until:
         print(f"daq timeout: reached {reached}", flush=True)
