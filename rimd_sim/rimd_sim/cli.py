@@ -62,7 +62,32 @@ def number(option: str, unit: str = "", *, ge: float | None = None, gt: float | 
         return value
 
     convert.__name__ = "integer" if integer else "number"   # what argparse says for a value it cannot convert
+    convert.option, convert.rule = option, rule               # for the tests that sweep every verb's options
     return convert
+
+
+def count(option: str, minimum: int = 1, maximum: int | None = None) -> Callable[[str], int]:
+    """An integer >= ``minimum`` (and <= ``maximum``), see :func:`number`."""
+    return number(option, ge=minimum, le=maximum, integer=True)
+
+
+def simulator_parameter(option: str, name: str, *, scale: float = 1.0,
+                        unit: str | None = None) -> Callable[[str], float]:
+    """An option that sets the simulator parameter ``name``, possibly in another unit (``--gap-mm``: ``gap`` in mm).
+
+    Its bounds are the parameter's own declaration (:mod:`rimd_sim.core.config`), scaled, so the refusal names
+    the option as typed, in its unit: ``--gap-mm 2400 refused: must be >= 0 and <= 50 mm``.
+    """
+    from rimd_sim.core.config import PARAMETERS
+
+    p = PARAMETERS[name]
+
+    def scaled(bound: float | None) -> float | None:
+        return None if bound is None else round(bound * scale, 12)
+
+    zero = p.zero if isinstance(p.zero, str) else ("" if not p.zero else "allowed")
+    return number(option, p.unit if unit is None else unit, ge=scaled(p.ge), gt=scaled(p.gt), le=scaled(p.le),
+                  lt=scaled(p.lt), zero=zero)
 
 
 def nonnegative_float(option: str, unit: str = "") -> Callable[[str], float]:
@@ -73,6 +98,11 @@ def nonnegative_float(option: str, unit: str = "") -> Callable[[str], float]:
 def positive_float(option: str, unit: str = "") -> Callable[[str], float]:
     """A number > 0 (see :func:`number`)."""
     return number(option, unit, gt=0)
+
+
+def gap_mm(option: str = "--gap-mm") -> Callable[[str], float]:
+    """The gap in mm, within the bounds of the simulator's ``gap`` (see :func:`simulator_parameter`)."""
+    return simulator_parameter(option, "gap", scale=1e3, unit="mm")
 
 
 #: The simulator's real_time_factor as an option: 0 (as fast as possible) or within [0.001, 1e6].

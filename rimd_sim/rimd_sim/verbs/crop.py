@@ -5,16 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rimd_sim.cli import CommandError
+from rimd_sim.cli import CommandError, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd crop``."""
     parser.add_argument("recording", type=Path,
                         help="ROS 2 MCAP recording: one .mcap file or a recording directory of rimd_recorder")
-    parser.add_argument("--start", type=float, default=0.0, metavar="S",
+    parser.add_argument("--start", type=nonnegative_float("--start", "s"), default=0.0, metavar="S",
                         help="s from the recording's first message where the window starts (default 0)")
-    parser.add_argument("--end", type=float, default=None, metavar="E",
+    parser.add_argument("--end", type=nonnegative_float("--end", "s"), default=None, metavar="E",
                         help="s from the recording's first message where the window ends, included "
                              "(default: the last message)")
     parser.add_argument("--topics", nargs="+", default=None, metavar="TOPIC",
