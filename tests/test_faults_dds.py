@@ -1,6 +1,9 @@
-"""Faults seen by a DAQ client over DDS (issue 12): every kind detected from the stream alone, at its stated
-time, and ended; the other channels untouched; same seed + scenario = bit-identical messages; a clock drift
-of +100 ppm over 600 s; bad requests refused while the rig keeps running.
+"""Faults seen by a DAQ client over DDS (issue 12): every kind detected from the stream alone, at its time.
+
+Each kind is seen at its stated time and ended; the other channels untouched; same seed + scenario =
+bit-identical messages; bad requests refused while the rig keeps running. (The +100 ppm clock drift over 600 s
+is a property of the fault layer: tests/core/test_faults.py checks it on the core in seconds; here the
+scenario's drift reaches a client and a recording.)
 
 Hypotheses: the fault layer only touches the faulted channel's readings and deliveries (so the other
 channels and the faulted one outside its windows are sample for sample those of a run without faults), and
@@ -277,39 +280,6 @@ def test_motor_slip_is_seen_in_the_motor_states_after_each_impact(tmp_path, rimd
     events = _events(data["/rig/faults"])
     assert [(e.event, e.kind, e.channel) for e in events] == [("start", "motor_slip", "motor"),
                                                               ("end", "motor_slip", "motor")]
-
-
-@pytest.mark.timeout(240)
-def test_clock_drift_100_ppm_over_600_s(tmp_path, rimd_rig):
-    """+100 ppm on the force channel from t = 0: 600 s later its impact times lag the acceleration channel's
-    by 60 ms (within one sample), and every stamp of both channels stays on the nominal grid."""
-    data, _ = _lockstep_run(rimd_rig, tmp_path / "drift.pkl", 600.5, "--mode", "impacts",
-                            "--topics", "/rig/rimd/acceleration", FORCE, "--extra", timeout=200,
-                            parameters={"block_rate": 20.0, "motor.initial_frequency": 3.75,
-                                        "motor.initial_setpoint": 3.75},
-                            faults=["channel=impact_force kind=clock_drift start=0 duration=0 magnitude=100"])
-    # In lockstep nothing is lost in transport, however loaded the machine (open-loop at real_time_factor 0
-    # this run lost up to 4 stretches of 0.5-11 s under load): every block of both channels, in order.
-    for topic, s in data.items():
-        assert s["bad_stamps"] == 0 and s["gaps"] == [], (topic, s["bad_stamps"], s["gaps"])
-        assert s["blocks"] >= 600.5 * 20, (topic, s["blocks"])
-
-    def crossings(above: np.ndarray) -> np.ndarray:
-        above = np.unique(above)
-        return above[np.r_[True, np.diff(above) > int(0.002 * RATE)]] / RATE
-
-    t_acc = crossings(data["/rig/rimd/acceleration"]["above"])
-    t_force = crossings(data[FORCE]["above"])
-    from rimd_sim.analysis.faultscan import drift_fit
-
-    t, lag = drift_fit(t_acc, t_force)
-    assert t.size > 2000 and t.max() > 590   # one impact per cycle at 3.75 Hz: 2250 in 600 s
-    slope, intercept = np.polyfit(t, lag, 1)
-    at_600 = slope * 600.0 + intercept - (lag[: 20].mean() - slope * t[:20].mean())   # drift accumulated since 0
-    assert abs(at_600 - 0.060) <= 1.0 / RATE, f"drift at 600 s: {at_600 * 1e3:.4f} ms"
-    # each impact within one sample of the line (the crossing's quantisation), none jumping
-    assert np.max(np.abs(lag - (slope * t + intercept))) <= 1.0 / RATE + 1e-9
-    assert slope == pytest.approx(1e-4, rel=0.01)
 
 
 @pytest.mark.timeout(120)
