@@ -236,7 +236,9 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
     ch = SimConfig().channel("impact_force")
     findings = [f for f in scan_channel(blocks, RATE, ch.range_min, ch.range_max, late_blocks=7.0)
                 if f.kind == "late"]
-    assert any(abs(f.start - start) <= BLOCK_S + 1e-9 and abs(f.end - (start + duration)) <= BLOCK_S + 1e-9
+    # Coarse (arrival times on a shared machine): a late stretch where the window is, within 3 blocks at each
+    # end. The exact release times of the delayed blocks are tests/core/test_faults.py's, on the core's clock.
+    assert any(abs(f.start - start) <= 3 * BLOCK_S + 1e-9 and abs(f.end - (start + duration)) <= 3 * BLOCK_S + 1e-9
                for f in findings), findings
     order = [b.first_index for b in blocks]
     assert sorted(order) == list(range(0, order and max(order) + 1, 200))   # nothing lost, only late

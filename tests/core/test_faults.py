@@ -233,3 +233,25 @@ def test_clock_drift_100_ppm_over_600_s():
     assert abs(at_600 - 0.060) <= 1.0 / rate, f"drift at 600 s: {at_600 * 1e3:.4f} ms"
     assert np.max(np.abs(lag - (slope * t + intercept))) <= 1.0 / rate + 1e-9   # each impact within a sample
     assert slope == pytest.approx(1e-4, rel=0.01)
+
+
+def test_delay_releases_the_blocks_of_its_window_late_by_the_latency_plus_jitter():
+    """The timing of ``delay``, behind the core's clock (the DDS test keeps a coarse check of arrival times): a
+    block of the window leaves between ``latency`` and 1.5 ``latency`` (plus one block period, as blocks leave
+    at block boundaries) after its last sample, in a random order; every other block leaves with its own."""
+    start, duration, latency = 0.6, 0.3, 0.1
+    sim = RigSimulator(CFG)
+    sim.inject_fault("impact_force", "delay", start, duration, latency)
+    rate, period = 20000, 0.01
+    late, order = [], []
+    for b in sim.advance_blocks([Fraction(k, 100) for k in range(1, 151)]):
+        leaves = float(b.t_stop)   # the DAQ receives the deliveries at the end of the block
+        for c in b.deliveries["impact_force"]:
+            order.append(c.first_index)
+            data_end = (c.first_index + len(c.samples)) / rate
+            late.append((c.first_index / rate, leaves - data_end))
+    in_window = [d for t, d in late if start <= t < start + duration]
+    outside = [d for t, d in late if not start <= t < start + duration]
+    assert len(in_window) == round(duration / period) and all(d == pytest.approx(0.0, abs=1e-9) for d in outside)
+    assert all(latency - 1e-9 <= d <= 1.5 * latency + period + 1e-9 for d in in_window), in_window
+    assert sorted(order) == list(range(0, 150 * 200, 200)) and order != sorted(order)   # late and reordered

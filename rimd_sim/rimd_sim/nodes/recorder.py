@@ -372,6 +372,7 @@ class RecorderNode(PollingNode):
         for topic, stamp in list(self._written_stamp.items()):
             values[topic + PROGRESS_STAMP_KEY] = str(stamp)   # how far each topic is written
         for topic, r in report.items():
+            values[f"{topic} written"] = str(r.written)
             values[f"{topic} lost_samples"] = str(r.lost_samples)
             values[f"{topic} queue_dropped"] = str(r.queue_dropped)
             values[f"{topic} not_written"] = str(r.not_written)

@@ -316,7 +316,8 @@ class ReplayNode(Node):
     # -- services ---------------------------------------------------------------------------------------------
     def _on_pause(self, request, response):  # noqa: ARG002
         response.success = self.player.pause()
-        response.message = "paused" if response.success else "already paused"
+        count = f"{self.player.published} messages published"   # taken: each reaches its subscribers
+        response.message = f"paused after {count}" if response.success else f"already paused ({count})"
         return response
 
     def _on_resume(self, request, response):  # noqa: ARG002

@@ -213,6 +213,7 @@ class SimulatorNode(Node):
             self._pub_captures = {"force": self.create_publisher(Capture, "capture/force", cap_qos),
                                   "acceleration": self.create_publisher(Capture, "capture/acceleration", cap_qos)}
         self._topic = {id(pub): pub.topic_name for pub in self._all_publishers()}
+        self._sent: dict[str, int] = {}   # messages published per topic since the start (diagnostics)
         self._pace_lock = threading.Lock()
         self._pacer = Pacer(self._rtf, self._lockstep, topics=list(self._topic.values()))
         self._warned: set[tuple[str, str]] = set()
@@ -431,10 +432,12 @@ class SimulatorNode(Node):
 
     def _send(self, pub: Any, msg: Any, stamp: int) -> None:
         """Publish ``msg`` stamped ``stamp`` (the pacer learns it first: a consumer may answer at once)."""
+        topic = self._topic[id(pub)]
         if self._lockstep is not None:
             with self._pace_lock:
-                self._pacer.published(stamp, self._topic[id(pub)])
+                self._pacer.published(stamp, topic)
         pub.publish(msg)
+        self._sent[topic] = self._sent.get(topic, 0) + 1
 
     def _publish(self, block: SimBlock) -> None:
         # Messages are reused (publish serialises at once); only the fields that change are set.
@@ -600,6 +603,9 @@ class SimulatorNode(Node):
         }
         if self._wall_clock:
             values["stamps_behind_wall_clock_s"] = f"{self._paused_wall:.3f}"
+        for pub in self._all_publishers():   # per topic: what went out, and to how many matched subscribers
+            values[f"{pub.topic_name} published"] = str(self._sent.get(pub.topic_name, 0))
+            values[f"{pub.topic_name} subscribers"] = str(pub.get_subscription_count())
         if self._lockstep is not None:
             values["lockstep_waiting_for"] = holding
             with self._pace_lock:
