@@ -32,14 +32,44 @@ from queue import Empty, SimpleQueue
 from typing import Any
 
 from rimd_sim.recording.bag import BagWriter, FileInfo, WriteFailure
-from rimd_sim.recording.cdr import BLOCK_TYPES, LossCounter, block_span
+from rimd_sim.recording.cdr import BLOCK_TYPES, block_span
 from rimd_sim.recording.msgdefs import MessageDefinitionError
 
-__all__ = ["RecordingSession", "TopicLoss"]
+__all__ = ["LossCounter", "RecordingSession", "TopicLoss"]
 
 #: Log levels of the session's lines.
 INFO, WARNING, ERROR = "info", "warning", "error"
 
+
+class LossCounter:
+    """Counts, per topic, samples missing between consecutive blocks (gaps in ``first_index``).
+
+    The first block seen on a topic sets the start (a recorder started after the rig loses nothing). A block
+    that starts before the expected index (the rig was restarted, or replayed) restarts the count and is
+    counted in ``restarts``, not as loss.
+    """
+
+    def __init__(self) -> None:
+        self.expected: dict[str, int] = {}
+        self.first: dict[str, int] = {}
+        self.lost_samples: dict[str, int] = {}
+        self.lost_blocks: dict[str, int] = {}
+        self.restarts: dict[str, int] = {}
+
+    def observe(self, topic: str, first_index: int, count: int) -> int:
+        """Record one block; return the number of samples missing just before it."""
+        expected = self.expected.get(topic)
+        missing = 0
+        if expected is None:
+            self.first[topic] = first_index
+        elif first_index > expected:
+            missing = first_index - expected
+            self.lost_samples[topic] = self.lost_samples.get(topic, 0) + missing
+            self.lost_blocks[topic] = self.lost_blocks.get(topic, 0) + max(1, round(missing / max(count, 1)))
+        elif first_index < expected:
+            self.restarts[topic] = self.restarts.get(topic, 0) + 1
+        self.expected[topic] = first_index + count
+        return missing
 
 @dataclass(frozen=True)
 class TopicLoss:
