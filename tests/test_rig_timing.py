@@ -123,7 +123,11 @@ def test_blocks_arrive_on_time_however_the_rig_starts_and_each_run_is_named(ros_
     rig = ros_processes.start_node("rimd_simulator", "--ros-args", "-p", "start_paused:=true")
     rig.wait_for_output(r"rig ready", timeout=60)
     resume = node.create_client(Trigger, "/rig/resume")
-    assert spin_until(ros_executor, lambda: arrivals.sub.get_publisher_count() > 0, timeout=10)
+    # Matched on the simulator's side: its /diagnostics count the subscriptions its publisher has matched (the
+    # probe's own count can still include the stopped rig's writer, and the new rig's view of the graph may lag).
+    diagnostics.clear()
+    assert spin_until(ros_executor, lambda: diagnostics and int(diagnostics[-1].get(f"{FORCE} subscribers", 0)) >= 1,
+                      timeout=30), diagnostics[-1:]
     assert call_service(ros_executor, node, resume, Trigger.Request(), timeout=10).success
     resumed = arrivals.measure(MEASURE_S, drop_waiting=False)
     assert resumed <= 5.0, f"paused start then resume: blocks {resumed:.1f} ms late (median)"

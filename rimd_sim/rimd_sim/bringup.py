@@ -319,9 +319,15 @@ def _resume_when_connected(consumers: tuple[str, ...], procs: Mapping[str, subpr
                            timeout: float = 20.0, domain_id: int | None = None) -> bool:
     """Wait until each consumer node subscribes to every rig topic, then call /rig/resume. True when resumed.
 
+    Subscribed in the graph is not yet matched: a volatile topic reaches only the readers its writer has matched,
+    and the simulator's own view of the graph may lag this process's under load (the recorder then missed the
+    first blocks). So the resume also waits until the simulator's /diagnostics say that each rig topic's
+    publisher has matched as many subscriptions as the graph shows here.
+
     ``domain_id``: the rig's ROS domain (default: this process's ``ROS_DOMAIN_ID``).
     """
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.signals import SignalHandlerOptions
     from std_srvs.srv import Trigger
 
@@ -330,16 +336,26 @@ def _resume_when_connected(consumers: tuple[str, ...], procs: Mapping[str, subpr
                **({} if domain_id is None else {"domain_id": domain_id}))
     try:
         node = rclpy.create_node("rimd_rig", context=context, start_parameter_services=False)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        matched: dict[str, int] = {}   # topic -> subscriptions its publisher has matched (the simulator says)
+
+        def on_diagnostics(msg: DiagnosticArray) -> None:
+            for status in msg.status:
+                if "rimd_simulator" in status.name:
+                    matched.update({kv.key[:-len(" subscribers")]: int(kv.value) for kv in status.values
+                                    if kv.key.endswith(" subscribers")})
+
+        node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
         deadline = time.monotonic() + timeout
         client = node.create_client(Trigger, "/rig/resume")
         while time.monotonic() < deadline and all(p.poll() is None for p in procs.values()):
-            if all(_subscribed(node, t, consumers) for t in RIG_TOPICS) and client.service_is_ready():
+            if (all(_subscribed(node, t, consumers) for t in RIG_TOPICS) and client.service_is_ready()
+                    and (not consumers or all(matched.get(t, -1) >= node.count_subscribers(t) for t in RIG_TOPICS))):
                 future = client.call_async(Trigger.Request())
-                executor = rclpy.executors.SingleThreadedExecutor(context=context)
-                executor.add_node(node)
                 executor.spin_until_future_complete(future, timeout_sec=5.0)
                 return bool(future.done() and future.result().success)
-            time.sleep(0.05)
+            executor.spin_once(timeout_sec=0.05)
         return False
     finally:
         context.try_shutdown()

@@ -119,13 +119,15 @@ def main() -> int:
     for topic in args.topics:
         subs[topic] = node.create_subscription(msgs.SampleBlock, topic, lambda d, t=topic: on_block(d, t), qos,
                                                raw=True)
-    extra = []
+    extra = []   # the volatile ones: a message published before they matched would never reach them
     for topic in args.extra:
         kind = {"/rig/faults": msgs.FaultEvent, "/rig/impact/events": msgs.ImpactEvent,
                 "/rig/motor/state": msgs.MotorState}.get(topic, msgs.Capture)
-        extra.append(node.create_subscription(
+        sub = node.create_subscription(
             kind, topic, lambda d, t=topic: stored[t].append((d, state["now"], time.time_ns())),
-            latched if topic == "/rig/faults" else qos, raw=True))
+            latched if topic == "/rig/faults" else qos, raw=True)
+        if topic != "/rig/faults":   # transient local: its history reaches a late reader (and a replay may have none)
+            extra.append(sub)
     reporter = None
     if args.lockstep:   # it joins once every subscription matched: the rig's first messages reach each of them
         from rimd_sim.client import ProgressReporter
