@@ -31,7 +31,7 @@ from rimd_sim import cli
 from rimd_sim.analysis.dynamics import steady_orbit
 from rimd_sim.core import load_config
 from rimd_sim.core.ensemble import StopRule, run_cells
-from rimd_sim.core.model import _params_vector
+from rimd_sim.core.model import model_for
 
 SRC = str(Path(rimd_sim.__file__).resolve().parent.parent)
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -43,11 +43,11 @@ def test_ensemble_without_early_stop_is_the_fixed_length_run():
     base = load_config(None)
     gaps, freqs = [0.0, 1e-3, 2.4e-3], [3.75, 5.0, 7.25]
     cfgs = [base.with_parameters({"gap": g}) for g in gaps]
-    params = np.array([_params_vector(c.rig, c) for c in cfgs])
+    params = np.array([model_for(c).params(c) for c in cfgs])
     gi = np.repeat(np.arange(3), 3)
     ff = np.tile(freqs, 3)
     for theta_dot0 in (0.0, 0.8):
-        res = run_cells(params, gi, ff, np.zeros(9), np.full(9, theta_dot0),
+        res = run_cells("rigid", params, gi, ff, np.zeros(9), np.full(9, theta_dot0),
                         StopRule(early=False, max_cycles=60 + 36, measure_cycles=36))
         for i, label in enumerate(res.labels()):
             orbit = steady_orbit(cfgs[gi[i]], ff[i], theta_dot0=theta_dot0, transient_cycles=60, measure_cycles=36)
@@ -59,8 +59,8 @@ def test_ensemble_without_early_stop_is_the_fixed_length_run():
 def test_early_stop_stops_settled_motions_early_and_runs_chaos_to_the_cap():
     """Gap 0: 3.75 Hz (1/1) stops at the first chance; 8.5 Hz (non-periodic) runs to the cap."""
     cfg = load_config(None, {"gap": 0.0})
-    res = run_cells(_params_vector(cfg.rig, cfg)[None, :], np.zeros(2, dtype=np.int64), np.array([3.75, 8.5]),
-                    np.zeros(2), np.zeros(2), StopRule())
+    res = run_cells("rigid", model_for(cfg).params(cfg)[None, :], np.zeros(2, dtype=np.int64),
+                    np.array([3.75, 8.5]), np.zeros(2), np.zeros(2), StopRule())
     assert res.labels() == ["1/1", "chaotic/non-periodic"]
     assert res.cycles[0] <= 40 and res.cycles[1] == 193
 

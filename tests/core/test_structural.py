@@ -14,8 +14,8 @@ import pytest
 from rimd_sim.analysis.pulse import force_peaks, pulse, ring_frequency
 from rimd_sim.core import CommandError, ConfigError, RigModel, SimConfig, load_config
 from rimd_sim.core.config import find_config_file
+from rimd_sim.core.model import MODELS
 from rimd_sim.core.simulator import RigSimulator
-from rimd_sim.core.structural import StructuralModel, make_model
 
 
 def at_frequency(cfg: SimConfig, f: float, **params) -> SimConfig:
@@ -47,7 +47,7 @@ def test_rigid_two_mass_reduces_to_the_paper_model(freq, gap):
     ref = RigModel(cfg, channels=False, truth=False).advance(20.0).impacts
     two = cfg.with_parameters({"structure.model": "two_mass", "structure.axial_stiffness": 0.0,
                                "structure.mount_stiffness": 0.0})
-    got = StructuralModel(two, channels=False, truth=False).advance(20.0).impacts
+    got = RigModel(two, channels=False, truth=False).advance(20.0).impacts
     assert len(ref) > 30 and len(got) == len(ref)
     np.testing.assert_allclose(np.array(got, dtype=float), np.array(ref, dtype=float), rtol=1e-6, atol=1e-9)
 
@@ -56,7 +56,7 @@ def test_rigid_two_mass_samples_the_paper_models_channels():
     """In the rigid special case the four channels and the truth are the paper model's too (5 s, 3.75 Hz)."""
     cfg = at_frequency(SimConfig(), 3.75)
     ref = RigModel(cfg).advance(5.0)
-    got = StructuralModel(cfg.with_parameters({"structure.model": "two_mass"})).advance(5.0)
+    got = RigModel(cfg.with_parameters({"structure.model": "two_mass"})).advance(5.0)
     for name, (first, samples) in ref.channels.items():
         assert got.channels[name][0] == first
         np.testing.assert_allclose(got.channels[name][1], samples, rtol=1e-9, atol=1e-9 * np.abs(samples).max())
@@ -66,7 +66,7 @@ def test_rigid_two_mass_samples_the_paper_models_channels():
 def test_reconfigured_to_rigid_while_ringing_runs_on(structural):
     """Changing the link and the mount to rigid right after an impact (modes still ringing) keeps the model
     running, with the axial and mount states at exactly 0 from the next free step on."""
-    model = StructuralModel(at_frequency(structural, 3.75), channels=False, truth=False)
+    model = RigModel(at_frequency(structural, 3.75), channels=False, truth=False)
     t = Fraction(0)
     while not model.advance(t := t + Fraction(1, 1000)).impacts:  # stop within 1 ms of the first impact's end
         assert t < 2
@@ -101,8 +101,8 @@ def test_fitted_preset_double_peak_and_ringing_at_3_75_hz(structural):
     rate = 250_000.0
     cfg = at_frequency(structural, 3.75, **{"channels.impact_force.sample_rate": rate,
                                             "channels.rimd_acceleration.sample_rate": rate})
-    model = make_model(cfg, channels=True, truth=False)
-    assert isinstance(model, StructuralModel)
+    model = RigModel(cfg, channels=True, truth=False)
+    assert model.physics_model is MODELS["two_mass"]
     model.advance(11.0)
     out = model.advance(12.0)
     imp = out.impacts[-1]
@@ -141,8 +141,8 @@ def test_table1_from_rest_with_the_structural_preset(structural, gap):
     for f in np.arange(2.0, 9.51, 0.25):
         f = float(f)
         duration = 150 / f
-        impacts = make_model(at_frequency(structural, f, gap=gap), channels=False, truth=False
-                             ).advance(duration).impacts
+        impacts = RigModel(at_frequency(structural, f, gap=gap), channels=False, truth=False
+                           ).advance(duration).impacts
         last = [i for i in impacts if i.t_start >= duration - 50 / f]
         rows.append((f, max((i.peak_force for i in last), default=0.0), len(last) / 50))
     # Period 1 and period 2 strictly: 50 (band A) or 25 (band B) impacts in the 50 cycles. (The paper model's
@@ -163,7 +163,7 @@ def test_simulator_runs_the_selected_model_and_blocks_do_not_matter(structural):
     bit-identical samples and impacts however time is cut into calls (one call against 1/7 s blocks)."""
     cfg = at_frequency(structural, 3.75, **{"noise.enabled": False})
     one = RigSimulator(cfg)
-    assert isinstance(one.model, StructuralModel)
+    assert one.model.physics_model is MODELS["two_mass"]
     a = one.advance(3.0)
     sim = RigSimulator(cfg)
     blocks = []
@@ -174,8 +174,7 @@ def test_simulator_runs_the_selected_model_and_blocks_do_not_matter(structural):
     for name, ch in a.channels.items():
         np.testing.assert_array_equal(ch.samples, np.concatenate([b.channels[name].samples for b in blocks]))
     assert [i.t_start for i in a.impacts] == [i.t_start for b in blocks for i in b.impacts]
-    assert isinstance(RigSimulator(SimConfig()).model, RigModel)
-    assert not isinstance(RigSimulator(SimConfig()).model, StructuralModel)
+    assert RigSimulator(SimConfig()).model.physics_model is MODELS["rigid"]
     with pytest.raises(CommandError, match="structure.model"):
         one.set_parameters({"structure.model": "rigid"})
 
