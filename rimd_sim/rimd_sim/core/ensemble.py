@@ -187,8 +187,9 @@ def _loop(name: str) -> types.ModuleType:
     n_strobe = k.N_STROBE + drv.N_MODES
     ns = k._namespace(drv.__name__ + "_ensemble", f"The loop over the cells of the {name!r} model.")
     loop = ns
+    compiled = k.jit_for(f"_loop.{name}")
 
-    @_jit
+    @compiled
     def init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, h_first, imp_buf):
         """The state of ``RigModel`` at t = 0: the motor at constant ``f``, the hammer at the given state.
 
@@ -218,7 +219,7 @@ def _loop(name: str) -> types.ModuleType:
         ist[k.I_IMPOUT] = 0
         drv.resync(p, fs, ist, ya, yb, imp_buf)
 
-    @_jit
+    @compiled
     def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
                 ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out):
         """One trajectory; returns ``(period, impacts, kind, cycles, theta, theta_dot, steps)``."""
@@ -276,7 +277,7 @@ def _loop(name: str) -> types.ModuleType:
                 period, imp, kind = _classify_window(u, v, counts, cap - measure + 1, cap + 1, max_period, tol)
                 return period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP]
 
-    @_jit
+    @compiled
     def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f):
         """Run every cell; ``chain[i]`` true starts cell ``i`` from the final state of cell ``i - 1``."""
         cap = int(rule[1])

@@ -509,6 +509,20 @@ def source_key(*modules) -> str:
     return digest.hexdigest()[:12]
 
 
+def jit_for(scope: str):
+    """The decorator of the functions a factory compiles for one model: ``_jit`` under the name ``scope.fn``.
+
+    Functions built by one factory share their Python qualified name; numba names the compiled symbols and the
+    cache files after it, and two models' functions loaded from the cache into one process must not share a
+    symbol (the second would call the first's code). ``scope`` holds the model's name.
+    """
+    def compiled(func):
+        func.__qualname__ = f"{scope}.{func.__name__}"
+        return _jit(func)
+
+    return compiled
+
+
 def _namespace(name: str, doc: str) -> types.ModuleType:
     """A module registered in ``sys.modules`` (so numba's cache key pickles it by its name)."""
     ns = types.ModuleType(name, doc)
@@ -557,10 +571,11 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
     ns = _namespace(f"{__name__}.driver_{name}_{key}",
                     f"The integration driver of the {name!r} model, built by rimd_sim.core.kernel.build_driver.")
     drv = ns
+    compiled = jit_for(f"build_driver.{name}")
 
     # ---- Runge-Kutta step ------------------------------------------------------------------------
 
-    @_jit
+    @compiled
     def rk_step(t, y, f, h, mode, p, fs, K, ynew):
         """One Dormand-Prince step from ``(t, y)`` with ``f = rhs(t, y)``; fills ``K`` (7 stages), ``ynew``.
 
@@ -626,7 +641,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                     count += 1
         return math.sqrt(total / count)
 
-    @_jit
+    @compiled
     def dense_coeffs(K, Q):
         """``Q = K.T @ P``: coefficients of the 4th-order continuous extension of every component."""
         P = _P
@@ -637,7 +652,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                     acc += K[s, i] * P[s, j]
                 Q[i, j] = acc
 
-    @_jit
+    @compiled
     def rhs(t, y, mode, p, fs, out):
         """Derivative of the state array ``y`` into ``out``."""
         d = phys.derivs(t, to_tuple(y, n), mode, p, fs)
@@ -646,7 +661,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
 
     # ---- events --------------------------------------------------------------------------------
 
-    @_jit
+    @compiled
     def event_value(kind, mode, ya, Q, h, x, p, fs):
         """Value of event function ``kind`` (0: delta, 1: law force) at fraction ``x`` of the step."""
         d, dd = phys.penetration(phys.dense_point(mode, ya, Q, h, x, p), p)
@@ -654,7 +669,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             return d
         return law_force(d, dd, p, fs[F_VIMP])
 
-    @_jit
+    @compiled
     def find_root(kind, mode, ya, Q, h, lo, glo, hi, ghi, p, fs):
         """Illinois regula falsi for a sign change of event ``kind`` in ``[lo, hi]`` (fractions of the step).
 
@@ -684,7 +699,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 side = 1
         return hi
 
-    @_jit
+    @compiled
     def ring_scan(ya, yb, Q, h, p):
         """Samples of ``delta`` the free step needs while the modes ring near the stop (0: none); the bound.
 
@@ -706,7 +721,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             return min(RING_SAMPLES_MAX, int(math.ceil(8.0 * h / phys.ring_period(p, ya))) + 1), amp
         return 0, amp
 
-    @_jit
+    @compiled
     def scan_onset(ya, Q, h, p, fs, scan, amp, da):
         """Contact onset while the modes ring: ``delta`` sampled eight times per ringing period.
 
@@ -737,7 +752,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             q0 = q1
         return 2.0, EV_NONE
 
-    @_jit
+    @compiled
     def scan_release(ya, Q, h, p, fs, scan, da, dda):
         """After a release with ``delta > 0`` while the modes ring: the end of the impact or a re-contact.
 
@@ -767,7 +782,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             flo = fx
         return best, code
 
-    @_jit
+    @compiled
     def detect_event(mode, rec, ya, yb, h, Q, p, fs):
         """Earliest switch inside the step ``[0, 1]``: returns ``(fraction, event code)`` or ``(2, EV_NONE)``.
 
@@ -836,7 +851,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
 
     # ---- sampling ------------------------------------------------------------------------------
 
-    @_jit
+    @compiled
     def emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
                      tr_rate, tr_next, tr_stop, tr_base, tr_out, st_out, t_stop):
         """Emit every channel sample, truth sample and stroboscopic point that falls in the current step."""
@@ -966,7 +981,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
 
     # ---- records and switches ------------------------------------------------------------------
 
-    @_jit
+    @compiled
     def open_record(fs, ist, p, t, y):
         """Start an impact record at ``t`` (contact begins with ``delta`` rising through 0)."""
         d, dd = phys.penetration(phys.point(y), p)
@@ -985,7 +1000,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         fs[F_RFREQ] = motor_freq(fs, t)
         fs[F_RPHASE] = TWO_PI * (phi - turns)
 
-    @_jit
+    @compiled
     def apply_event(fs, ist, p, yb, imp_out):
         """Apply the pending switch at the end of the current step. Returns False on a chattering contact."""
         ev = ist[I_PEND]
@@ -1039,14 +1054,14 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         ist[I_NEEDF] = 1
         return True
 
-    @_jit
+    @compiled
     def force_and_delta(fs, p, ya, Q, h, x):
         """The sensor's force and the penetration at fraction ``x`` of the current (contact) step."""
         s = phys.dense_point(CONTACT, ya, Q, h, x, p)
         d, dd = phys.penetration(s, p)
         return phys.sensor_force(law_force(d, dd, p, fs[F_VIMP]), s, p), d
 
-    @_jit
+    @compiled
     def refine_max(fs, p, ya, Q, h, which):
         """Maximum of the force (``which`` 0) or penetration (1) inside the step.
 
@@ -1073,7 +1088,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 return best - 0.125 * (right - left) * (right - left) / den
         return best
 
-    @_jit
+    @compiled
     def track_contact_extremes(fs, p, ya, Q, h):
         """Update the open record's peak force and penetration over the current (contact) step.
 
@@ -1096,7 +1111,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
 
     # ---- the driver ----------------------------------------------------------------------------
 
-    @_jit
+    @compiled
     def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
                 ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
                 tr_rate, tr_next, tr_stop, tr_base, tr_out,
@@ -1200,7 +1215,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             if mode == CONTACT:
                 drv.track_contact_extremes(fs, p, ya, Q, h)
 
-    @_jit
+    @compiled
     def truncate(p, fs, ist, ya, yb, fa, Q, t, imp_out):
         """End the current step at ``t`` (``F_TA <= t <= F_TB``), discarding what lies beyond.
 
@@ -1231,7 +1246,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         ist[I_NEEDF] = 1
         return ok
 
-    @_jit
+    @compiled
     def resync(p, fs, ist, ya, yb, imp_out):
         """Make the mode agree with the Filippov sets after a command changed the state or the parameters.
 
