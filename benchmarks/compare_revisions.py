@@ -16,10 +16,15 @@ the repository). Each part runs both trees in separate interpreters, each import
 * ``bench``: ``bench_core.py`` and ``bench_structural.py`` of each tree (each measures its own code), run
   alternately, base first then head, ``--rounds`` times; every real-time factor they print is paired with the
   same figure of the same round, and the median ratio head/base per figure is printed (> 1: head is faster).
-  The load average is printed with each round: on a shared machine the figures are preliminary.
+  ``--clock cpu`` (the default) runs both benchmarks with ``time.perf_counter`` replaced by
+  ``time.thread_time``, the CPU time of the benchmark's thread (the core runs in it), so that a machine shared
+  with other work disturbs the figures less; ``--clock wall`` leaves them as they are. The load average is
+  printed with each round: on a shared machine the figures are preliminary.
 
-Run: .venv/bin/python benchmarks/compare_revisions.py [--base REV] [--parts identity,compile,bench]
-[--rounds 3] [--seconds 10]
+``--head REV`` compares an exported revision instead of this working tree (so the tree can change meanwhile).
+
+Run: .venv/bin/python benchmarks/compare_revisions.py [--base REV] [--head REV] [--parts identity,compile,bench]
+[--rounds 3] [--seconds 10] [--clock cpu|wall]
 """
 
 from __future__ import annotations
@@ -193,6 +198,11 @@ def export(rev: str, into: Path) -> Path:
     return into
 
 
+#: Runs a benchmark script (argv[1]) with its arguments, ``time.perf_counter`` replaced by the thread's CPU time.
+CPU_CLOCK = ("import runpy, sys, time; time.perf_counter = time.thread_time; sys.argv = sys.argv[1:]; "
+             "runpy.run_path(sys.argv[0], run_name='__main__')")
+
+
 def run(tree: Path, argv: list[str], env: dict | None = None) -> str:
     full = {**os.environ, "PYTHONPATH": str(tree / "rimd_sim"), "NUMBA_NUM_THREADS": "1", **(env or {})}
     proc = subprocess.run([sys.executable, *argv], cwd=tree, env=full, capture_output=True, text=True)
@@ -254,15 +264,17 @@ def figures(bench: str, text: str) -> dict[str, float]:
     return found
 
 
-def benches(base: Path, head: Path, rounds: int, seconds: float) -> None:
-    print(f"== benchmarks, {rounds} rounds, base then head in each round, --seconds {seconds:g}")
+def benches(base: Path, head: Path, rounds: int, seconds: float, clock: str) -> None:
+    print(f"== benchmarks, {rounds} rounds, base then head in each round, --seconds {seconds:g}, clock: "
+          f"{'CPU time of the thread' if clock == 'cpu' else 'wall (perf_counter)'}")
     ratios: dict[str, list[float]] = {}
     for r in range(rounds):
         for bench in ("bench_core.py", "bench_structural.py"):
             got = {}
             for name, tree in (("base", base), ("head", head)):
                 load = os.getloadavg()[0]
-                got[name] = figures(bench, run(tree, [str(tree / "benchmarks" / bench), "--seconds", str(seconds)]))
+                script = [str(tree / "benchmarks" / bench), "--seconds", str(seconds)]
+                got[name] = figures(bench, run(tree, ["-c", CPU_CLOCK, *script] if clock == "cpu" else script))
                 print(f"  round {r + 1} {bench:20} {name}: {len(got[name])} figures (load average {load:.2f})",
                       flush=True)
             for key in got["base"].keys() & got["head"].keys():
@@ -279,7 +291,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", default=None,
                         help="revision to compare with (default: git merge-base HEAD main)")
+    parser.add_argument("--head", default=None, help="revision to compare (default: this working tree)")
     parser.add_argument("--parts", default="identity,compile,bench", help="identity, compile, bench")
+    parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
+                        help="benchmark clock: the thread's CPU time (default) or the wall clock")
     parser.add_argument("--rounds", type=int, default=3, help="alternating benchmark rounds")
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per benchmark figure")
     parser.add_argument("--only", nargs="*", default=[], help="identity: only the outputs whose name starts so")
@@ -288,22 +303,25 @@ def main() -> None:
     if args.base is None:
         args.base = subprocess.run(["git", "-C", str(ROOT), "merge-base", "HEAD", "main"], capture_output=True,
                                    text=True, check=True).stdout.strip()
-    with tempfile.TemporaryDirectory(prefix="rimd-base-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="rimd-base-") as tmp, \
+            tempfile.TemporaryDirectory(prefix="rimd-head-") as tmp_head:
         base = export(args.base, Path(tmp))
+        tree = ROOT if args.head is None else export(args.head, Path(tmp_head))
         rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.base], capture_output=True,
                              text=True).stdout.strip()
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True).stdout.strip()
+        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.head or "HEAD"],
+                              capture_output=True, text=True).stdout.strip()
         dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "rimd_sim"], capture_output=True,
                                text=True).stdout.strip()
-        note = ", with uncommitted changes" if dirty else ""
-        print(f"base {args.base} ({rev}) against this tree (HEAD {head}{note}); load average {os.getloadavg()[0]:.2f}")
+        what = (f"this tree (HEAD {head}{', with uncommitted changes' if dirty else ''})" if args.head is None
+                else f"{args.head} ({head})")
+        print(f"base {args.base} ({rev}) against {what}; load average {os.getloadavg()[0]:.2f}")
         if "identity" in parts:
-            identity(base, ROOT, args.only)
+            identity(base, tree, args.only)
         if "compile" in parts:
-            compile_times(base, ROOT)
+            compile_times(base, tree)
         if "bench" in parts:
-            benches(base, ROOT, args.rounds, args.seconds)
+            benches(base, tree, args.rounds, args.seconds, args.clock)
 
 
 if __name__ == "__main__":

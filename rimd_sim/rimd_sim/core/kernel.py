@@ -45,8 +45,8 @@ every sample are bit-identical however the simulated time is cut into calls. Onl
 
 The physics contract
 --------------------
-A model's physics module defines, all compiled with :func:`physics_jit` (``p`` is the parameter vector,
-``fs`` the float state, ``y`` a state tuple, ``s`` a point tuple, ``mode`` FREE or CONTACT):
+A model's physics module defines, compiled with :func:`physics_inline` or :func:`physics_jit` (``p`` is the
+parameter vector, ``fs`` the float state, ``y`` a state tuple, ``s`` a point tuple, ``mode`` FREE or CONTACT):
 
 =========================================== =================================================================
 ``N_MODES``                                 number of modes ``k`` (the state has ``3 + k`` components)
