@@ -115,3 +115,17 @@ def test_the_registry_holds_every_structure_model():
     physics module and state size."""
     assert tuple(MODELS) == STRUCTURE_MODELS
     assert [MODELS[m].n_state for m in MODELS] == [3, 7]
+
+
+def test_a_running_model_keeps_its_model_and_its_modes_count():
+    """RigModel refuses to be reconfigured to another model (its state would not fit), and a start whose modes do
+    not fit the model, each with a message naming what was wrong."""
+    from rimd_sim.core import CommandError, ConfigError, RigModel, SimConfig
+
+    model = RigModel(SimConfig(), channels=False, truth=False)
+    with pytest.raises(CommandError, match=r"structure.model cannot change while the model runs \(rigid to two_mass\)"):
+        model.reconfigure(SimConfig().with_parameters({"structure.model": "two_mass"}))
+    with pytest.raises(ConfigError, match=r"'initial_modes' = \(0.0,\) refused: the rigid model has 0 modes"):
+        RigModel(SimConfig(), initial_modes=(0.0,))
+    two = RigModel(SimConfig().with_parameters({"structure.model": "two_mass"}), initial_modes=(1e-9, 0, 0, 0))
+    assert two._ya[3:].tolist() == [1e-9, 0.0, 0.0, 0.0]
