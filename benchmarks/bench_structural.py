@@ -30,6 +30,7 @@ from pathlib import Path
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "rimd_sim"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_core import time_simulator  # noqa: E402
 

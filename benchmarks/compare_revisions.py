@@ -199,8 +199,8 @@ def export(rev: str, into: Path) -> Path:
 
 
 #: Runs a benchmark script (argv[1]) with its arguments, ``time.perf_counter`` replaced by the thread's CPU time.
-CPU_CLOCK = ("import runpy, sys, time; time.perf_counter = time.thread_time; sys.argv = sys.argv[1:]; "
-             "runpy.run_path(sys.argv[0], run_name='__main__')")
+CPU_CLOCK = ("import os, runpy, sys, time; time.perf_counter = time.thread_time; sys.argv = sys.argv[1:]; "
+             "sys.path.insert(0, os.path.dirname(sys.argv[0])); runpy.run_path(sys.argv[0], run_name='__main__')")
 
 
 def run(tree: Path, argv: list[str], env: dict | None = None) -> str:
