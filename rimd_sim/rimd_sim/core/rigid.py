@@ -54,13 +54,12 @@ HAMMER_MODES: tuple[int, ...] = ()
 
 
 @physics_inline
-def hammer_accel(th, om, mode, force, p, ac):
+def hammer_accel(s, c, om, mode, force, p, ac):
     """Inertial acceleration of the hammer's centre of mass, ``l (theta'' cos - theta'^2 sin) + a_c``.
 
-    From the cart's acceleration ``ac`` and the contact force ``force`` (counted in contact only), in the
-    order of operations of the sampled channel.
+    From ``(sin theta, cos theta)``, the cart's acceleration ``ac`` and the contact force ``force`` (counted
+    in contact only), in the order of operations of the sampled channel.
     """
-    s, c = sincos(th)
     lg = p[P_L]
     acc = -(ac / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
     if mode == CONTACT:
@@ -142,15 +141,17 @@ def force_free_is_zero(p):
 @physics_inline
 def sample(qty, mode, s, p, fs, w, alpha, sp, cp):
     """The force (clipped at 0) or the hammer's inertial acceleration (``Q_FORCE``, ``Q_ACC``)."""
-    th = s[0]
     om = s[1]
+    sn, c = sincos(s[0])
+    lg = p[P_L]
+    if qty == Q_FORCE:
+        if mode != CONTACT:
+            return 0.0
+        return max(law_force(lg * sn - p[P_GAP], lg * om * c, p, fs[F_VIMP]), 0.0)
     force = 0.0
     if mode == CONTACT:
-        d, dd = penetration(s, p)
-        force = law_force(d, dd, p, fs[F_VIMP])
-    if qty == Q_FORCE:
-        return max(force, 0.0) if mode == CONTACT else 0.0
-    return hammer_accel(th, om, mode, force, p, p[P_A0] * (alpha * cp - w * w * sp))
+        force = law_force(lg * sn - p[P_GAP], lg * om * c, p, fs[F_VIMP])
+    return hammer_accel(sn, c, om, mode, force, p, p[P_A0] * (alpha * cp - w * w * sp))
 
 
 @physics_inline

@@ -261,15 +261,21 @@ def rear_accel(xdd, u, up, force, mode, p):
 @physics_inline
 def sample(qty, mode, s, p, fs, w, alpha, sp, cp):
     """The force through the mount (``Q_FORCE``) or the rear mass's acceleration (``Q_ACC``)."""
+    if qty == Q_FORCE:
+        if p[P_MT] != 0.0:
+            return sensor_force(0.0, s, p)  # through the mount: the law's force is not needed
+        if mode != CONTACT:
+            return 0.0
+        d, dd = penetration(s, p)
+        return sensor_force(law_force(d, dd, p, fs[F_VIMP]), s, p)
+    om = s[1]
+    sn, c = sincos(s[0])
+    lg = p[P_L]
     force = 0.0
     if mode == CONTACT:
-        d, dd = penetration(s, p)
-        force = law_force(d, dd, p, fs[F_VIMP])
-    if qty == Q_FORCE:
-        if p[P_MT] != 0.0 or mode == CONTACT:
-            return sensor_force(force, s, p)
-        return 0.0
-    xdd = rigid.hammer_accel(s[0], s[1], mode, force, p, p[P_A0] * (alpha * cp - w * w * sp))
+        force = law_force(lg * sn + p[P_R2] * s[2] - s[4] - p[P_GAP], lg * om * c + p[P_R2] * s[3] - s[5], p,
+                          fs[F_VIMP])
+    xdd = rigid.hammer_accel(sn, c, om, mode, force, p, p[P_A0] * (alpha * cp - w * w * sp))
     return rear_accel(xdd, s[2], s[3], force, mode, p)
 
 
