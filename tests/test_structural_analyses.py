@@ -32,6 +32,8 @@ from rimd_sim.analysis.peterka import basins, peterka
 from rimd_sim.analysis.sweep import sweep
 from rimd_sim.core import load_config
 from rimd_sim.core.config import find_config_file
+from rimd_sim.core.ensemble import StopRule, run_cells
+from rimd_sim.core.model import model_for
 
 
 @pytest.fixture(scope="module")
@@ -74,6 +76,19 @@ def test_bifurcation_and_poincare_run_the_structural_model(structural, rigid, tm
     assert summary["class"] == "1/1" and summary["lyapunov_exponent_per_s"] < 0 and not summary["chaotic"]
     rows = np.loadtxt(out / "poincare.csv", delimiter=",", skiprows=1, usecols=4)
     np.testing.assert_allclose(rows, orbit.u, rtol=1e-12)
+
+
+def test_the_ensemble_is_the_fixed_length_run_of_the_two_mass_model(structural):
+    """Three cells of the preset at gap 0 (bands A and B, and the irregular 5.25 Hz) through the ensemble without
+    early stopping: the class and the final stroboscopic state of ``steady_orbit`` (``RigModel``), bit for bit."""
+    freqs = [3.75, 5.25, 7.25]
+    model = model_for(structural)
+    assert model.name == "two_mass"
+    res = run_cells(model.name, model.params(structural)[None, :], np.zeros(3, dtype=np.int64), freqs, np.zeros(3),
+                    np.zeros(3), StopRule(early=False, max_cycles=60 + 36, measure_cycles=36))
+    for i, f in enumerate(freqs):
+        orbit = steady_orbit(structural, f, transient_cycles=60, measure_cycles=36)
+        assert res.labels()[i] == orbit.label and tuple(res.final[i]) == orbit.final_state, f
 
 
 def test_peterka_runs_the_structural_model_through_the_ensemble(structural):
