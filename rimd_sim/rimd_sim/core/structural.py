@@ -284,11 +284,20 @@ def truth(mode, s, t, p, fs, xc, vc, ac):
     """``(x, v, a, delta, force)`` of the truth block.
 
     The centre of mass's position and velocity, the rear mass's acceleration, the law's force (not the mount's).
+    Written out, sin and cos of theta once (the terms of :func:`rates`, in their order of operations), as
+    :func:`rimd_sim.core.rigid.truth` is.
     """
-    d = rates(t, s[0], s[1], s[2], s[3], s[4], s[5], mode, p, fs)
-    x, v, a = rigid.inertial(s[0], s[1], d[1], p, xc, vc, ac)
-    delta, _ = penetration(s, p)
-    return x, v, rear_accel(a, s[2], s[3], d[2], mode, p), delta, max(d[2], 0.0)
+    th, om, u, up, sm, smp = s
+    sn, c = sincos(th)
+    lg = p[P_L]
+    xdd = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    delta = lg * sn + p[P_R2] * u - sm - p[P_GAP]
+    force = 0.0
+    if mode == CONTACT:
+        force = law_force(delta, lg * om * c + p[P_R2] * up - smp, p, fs[F_VIMP])
+        xdd -= force / (p[P_M] * lg)
+    xdd = lg * (xdd * c - om * om * sn) + ac
+    return lg * sn + xc, lg * om * c + vc, rear_accel(xdd, u, up, force, mode, p), delta, max(force, 0.0)
 
 
 # ---- parameters ------------------------------------------------------------------------------------------
