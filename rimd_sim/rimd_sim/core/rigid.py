@@ -4,8 +4,8 @@ Physics only, in the contract of :mod:`rimd_sim.core.kernel` (which builds the i
 the registry :data:`rimd_sim.core.model.MODELS` names it ``rigid``. No modes: the state is
 ``(theta, theta_dot, J)`` and a point is ``(theta, theta_dot)``.
 
-The sampled acceleration of the hammer's centre of mass (:func:`hammer_accel`) is shared with the two-mass model
-(:mod:`rimd_sim.core.structural`), whose hammer's centre of mass is this pendulum.
+The two-mass model (:mod:`rimd_sim.core.structural`) writes the same pendulum terms for its hammer's centre of
+mass: numba's inlining of a shared helper into the sampled quantities cost more per sample than the terms.
 """
 
 from __future__ import annotations
@@ -51,20 +51,6 @@ HAMMER_MODES: tuple[int, ...] = ()
 
 
 # ---- the pendulum's terms (every model's hammer) ---------------------------------------------------------
-
-
-@physics_inline
-def hammer_accel(s, c, om, mode, force, p, ac):
-    """Inertial acceleration of the hammer's centre of mass, ``l (theta'' cos - theta'^2 sin) + a_c``.
-
-    From ``(sin theta, cos theta)``, the cart's acceleration ``ac`` and the contact force ``force`` (counted
-    in contact only), in the order of operations of the sampled channel.
-    """
-    lg = p[P_L]
-    acc = -(ac / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
-    if mode == CONTACT:
-        acc -= force / (p[P_M] * lg)
-    return lg * (acc * c - om * om * s) + ac
 
 
 # ---- the contract of rimd_sim.core.kernel --------------------------------------------------------------
@@ -148,10 +134,12 @@ def sample(qty, mode, s, p, fs, w, alpha, sp, cp):
         if mode != CONTACT:
             return 0.0
         return max(law_force(lg * sn - p[P_GAP], lg * om * c, p, fs[F_VIMP]), 0.0)
-    force = 0.0
+    # The inertial acceleration x'' = l (theta'' cos - theta'^2 sin) + a_c, theta'' from the cart's a_c.
+    ac = p[P_A0] * (alpha * cp - w * w * sp)
+    acc = -(ac / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
     if mode == CONTACT:
-        force = law_force(lg * sn - p[P_GAP], lg * om * c, p, fs[F_VIMP])
-    return hammer_accel(sn, c, om, mode, force, p, p[P_A0] * (alpha * cp - w * w * sp))
+        acc -= law_force(lg * sn - p[P_GAP], lg * om * c, p, fs[F_VIMP]) / (p[P_M] * lg)
+    return lg * (acc * c - om * om * sn) + ac
 
 
 @physics_inline

@@ -275,8 +275,11 @@ def sample(qty, mode, s, p, fs, w, alpha, sp, cp):
     if mode == CONTACT:
         force = law_force(lg * sn + p[P_R2] * s[2] - s[4] - p[P_GAP], lg * om * c + p[P_R2] * s[3] - s[5], p,
                           fs[F_VIMP])
-    xdd = rigid.hammer_accel(sn, c, om, mode, force, p, p[P_A0] * (alpha * cp - w * w * sp))
-    return rear_accel(xdd, s[2], s[3], force, mode, p)
+    ac = p[P_A0] * (alpha * cp - w * w * sp)  # the centre of mass's x'', as rimd_sim.core.rigid.sample writes it
+    acc = -(ac / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if mode == CONTACT:
+        acc -= force / (p[P_M] * lg)
+    return rear_accel(lg * (acc * c - om * om * sn) + ac, s[2], s[3], force, mode, p)
 
 
 @physics_inline
