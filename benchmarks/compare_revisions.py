@@ -8,7 +8,8 @@ The other revision is exported with ``git archive REV`` into a temporary directo
 the repository). Each part runs both trees in separate interpreters, each importing its own ``rimd_sim``:
 
 * ``identity``: a probe runs the same public calls in both trees (``RigModel`` on the reference points of
-  ``tests/core/test_physics.py``, ``RigSimulator`` with commands and noise for both models, ``pulse``,
+  ``tests/core/test_physics.py``, ``RigSimulator`` with commands and noise for both models and with the
+  triggered capture, ``pulse``,
   ``steady_orbit``, ``sweep``, ``bifurcation``, ``peterka``, ``basins``, ``largest_lyapunov``) and prints a
   SHA-256 digest of every output (arrays by their bytes, impacts by their repr); the table says which differ.
 * ``compile``: with an empty numba cache (``NUMBA_CACHE_DIR``), the time of each first call (import, rigid
@@ -101,6 +102,13 @@ for label, cfg in (("rigid", rigid), ("two_mass", two)):
     name = f"{label} RigSimulator ramp, perturb, reset, noise 6 s"
     if want(name):
         out[name] = commands(at(cfg, 3.75), 6)
+name = "rigid RigSimulator with the triggered capture (1 MHz), 3 s"
+if want(name):
+    from rimd_sim.core.capture import CaptureConfig
+    sim = RigSimulator(at(rigid, 3.75), capture=CaptureConfig(enabled=True))
+    b = sim.advance(3)
+    out[name] = digest(b.impacts, [(c.number, c.trigger_index, c.force, c.acceleration) for c in b.captures],
+                       *[c.samples for c in b.channels.values()])
 for gap, f in [(0.0, 3.75), (0.0, 7.25), (1.0e-3, 6.5), (0.0, 9.0)]:
     name = f"two_mass RigSimulator gap {gap * 1e3:g} mm {f} Hz 8 s"
     if want(name):
