@@ -64,15 +64,19 @@ h, x, p)``                                  (from :func:`dense_theta`, :func:`de
 ``sensor_force(force, s, p)``               what the force sensor reads in contact when the law gives
                                             ``force`` (unclipped): the impact record's peak is taken on it
 ``force_free_is_zero(p)``                   the sensor reads exactly 0 outside contact
-``sample(qty, mode, s, p, fs, w, alpha,     a channel quantity (``Q_*``) from the point and the motor's angular
-sp, cp)``                                   frequency, acceleration and the sine and cosine of its phase
+``sample(qty, mode, s, p, fs, w, alpha,     the force or the acceleration (``Q_FORCE``, ``Q_ACC``; the driver
+sp, cp)``                                   samples the displacements) from the point and the motor's angular
+                                            frequency, acceleration and the sine and cosine of its phase
 ``truth(mode, s, t, p, fs, xc, vc, ac)``    ``(x, v, a, delta, force)`` of the truth block
 ``ring_amplitude(y, p)``                    a bound on how far the modes can move ``delta`` from the
                                             pendulum's ``l sin(theta) - gap`` from now on (free flight)
 ``ring_period(p, y)``                       the shortest period of a mode still ringing, or inf
 ``settle(y, p)``                            set modes that have died out to exactly 0 (start of a free step)
-``params(config)``                          (Python) the parameter vector: this module's ``P_*`` layout first
+``params(config)``                          (Python) the parameter vector: the ``P_*`` layout of this module
+                                            first, the model's own after it
 =========================================== =================================================================
+
+:func:`check_physics` checks a module against this table (``CONTRACT``, ``RING_HOOKS``) before a driver is built.
 """
 
 from __future__ import annotations
