@@ -46,8 +46,7 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.plots import plot_poincare
     from rimd_sim.core import RimdError, load_config
-    from rimd_sim.core.model import TRUTH_FIELDS
-    from rimd_sim.core.structural import make_model
+    from rimd_sim.core.model import TRUTH_FIELDS, RigModel
 
     if args.frequency is not None and args.ratio is not None:
         raise CommandError("give --frequency or --ratio, not both")
@@ -62,7 +61,7 @@ def main(args: argparse.Namespace) -> int:
         cfg = constant_frequency(base, f, args.theta0, args.theta_dot0).with_parameters(
             {"truth.sample_rate": max(1000.0, 200.0 * f)})
         print(f"rimd poincare: gap {args.gap_mm:g} mm, {f:.4g} Hz: simulating...", file=sys.stderr, flush=True)
-        model = make_model(cfg, channels=False, truth=True, strobe=True)
+        model = RigModel(cfg, channels=False, truth=True, strobe=True)
         n0 = args.transient_cycles
         model.advance(n0 / f)
         shown = model.advance((n0 + args.plot_cycles) / f)
