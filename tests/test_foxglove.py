@@ -119,8 +119,14 @@ def test_a_client_commands_the_motor_and_sets_parameters_with_the_nodes_answers(
         answer = call(5.0, ramp_rate=50.0)
         assert answer.success and answer.frequency_hz == 5.0, answer
         # The motor follows: the setpoint at once, the actual frequency within the 0.025 s ramp (1.25 Hz at 50 Hz/s).
-        client.wait_for(lambda r: any(state(d).frequency_setpoint == 5.0 and abs(state(d).frequency - 5.0) < 1e-9
-                                      for _, d in r.messages.get(subscription, ())), 15, "motor at 5 Hz")
+        try:
+            client.wait_for(lambda r: any(state(d).frequency_setpoint == 5.0 and abs(state(d).frequency - 5.0) < 1e-9
+                                          for _, d in r.messages.get(subscription, ())), 15, "motor at 5 Hz")
+        except AssertionError as failure:   # say what did arrive
+            states = [state(d) for _, d in client.received.messages.get(subscription, ())]
+            got = [(m.frequency_setpoint, m.frequency) for m in states]
+            raise AssertionError(f"{failure}: {len(got)} motor states on the subscription, the last {got[-3:]}; "
+                                 f"bridge: {bridge.tail()}") from None
         refused = call(-1.0)
         assert not refused.success and refused.frequency_hz == 5.0, refused
         assert refused.message == "frequency_hz = -1.0 refused: must be >= 0"   # the simulator's own words

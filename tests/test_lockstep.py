@@ -182,11 +182,20 @@ def test_a_killed_consumer_is_named_then_dropped_and_joins_again(rimd_rig, tmp_p
     assert _wait_for(lambda: "consumer 'daq' dropped" in rig.log(), 10.0) is not None, rig.log()[-2000:]
     rig.wait_until_simulated(3.0, timeout=60)
     # The consumer comes back under the same name: it joins where the run stands and loses nothing from there.
+    # The rig is paused meanwhile (running without it, it would pass any --until before the client has started).
+    assert rig.pause().success
     again = tmp_path / "again.pkl"
     until = rig.simulated() + 3.0
-    result = subprocess.run([sys.executable, DAQ, str(again), "--until", str(until), "--lockstep", "daq"],
-                            env=rig.env, capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stdout + result.stderr
+    client = subprocess.Popen([sys.executable, DAQ, str(again), "--until", str(until), "--lockstep", "daq",
+                               "--timeout", "60"], env=rig.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True)
+    try:
+        assert _wait_for(lambda: "returned after being dropped" in rig.log(), 60.0) is not None, rig.log()[-2000:]
+        assert rig.resume().success
+        output, _ = client.communicate(timeout=120)
+    finally:
+        client.kill()
+    assert client.returncode == 0, output
     joined = re.search(r"consumer 'daq' returned after being dropped at (\S+) s", rig.log())
     assert joined, rig.log()[-2000:]
     # From where it joined on, every block (a subscriber may also be handed an older block still in the writer's

@@ -280,7 +280,8 @@ def test_offline_bad_input_is_one_clear_line(tmp_path, case):
 def test_node_refuses_an_unknown_sink(ros_processes):
     bridge = ros_processes.start_node("rimd_rerun", "--ros-args", "-p", "sink:=carrier_pigeon")
     assert bridge.wait(30) == 1
-    assert "rimd_rerun: unknown sink 'carrier_pigeon': one of save, spawn, connect, serve_web" in bridge.output()
+    assert ("rimd_rerun: parameter 'sink' = 'carrier_pigeon' refused: must be one of: save, spawn, connect, "
+            "serve_web") in bridge.output()
     assert "Traceback" not in bridge.output()
 
 

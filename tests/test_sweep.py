@@ -38,8 +38,11 @@ def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
 
 
 def test_rimd_sweep_refuses_bad_ranges(tmp_path, capsys):
-    assert cli.main(["sweep", "--f-step", "0", "--out", str(tmp_path)]) == 2
-    assert "--f-step > 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        cli.main(["sweep", "--f-step", "0", "--out", str(tmp_path)])
+    assert usage.value.code == 2 and "--f-step 0 refused: must be > 0 Hz" in capsys.readouterr().err
+    assert cli.main(["sweep", "--f-min", "5", "--f-max", "3", "--out", str(tmp_path)]) == 1
+    assert "--f-min 5 > --f-max 3" in capsys.readouterr().err
     assert cli.main(["sweep", "--f-max", "50", "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert "parameter 'frequencies'" in err and "<= 12.0 Hz" in err  # the motor's configured maximum

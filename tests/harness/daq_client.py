@@ -150,10 +150,15 @@ def main() -> int:
         print(f"resume: {future.result().message if future.done() else 'no answer'}", flush=True)
     # Past --until by --margin of simulation time on every channel: what was still in flight at --until (delayed
     # blocks, the last fault events) has arrived by then. An observable condition, not a wall-clock wait.
-    while time.monotonic() < deadline and min(reached.values()) < args.until + args.margin:
+    # A lockstep consumer also stays until it has joined (a rig running free after dropping it may have passed
+    # --until before the reporter's first report).
+    while time.monotonic() < deadline and (min(reached.values()) < args.until + args.margin
+                                           or (reporter is not None and not reporter.joined)):
         rclpy.spin_once(node, timeout_sec=0.05)
-    if min(reached.values()) < args.until:
-        print(f"daq timeout: reached {reached}", flush=True)
+    if min(reached.values()) < args.until or (reporter is not None and not reporter.joined):
+        print(f"daq timeout: reached {reached}"
+              + ("" if reporter is None else f"; lockstep joined: {reporter.joined}, {reporter.reports} reports"),
+              flush=True)
         return 1
     if args.mode == "impacts":
         for s in summary.values():
