@@ -60,7 +60,7 @@ from rimd_sim.core.pacing import Go, Hold, Pacer, Wait
 from rimd_sim.core.params import build
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.nodes._params import declare, refuse_unnamed
-from rimd_sim.nodes._run import run_node, spin_until_stopped
+from rimd_sim.nodes._run import log_at, run_node, spin_until_stopped
 from rimd_sim.recording.cdr import SampleBlockEncoder
 
 __all__ = ["SimulatorNode", "main"]
@@ -344,14 +344,7 @@ class SimulatorNode(Node):
                                         f"{traceback.format_exc()}")
 
     def _log(self, level: str, line: str) -> None:
-        # One call site per severity: rclpy's logger refuses a call site that changes severity between calls.
-        logger = self.get_logger()
-        if level == "error":
-            logger.error(line)
-        elif level == "warning":
-            logger.warning(line)
-        else:
-            logger.info(line)
+        log_at(self, level, line)
 
     def _on_hold(self, hold: Hold) -> None:
         """Say which consumers hold the run and since when: once it has lasted HOLD_REPORT_S, then every REPEAT s."""
