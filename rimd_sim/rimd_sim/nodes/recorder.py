@@ -78,9 +78,9 @@ STAMPED_TYPES = HEADER_FIRST_TYPES
 
 NODE_NAME = "rimd_recorder"
 #: Period of the takes from the subscriptions (s): the messages of one period are taken at once.
-POLL_PERIOD_S = 0.02
+POLL_PERIOD_S = 0.01
 #: The writer thread sleeps this long after the first message of a batch, then writes all that came (s).
-WRITER_BATCH_S = 0.02
+WRITER_BATCH_S = 0.01
 #: While the writing is stopped by a write error, the log reminds of it this often (s).
 FAILURE_REMINDER_S = 30.0
 
