@@ -30,11 +30,12 @@ from pathlib import Path
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "rimd_sim"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from rimd_sim.core import SimConfig, load_config  # noqa: E402
+from bench_core import time_simulator  # noqa: E402
+
+from rimd_sim.core import RigModel, SimConfig, load_config  # noqa: E402
 from rimd_sim.core.config import find_config_file  # noqa: E402
-from rimd_sim.core.simulator import RigSimulator  # noqa: E402
-from rimd_sim.core.structural import make_model  # noqa: E402
 
 POINTS = [(0.0, 3.75), (0.0, 5.5), (0.0, 7.25), (1.0e-3, 3.0), (2.4e-3, 5.25)]
 
@@ -44,24 +45,12 @@ def at(cfg: SimConfig, gap: float, freq: float) -> SimConfig:
 
 
 def time_model(cfg: SimConfig, seconds: float, **kw) -> tuple[float, int]:
-    model = make_model(cfg, **kw)
+    model = RigModel(cfg, **kw)  # the model cfg selects (structure.model)
     model.advance(0.5)  # warm-up (JIT from cache)
     steps = model.stats["steps"]
     t = time.perf_counter()
     model.advance(0.5 + seconds)
     return time.perf_counter() - t, model.stats["steps"] - steps
-
-
-def time_simulator(cfg: SimConfig, seconds: float, block: Fraction) -> float:
-    sim = RigSimulator(cfg)
-    sim.advance(block)
-    t0 = time.perf_counter()
-    t = sim.time
-    end = t + Fraction(seconds)
-    while t < end:
-        t += block
-        sim.advance(t)
-    return time.perf_counter() - t0
 
 
 def main() -> None:

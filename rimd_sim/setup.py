@@ -63,5 +63,7 @@ setup(
             "rimd = rimd_sim.cli:main",
             *NODE_EXECUTABLES,
         ],
+        # The rimd_rig fixture for users' own test suites (rimd_sim/testing.py, docs/testing.md).
+        "pytest11": ["rimd_sim = rimd_sim.testing"],
     },
 )

@@ -19,8 +19,8 @@ import math
 import numpy as np
 from scipy.optimize import minimize
 
-from rimd_sim.analysis.pulse import make_model, pulse
-from rimd_sim.core import load_config
+from rimd_sim.analysis.pulse import pulse
+from rimd_sim.core import RigModel, load_config
 from rimd_sim.core.config import find_config_file
 
 TARGETS = {"F_A": 82.4, "F_B": 120.0, "ratio": 50.0 / 80.0}
@@ -33,7 +33,7 @@ RESTITUTION_TARGET = 0.2242
 def steady(cfg, f: float, seconds: float = 20.0):
     """Largest peak force and median impact velocity over the last 5 s of ``seconds`` from rest at ``f``."""
     c = cfg.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
-    impacts = make_model(c, channels=False, truth=False).advance(seconds).impacts
+    impacts = RigModel(c, channels=False, truth=False).advance(seconds).impacts
     last = [i for i in impacts if i.t_start > seconds - 5.0]
     return max(i.peak_force for i in last), float(np.median([i.impact_velocity for i in last]))
 

@@ -29,12 +29,11 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import importlib
 import json
 import math
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -64,6 +63,9 @@ VERB_PAGES = {
     "pulse": "docs/physics.md",
     "info": "docs/development.md",
     "faults": "docs/faults.md",
+    "crop": "docs/recording.md",
+    **{verb: "docs/rig.md" for verb in ("motor", "perturb", "inject", "pause", "resume", "reset", "clear-faults",
+                                         "status")},
 }
 #: Where a verb that is not in VERB_PAGES yet gets its options table.
 DEFAULT_VERB_PAGE = "docs/analyses.md"
@@ -124,19 +126,19 @@ def _type_name(value: Any) -> str:
 # ------------------------------------------------------------------------------------------------------------
 
 
-def _simulator_specs() -> tuple[dict[str, Any], dict[str, Any]]:
-    from rimd_sim.core.config import PARAMETERS, SimConfig
-
-    return PARAMETERS, SimConfig().to_parameters()
+def parameter_table(table: Mapping[str, Any], *, skip: Callable[[str], bool] = lambda name: False) -> str:
+    """A node's parameters as a table, from their one declaration (rimd_sim.core.params.Param)."""
+    rows = [[f"`{name}`", _value(p.default), _cell(p.kind), _cell(p.unit or "—"), _cell(p.rule),
+             _cell(p.description + (" (read at start)" if p.read_only else ""))]
+            for name, p in table.items() if not skip(name)]
+    return _table(["parameter", "default", "type", "unit", "rule", "description"], rows)
 
 
 def render_parameters() -> str:
     """The simulator's parameters other than the channels'."""
-    specs, defaults = _simulator_specs()
-    rows = [[f"`{name}`", _value(defaults.get(name)), _cell(getattr(spec, "kind", "")),
-             _cell(getattr(spec, "rule", "")), _cell(getattr(spec, "description", ""))]
-            for name, spec in specs.items() if not _channel_key(name)]
-    return _table(["parameter", "default", "type", "rule", "description"], rows)
+    from rimd_sim.core.config import PARAMETERS
+
+    return parameter_table(PARAMETERS, skip=lambda name: _channel_key(name) is not None)
 
 
 def _channel_key(name: str) -> tuple[str, str] | None:
@@ -148,7 +150,8 @@ def _channel_key(name: str) -> tuple[str, str] | None:
 
 def render_channel_parameters() -> str:
     """The channels' parameters: one row per field, the default of each channel in its own column."""
-    specs, defaults = _simulator_specs()
+    from rimd_sim.core.config import PARAMETERS as specs
+
     channels: list[str] = []
     fields: dict[str, Any] = {}
     for name, spec in specs.items():
@@ -161,72 +164,42 @@ def render_channel_parameters() -> str:
         fields.setdefault(field, spec)
     rows = []
     for field, spec in fields.items():
-        row = [f"`channels.<name>.{field}`", _cell(getattr(spec, "kind", "")), _cell(getattr(spec, "rule", "")),
-               _cell(getattr(spec, "description", ""))]
+        row = [f"`channels.<name>.{field}`", _cell(spec.kind), _cell(spec.unit or "—"), _cell(spec.rule),
+               _cell(spec.description)]
         for channel in channels:
             full = f"channels.{channel}.{field}"
-            row.append(_value(defaults.get(full)) if full in specs else "—")
+            row.append(_value(specs[full].default) if full in specs else "—")
         rows.append(row)
-    return _table(["parameter", "type", "rule", "description", *(f"`{c}`" for c in channels)], rows)
+    return _table(["parameter", "type", "unit", "rule", "description", *(f"`{c}`" for c in channels)], rows)
 
 
-def _probe_rule(rule: Callable[[Any], Any]) -> str:
-    """The words of a recorder rule (a predicate returning True or the rule), read by breaking it."""
-    for probe in (-math.inf, "", " ", "a/b", None):
-        try:
-            verdict = rule(probe)
-        except Exception:  # noqa: BLE001 - a probe of the wrong type: try the next one
-            continue
-        if isinstance(verdict, str):
-            return verdict
-    return ""
+def render_node_parameters() -> str:
+    """The simulator node's own parameters: start, fault scenario, capture, lockstep (read at start)."""
+    from rimd_sim.core.config import NODE_PARAMETERS
+
+    return parameter_table(NODE_PARAMETERS)
 
 
 def render_recorder_parameters() -> str:
     """The recorder's parameters (rimd_sim.recording.settings)."""
-    settings = importlib.import_module("rimd_sim.recording.settings")
-    rules = getattr(settings, "_RULES", {})
-    rows = []
-    for name, entry in settings.PARAMETERS.items():
-        default, description = entry[0], entry[1]
-        rule = _probe_rule(rules[name]) if name in rules else ""
-        if name in ("topics", "exclude"):
-            rule = rule or "regular expressions"
-        rows.append([f"`{name}`", _value(default), _type_name(default), _cell(rule or "—"), _cell(description)])
-    return _table(["parameter", "default", "type", "rule", "description"], rows)
+    from rimd_sim.recording.settings import PARAMETERS
 
-
-def render_fault_parameters() -> str:
-    """The simulator's capture and fault-scenario parameters (rimd_sim.core.capture, node-only)."""
-    capture = importlib.import_module("rimd_sim.core.capture")
-    rows = []
-    for name, (default, description) in capture.CAPTURE_PARAMETERS.items():
-        what, _, rule = description.partition("; ")
-        rows.append([f"`{name}`", _value(default), _type_name(default), _cell(rule or "true or false"), _cell(what)])
-    rows.append(["`faults`", "`['']`", "string[]", _cell("each entry 'channel=... kind=... start=... duration=... "
-                                                          "magnitude=...' ('' ignored), checked as the service does"),
-                 _cell("fault scenario scheduled at start")])
-    return _table(["parameter", "default", "type", "rule", "description"], rows)
+    return parameter_table(PARAMETERS)
 
 
 def render_replay_parameters() -> str:
-    """The replay's parameters (rimd_sim.nodes.replay)."""
-    replay = importlib.import_module("rimd_sim.nodes.replay")
-    rows = [[f"`{name}`", _value(entry[0]), _type_name(entry[0]), _cell(entry[1])]
-            for name, entry in replay.PARAMETERS.items()]
-    return _table(["parameter", "default", "type", "description"], rows)
+    """The replay's parameters (rimd_sim.recording.player.ReplaySettings)."""
+    from rimd_sim.core.params import parameters
+    from rimd_sim.recording.player import ReplaySettings
+
+    return parameter_table(parameters(ReplaySettings))
 
 
 def render_rerun_parameters() -> str:
-    """The Rerun bridge's parameters (rimd_sim.nodes.rerun_bridge)."""
-    bridge = importlib.import_module("rimd_sim.nodes.rerun_bridge")
-    rows = []
-    for name, entry in bridge.PARAMETERS.items():
-        default, description = entry[0], entry[1]
-        bounds = entry[2] if len(entry) > 2 else None
-        span = f"[{bounds[0]:g}, {bounds[1]:g}]" if bounds else "—"
-        rows.append([f"`{name}`", _value(default), _type_name(default), span, _cell(description)])
-    return _table(["parameter", "default", "type", "range", "description"], rows)
+    """The Rerun bridge's parameters (rimd_sim.viz.bridge_settings)."""
+    from rimd_sim.viz.bridge_settings import PARAMETERS
+
+    return parameter_table(PARAMETERS)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -301,10 +274,21 @@ def render_verbs() -> str:
     from rimd_sim import cli
 
     rows = []
+    by_module: dict[str, list[str]] = {}
     for verb in cli.VERBS:
         page = VERB_PAGES.get(verb.name, DEFAULT_VERB_PAGE)
         status = "" if verb.module else f" (not implemented yet: issue {verb.issue})"
-        rows.append([f"`rimd {verb.name}`", _cell(verb.summary + status), f"[{Path(page).stem}]({page})"])
+        if verb.module and verb.module in by_module:   # verbs of one module (pause, resume...) share a row
+            by_module[verb.module].append(verb.name)
+            continue
+        if verb.module:
+            by_module[verb.module] = [verb.name]
+        rows.append([verb.module or verb.name, _cell(verb.summary + status), f"[{Path(page).stem}]({page})"])
+    for row in rows:
+        names = by_module.get(row[0], [row[0]])
+        row[0] = " ".join(f"`rimd {n}`" for n in names)
+        if len(names) > 1:
+            row[1] = _cell("the rig's services " + ", ".join(n.replace("-", " ") for n in names) + ", in one line each")
     return _table(["command", "what it does", "documented in"], rows)
 
 
@@ -324,7 +308,7 @@ def sections() -> list[Section]:
         Section("recorder-parameters", "docs/recording.md", render_recorder_parameters, "Recorder parameters"),
         Section("replay-parameters", "docs/recording.md", render_replay_parameters, "Replay parameters"),
         Section("rerun-parameters", "docs/rerun.md", render_rerun_parameters, "Rerun bridge parameters"),
-        Section("fault-parameters", "docs/faults.md", render_fault_parameters, "Parameters"),
+        Section("node-parameters", "docs/configuration.md", render_node_parameters, "Simulator node parameters"),
     ]
     for verb in cli.VERBS:
         if verb.module is None:

@@ -36,6 +36,7 @@ def _reference_class(frequency: float) -> str:
     return f"{round(per_cycle * levels)}/{levels}" if per_cycle and np.isclose(per_cycle, 1.0) else "other"
 
 
+@pytest.mark.process
 def test_bifurcation_gap0_shows_the_doubling_window_up_and_down(tmp_path, capsys):
     """Default preset, gap 0: 1/1 at 4.8 Hz and the period-doubled 2/2 motion (alternating peaks) at 5.0 Hz in both
     sweeps, as the independent reference integrator finds from rest (the paper-model preset has the doubling from
@@ -101,12 +102,9 @@ def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
 @pytest.mark.parametrize(("argv", "message"), [
     (["bifurcation", "--f-min", "5", "--f-max", "3"], "--f-min 5 > --f-max 3"),
     (["bifurcation", "--direction", "sideways"], "--direction 'sideways' refused"),
-    (["bifurcation", "--gap-mm", "-1"], "--gap-mm -1.0 refused: must be >= 0"),
-    (["poincare", "--frequency", "-2"], "--frequency -2.0 refused"),
     (["poincare", "--frequency", "30"], "--frequency 30 refused: above motor.max_frequency"),
-    (["peterka", "--gap-min-mm", "-0.5"], "--gap-min-mm -0.5 refused"),
+    (["poincare", "--ratio", "20"], "--frequency 36.4 refused: above motor.max_frequency"),
     (["peterka", "--f-min", "8", "--f-max", "2"], "--f-min 8 > --f-max 2"),
-    (["basins", "--size", "1"], "--size 1 refused"),
     (["basins", "--theta-min", "0.1", "--theta-max", "0.0"], "theta_range"),
 ])
 def test_bad_input_gives_one_line_and_exit_1(tmp_path, capsys, argv, message):
@@ -114,6 +112,21 @@ def test_bad_input_gives_one_line_and_exit_1(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert status == 1
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["bifurcation", "--gap-mm", "-1"], "--gap-mm -1 refused: must be >= 0 and <= 50 mm"),
+    (["poincare", "--frequency", "-2"], "--frequency -2 refused: must be > 0 Hz"),
+    (["peterka", "--gap-min-mm", "-0.5"], "--gap-min-mm -0.5 refused: must be >= 0 and <= 50 mm"),
+    (["basins", "--size", "1"], "--size 1 refused: must be >= 2"),
+    (["sweep", "--workers", "0"], "--workers 0 refused: must be >= 1"),
+])
+def test_a_bad_number_is_a_usage_error_naming_the_option_in_its_unit(tmp_path, capsys, argv, message):
+    with pytest.raises(SystemExit) as usage:
+        cli.main([*argv, "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert usage.value.code == 2 and message in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_json_outputs_are_strict_json(tmp_path):

@@ -12,7 +12,8 @@ import pytest
 from rimd_sim import cli
 
 SPEC_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "sweep", "bifurcation", "peterka",
-              "poincare", "basins", "pulse", "faults", "rerun", "node", "info")
+              "poincare", "basins", "pulse", "faults", "motor", "perturb", "inject", "pause", "resume", "reset",
+              "clear-faults", "status", "rerun", "crop", "node", "info")   # SPEC sections 7, 9 and 10
 #: Verbs whose issue has not landed: none left (the Rerun verb, issue 6, was the last).
 NOT_IMPLEMENTED: dict[str, tuple[int, str]] = {}
 
@@ -24,11 +25,13 @@ def _rimd(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
                           stdin=subprocess.DEVNULL)
 
 
+@pytest.mark.process
 def test_rimd_on_path_is_the_ros2_run_executable():
     executable = Path(shutil.which("rimd") or "")
     assert executable.parent.parts[-2:] == ("lib", "rimd_sim"), executable
 
 
+@pytest.mark.process
 def test_help_lists_every_subcommand():
     result = _rimd("--help")
     assert result.returncode == 0, result.stderr
@@ -56,6 +59,7 @@ def test_not_implemented_verb_says_so_and_exits_2(monkeypatch, capsys):
     assert captured.err.strip() == "rimd teleport: not implemented yet (issue 99: Teleport)"
 
 
+@pytest.mark.process
 def test_a_failing_verb_is_one_line_and_status_1_through_the_console_script(tmp_path):
     missing = tmp_path / "missing.mcap"
     result = _rimd("rerun", str(missing), "--save", str(tmp_path / "out.rrd"))
@@ -75,6 +79,7 @@ def test_unknown_subcommand_is_a_usage_error():
     assert exit_info.value.code == 2
 
 
+@pytest.mark.process
 def test_info_reports_version_and_source_tree(repo_root):
     result = _rimd("info", "--json")
     assert result.returncode == 0, result.stderr
@@ -86,6 +91,7 @@ def test_info_reports_version_and_source_tree(repo_root):
     assert facts["rimd_msgs_location"] is not None
 
 
+@pytest.mark.process
 def test_info_plain_text():
     result = _rimd("info")
     assert result.returncode == 0, result.stderr
@@ -99,3 +105,46 @@ def test_command_error_prints_one_line_and_exits_1(monkeypatch, capsys):
     monkeypatch.setattr("rimd_sim.verbs.info.main", failing_main)
     assert cli.main(["info"]) == 1
     assert capsys.readouterr().err == "rimd info: gap must be >= 0 m, got -1\n"
+
+
+def _numeric_options():
+    """Every option of every verb that takes a number: (verb, option strings, its argparse type)."""
+    parser = cli.build_parser()
+    subparsers = next(a for a in parser._actions if isinstance(a, __import__("argparse")._SubParsersAction))
+    for verb, sub in subparsers.choices.items():
+        for action in sub._actions:
+            if action.type in (float, int) or hasattr(action.type, "rule"):
+                yield verb, action.option_strings or [action.metavar or action.dest], action.type
+
+
+def test_every_numeric_option_of_every_verb_is_checked_and_names_itself_in_its_refusal():
+    """Issue 22: `rimd rig --duration -5` ran until killed; `--gap-mm 2400` answered in metres. Every number a
+    verb takes is converted by `cli.number` (finite, within its bounds, refused naming the option as typed)."""
+    import argparse
+
+    options = list(_numeric_options())
+    bare = [(verb, names) for verb, names, kind in options if kind in (float, int)]
+    assert not bare, f"options taking a bare float/int (no bounds, nan and inf accepted): {bare}"
+    assert len(options) > 60
+    for verb, names, kind in options:
+        for text in ("nan", "inf", "-inf", "abc"):
+            with pytest.raises(argparse.ArgumentTypeError) as refused:
+                kind(text)
+            message = str(refused.value)
+            assert message.startswith(f"{kind.option} ") and " refused: must be " in message, (verb, names, message)
+        assert kind.option in names, (verb, names, kind.option)   # the refusal names the option as typed
+
+
+@pytest.mark.parametrize(("argv", "refusal"), [
+    (["rig", "--duration", "-5"], "--duration -5 refused: must be >= 0 s"),
+    (["poincare", "--gap-mm", "2400"], "--gap-mm 2400 refused: must be >= 0 and <= 50 mm"),
+    (["peterka", "--gap-max-mm", "-1"], "--gap-max-mm -1 refused: must be >= 0 and <= 50 mm"),
+    (["sweep", "--cycles", "1.5"], "--cycles '1.5' refused: must be an integer"),
+    (["experiment", "--dwell", "0"], "--dwell 0 refused: must be > 0 s"),
+    (["pulse", "--velocity", "11"], "--velocity 11 refused: must be > 0 and <= 10 m/s"),
+])
+def test_a_bad_number_is_refused_before_anything_runs_naming_the_option_in_its_unit(argv, refusal, capsys):
+    with pytest.raises(SystemExit) as usage:
+        cli.main(argv)
+    assert usage.value.code == 2
+    assert refusal in capsys.readouterr().err

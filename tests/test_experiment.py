@@ -1,59 +1,50 @@
 """``rimd experiment`` on the running rig, then ``rimd analyze``: real simulator, recorder and CLI processes.
 
-The simulator runs at 8x real time. The experiment is a continued upward stepped sweep with ramps, so the
-reference is the core's ``sweep(..., direction="up")`` from the same starting frequency with the same ramp
-rate; its steady peaks are compared with what ``rimd analyze`` reads from the recording alone.
+The rig runs in lockstep (the ``rimd_rig`` fixture) as fast as its consumer, the experiment's own recorder,
+allows: nothing is lost and no wall-clock pacing is waited for. It starts paused and is resumed once the
+experiment has scheduled its steps, so the whole run, from rest at t = 0, is the same however loaded the
+machine is. The experiment is a continued upward stepped sweep with ramps, so the reference is the core's
+``sweep(..., direction="up")`` from the same starting frequency with the same ramp rate; its steady peaks are
+compared with what ``rimd analyze`` reads from the recording alone.
 """
 
 from __future__ import annotations
 
 import csv
 import shutil
-import signal
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from harness.outputs import read_json
-from harness.ros import call_service, spin_until
 from rimd_sim.analysis.sweep import sweep
-from rimd_sim.core import SimConfig
+from rimd_sim.experiment import RECORDER_NODE
 
 pytestmark = pytest.mark.ros
 
-RTF = "8.0"
 
-
-def _rimd(ros_processes, *args: str, name: str):  # noqa: ANN001
+def _rimd(ros_processes, rig, *args: str, name: str):  # noqa: ANN001
     executable = shutil.which("rimd")
     assert executable is not None, "rimd is not on PATH: source env.sh"
-    return ros_processes.start([executable, *args], name=name)
+    return ros_processes.start([executable, *args], name=name, env=rig.env)
 
 
-#: Stamp (s) of the first step. The rig starts paused and is resumed once the experiment has scheduled its
-#: steps, so the whole run, from rest at t = 0, is the same however loaded the machine is.
+#: Stamp (s) of the first step.
 START = 10.0
 
 
-def _simulator(ros_processes, gap: float, f0: float):  # noqa: ANN001
-    sim = ros_processes.start_node(
-        "rimd_simulator", "--ros-args", "-p", f"real_time_factor:={RTF}", "-p", f"gap:={gap}",
-        "-p", f"motor.initial_frequency:={f0}", "-p", f"motor.initial_setpoint:={f0}", "-p", "start_paused:=true")
-    sim.wait_for_output(r"rig ready", timeout=60)
-    return sim
+def _rig(rimd_rig, gap: float, f0: float, *, experiment_records: bool):  # noqa: ANN001
+    """A paused rig in lockstep with the experiment's recorder (``experiment_records``), else the rig's own."""
+    return rimd_rig(consumers=[RECORDER_NODE] if experiment_records else [], record=not experiment_records,
+                    parameters={"gap": gap, "motor.initial_frequency": f0, "motor.initial_setpoint": f0,
+                                "start_paused": True})
 
 
-def _resume_when_scheduled(experiment, ros_executor) -> None:  # noqa: ANN001
+def _resume_when_scheduled(experiment, rig) -> None:  # noqa: ANN001
     """Resume the paused rig once the experiment says its steps are scheduled."""
-    import rclpy
-
-    from harness.rig import trigger
-
     experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
-    node = rclpy.create_node("resumer", context=ros_executor.context)
-    ros_executor.add_node(node)
-    assert trigger(ros_executor, node, "/rig/resume").success
+    assert rig.resume().success
 
 
 def _stamp(t) -> int:  # noqa: ANN001 - builtin_interfaces/Time
@@ -65,7 +56,7 @@ def _steps(out: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def _assert_recording_is_the_core_run(recording: Path, gap: float, freqs: list[float], ramp: float,
+def _assert_recording_is_the_core_run(recording: Path, config, freqs: list[float], ramp: float,  # noqa: ANN001
                                       starts_ns: list[int]) -> None:
     """The recorded force channel and events equal the core's offline run of the schedule, sample for sample."""
     from fractions import Fraction
@@ -75,10 +66,8 @@ def _assert_recording_is_the_core_run(recording: Path, gap: float, freqs: list[f
 
     data = rec.load(recording)
     force = data.channels[rec.FORCE]
-    config = SimConfig().with_parameters({"gap": gap, "motor.initial_frequency": freqs[0],
-                                          "motor.initial_setpoint": freqs[0]})
     core = RigSimulator(config, truth=False)
-    for f, start in zip(freqs, starts_ns, strict=True):   # at 8x the stamps are the simulation time
+    for f, start in zip(freqs, starts_ns, strict=True):   # in lockstep the stamps are the simulation time
         core.set_motor_frequency(f, ramp, at=Fraction(start, 10**9))
     rate = Fraction(20000)
     last = int(force.index[-1])
@@ -96,17 +85,19 @@ def _assert_recording_is_the_core_run(recording: Path, gap: float, freqs: list[f
     assert len(recorded) > 10 and all(peaks[i] == p for i, p in recorded.items()), "the events are not the core's"
 
 
-def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_executor, tmp_path):
+def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, rimd_rig, tmp_path):
     freqs = [3.0, 3.5, 3.75, 4.0]
     dwell, settle, ramp = 6.0, 2.0, 2.0
-    simulator = _simulator(ros_processes, 0.0, freqs[0])
+    rig = _rig(rimd_rig, 0.0, freqs[0], experiment_records=True)
     out = tmp_path / "exp"
-    experiment = _rimd(ros_processes, "experiment", "--frequencies", *map(str, freqs), "--dwell", str(dwell),
+    experiment = _rimd(ros_processes, rig, "experiment", "--frequencies", *map(str, freqs), "--dwell", str(dwell),
                        "--settle", str(settle), "--ramp-rate", str(ramp), "--out", str(out), "--start", str(START),
                        name="experiment")
-    _resume_when_scheduled(experiment, ros_executor)
-    assert experiment.wait(90) == 0, experiment.tail()
+    _resume_when_scheduled(experiment, rig)
+    assert experiment.wait(120) == 0, experiment.tail()
     assert "step 4/4" in experiment.output()   # progress shown
+    # Its recorder left the lockstep cleanly when it stopped: the rig goes on without waiting for it.
+    assert f"consumer '{RECORDER_NODE}' left at" in rig.log(), rig.log()[-2000:]
 
     summary = read_json(out / "summary.json")
     assert summary["loss"]["complete"] and not summary["loss"]["lost_samples"]
@@ -114,7 +105,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     assert [float(r["frequency_hz"]) for r in rows][-len(freqs):] == freqs
     rows = rows[-len(freqs):]
     # The reference: the core's continued upward sweep from the same start, same ramp rate.
-    ref = sweep(SimConfig().with_parameters({"gap": 0.0}), freqs, "up", cycles=18, measure_cycles=8, ramp_rate=ramp)
+    ref = sweep(rig.config, freqs, "up", cycles=18, measure_cycles=8, ramp_rate=ramp)
     report = []
     for row, point in zip(rows, ref.points, strict=True):
         events, channel = float(row["peak_force_events_n"]), float(row["peak_force_channel_n"])
@@ -151,32 +142,30 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
     starts = [s["scheduled_stamp_ns"] for s in schedule]
     assert [s["effective_stamp_ns"] for s in schedule] == starts and starts[0] == round(START * 1e9)
     assert {b - a for a, b in zip(starts, starts[1:], strict=False)} == {round(dwell * 1e9)}
-    _assert_recording_is_the_core_run(out / "recording", 0.0, freqs, ramp, starts)
+    _assert_recording_is_the_core_run(out / "recording", rig.config, freqs, ramp, starts)
 
     # A setpoint above motor.max_frequency: one clear line naming it, exit 1, the rig keeps running.
-    refused = _rimd(ros_processes, "experiment", "--no-record", "--frequencies", "50", "--dwell", "1",
+    refused = _rimd(ros_processes, rig, "experiment", "--no-record", "--frequencies", "50", "--dwell", "1",
                     "--settle", "0.2", "--out", str(tmp_path / "refused"), name="refused")
     assert refused.wait(60) == 1
     error = refused.output().strip().splitlines()[-1]
     assert error.startswith("rimd experiment: setpoint 50 Hz") and "refused" in error
     assert "Traceback" not in refused.output()
-    import rclpy
-
     from rimd_msgs.msg import MotorState
-    node = rclpy.create_node("probe", context=ros_executor.context)
-    ros_executor.add_node(node)
+
     states = []
-    node.create_subscription(MotorState, "/rig/motor/state", states.append, 10)
-    assert spin_until(ros_executor, lambda: len(states) >= 5, 20)
-    assert simulator.is_running and states[-1].frequency_setpoint == 4.0
+    client = rig.client()
+    client.node.create_subscription(MotorState, "/rig/motor/state", states.append, 10)
+    assert client.spin_until(lambda: len(states) >= 5, 20), "the rig stopped publishing after the refusal"
+    assert rig.rig.failed() is None and states[-1].frequency_setpoint == 4.0
 
     # The same recording cut at 60 %: analysed as far as it is valid, the loss reported.
     (mcap,) = (out / "recording").glob("*.mcap")
     cut = tmp_path / "cut.mcap"
     data = mcap.read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.6)])
-    analysis = _rimd(ros_processes, "analyze", str(cut), "--out", str(tmp_path / "cut_out"), "--settle", str(settle),
-                     name="analyze_cut")
+    analysis = _rimd(ros_processes, rig, "analyze", str(cut), "--out", str(tmp_path / "cut_out"), "--settle",
+                     str(settle), name="analyze_cut")
     assert analysis.wait(60) == 0, analysis.tail()
     cut_summary = read_json(tmp_path / "cut_out" / "summary.json")
     assert not cut_summary["loss"]["complete"]
@@ -192,67 +181,48 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, ros_exe
         assert float(cut3["peak_force_events_n"]) <= float(full3["peak_force_events_n"])
 
 
-def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, ros_executor, tmp_path):
+def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, rimd_rig, tmp_path):
     from rimd_msgs.msg import ImpactEvent
-    from rimd_msgs.srv import Perturb
 
-    _simulator(ros_processes, 0.0024, 2.5)
+    rig = _rig(rimd_rig, 0.0024, 2.5, experiment_records=False)   # the rig's recorder, in lockstep
     out = tmp_path / "exp"
-    recorder = ros_processes.start_node("rimd_recorder", "--ros-args", "-p", f"output_dir:={out / 'rec'}",
-                                        "-p", "topics:=['/rig/.*']")
-    recorder.wait_for_output(r"recording /rig/impact/events", timeout=30)
-    experiment = _rimd(ros_processes, "experiment", "--no-record", "--frequencies", "2.5", "3.0", "4.0", "5.25",
-                       "--dwell", "6", "--settle", "2", "--ramp-rate", "2", "--out", str(out), "--start", str(START),
-                       name="experiment")
-    _resume_when_scheduled(experiment, ros_executor)
-    assert experiment.wait(90) == 0, experiment.tail()
-
-    import rclpy
-    from builtin_interfaces.msg import Time
-    from diagnostic_msgs.msg import DiagnosticArray
-
-    node = rclpy.create_node("probe", context=ros_executor.context)
-    ros_executor.add_node(node)
     events = []
-    node.create_subscription(ImpactEvent, "/rig/impact/events", events.append, 100)
-    recorded_to = {}   # the recorder's /diagnostics: how far each topic has reached it
-
-    def on_diagnostics(msg) -> None:  # noqa: ANN001
-        for status in msg.status:
-            if "rimd_recorder" in status.name:
-                recorded_to.update({kv.key: int(kv.value) for kv in status.values if kv.key.endswith("last_stamp_ns")})
-
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
-    # A kick at an exact stamp, at 5.25 Hz: the whole run is deterministic (the rig started paused, from rest,
-    # and every command names its stamp). Measured with the core, a kick of +0.1 m/s lands on band B from
-    # t = 56, 60 or 64 s and falls off again from 58 or 62 s: the phase decides, so the stamp is fixed.
+    client = rig.client()
+    client.node.create_subscription(ImpactEvent, "/rig/impact/events", events.append, 10_000)
+    experiment = _rimd(ros_processes, rig, "experiment", "--no-record", "--frequencies", "2.5", "3.0", "4.0",
+                       "5.25", "--dwell", "6", "--settle", "2", "--ramp-rate", "2", "--out", str(out), "--start",
+                       str(START), name="experiment")
+    experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
+    # A kick at an exact stamp, at 5.25 Hz, asked before the rig moves: the whole run is deterministic (from rest,
+    # every command names its stamp). Measured with the core, a kick of +0.1 m/s lands on band B from t = 56, 60
+    # or 64 s and falls off again from 58 or 62 s: the phase decides, so the stamp is fixed.
     kick_ns = 60 * 10**9
-    client = node.create_client(Perturb, "/rig/perturb")
-    response = call_service(ros_executor, node, client, Perturb.Request(velocity=0.1, start_stamp=Time(sec=60)), 10)
+    response = rig.perturb(0.1, at=60.0)
     assert response.success, response.message
     assert _stamp(response.effective_stamp) == kick_ns
+    assert rig.resume().success
+    assert experiment.wait(120) == 0, experiment.tail()
 
     def after_kick() -> list:
         return [e for e in events if _stamp(e.header.stamp) >= kick_ns]
 
-    assert spin_until(ros_executor, lambda: len(after_kick()) >= 20, 60), "the kick did not put the rig on band B"
-    before = [e for e in events if _stamp(e.header.stamp) < kick_ns]
+    assert client.spin_until(lambda: len(after_kick()) >= 20, 120), "the kick did not put the rig on band B"
+    last_step = read_json(out / "experiment.json")["steps"][-1]["effective_stamp_ns"]
+    before = [e for e in events if last_step <= _stamp(e.header.stamp) < kick_ns]
     assert before == [], "the upward sweep should stay on the non-impacting motion at 5.25 Hz until the kick"
     steady = after_kick()[-12:]
     gaps = {b.cycle_index - a.cycle_index for a, b in zip(steady, steady[1:], strict=False)}
     assert gaps == {2}, f"band B: one impact every two cycles, got cycle gaps {gaps}"
-    last = _stamp(after_kick()[19].header.stamp)
-    assert spin_until(ros_executor, lambda: recorded_to.get("/rig/impact/events last_stamp_ns", 0) >= last, 60)
-    recorder.send_signal(signal.SIGINT)
-    assert recorder.wait(30) == 0
+    assert rig.stop() == 0   # the recorder finishes its file with everything the rig published
 
-    analysis = _rimd(ros_processes, "analyze", str(out / "rec"), "--out", str(out / "an"), "--settle", "2",
+    analysis = _rimd(ros_processes, rig, "analyze", str(rig.recording), "--out", str(out / "an"), "--settle", "2",
                      name="analyze")
     assert analysis.wait(60) == 0, analysis.tail()
     rows = {float(r["frequency_hz"]): r for r in _steps(out / "an")}
     assert float(rows[2.5]["impacts_per_cycle_events"]) > 0.9                 # band A: impacting
     assert int(rows[3.0]["impacts_events"]) == int(rows[4.0]["impacts_events"]) == 0   # fell off, stays off
     summary = read_json(out / "an" / "summary.json")
+    assert summary["loss"]["complete"] and not summary["loss"]["lost_samples"]   # lockstep: nothing lost
     t_kick = (kick_ns - summary["origin_ns"]) * 1e-9
     with open(out / "an" / "impact_events.csv") as fh:
         recorded = [float(r["time_s"]) for r in csv.DictReader(fh)]

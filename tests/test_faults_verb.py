@@ -22,16 +22,18 @@ def test_faults_verb_schedules_a_scenario_and_the_rig_publishes_it(tmp_path, ros
     sim = ros_processes.start_node("rimd_simulator", "--ros-args", "-p", "real_time_factor:=1.0")
     sim.wait_for_output(r"rig ready", timeout=90)
     scenario = tmp_path / "scenario.yaml"
+    # `after`: relative to when the rig takes the request, for a rig that has been up a while (an absolute start
+    # written for a fresh rig would be refused as past).
     scenario.write_text("faults:\n"
                         "  - {channel: impact_force, kind: offset, start: 0, duration: 0.2, magnitude: 2.5}\n"
-                        "  - {channel: cart_displacement, kind: dropout, start: 0, duration: 0.1}\n")
+                        "  - {channel: cart_displacement, kind: dropout, after: 0.5, duration: 0.1}\n")
     done = _rimd("faults", str(scenario), "--clear", env=ros_env)
     assert done.returncode == 0, done.stderr
     assert "faults[0]: fault 0: offset on impact_force" in done.stdout
     assert "faults[1]: fault 1: dropout on cart_displacement" in done.stdout
     assert "2 fault(s) scheduled" in done.stdout
-    sim.wait_for_output(r"fault 0 end at t = .*duration elapsed", timeout=30)
-    sim.wait_for_output(r"fault 1 end at t = .*duration elapsed", timeout=30)
+    sim.wait_for_output(r"fault 0 end at simulation time .*duration elapsed", timeout=30)
+    sim.wait_for_output(r"fault 1 end at simulation time .*duration elapsed", timeout=30)
 
     # refused by the rig: one line naming the entry, the field and the rule; the rig keeps running
     bad = tmp_path / "bad.yaml"
@@ -48,17 +50,19 @@ def test_faults_verb_schedules_a_scenario_and_the_rig_publishes_it(tmp_path, ros
     ("faults:\n  - {channel: impact_force, start: 1}\n", "faults[0].kind missing"),
     ("faults:\n  - {channel: impact_force, kind: stuck, start: 1, colour: red}\n", "faults[0].colour refused"),
     ("faults:\n  - {channel: impact_force, kind: stuck, start: soon}\n", "faults[0].start = 'soon' refused"),
-    ("faults: [\n", "is not valid YAML"),
+    ("faults:\n  - {channel: impact_force, kind: stuck, start: 1, after: 2}\n", "give start"),
+    ("faults: [\n", "is not valid YAML: {path}:2:1: expected the node content"),
+    ("faults:\n  - a: b: c\n", "is not valid YAML: {path}:2:9: mapping values are not allowed here"),
 ])
 def test_faults_verb_refuses_a_malformed_scenario_before_sending_anything(tmp_path, text, expected):
-    from rimd_sim.cli import CommandError
+    from rimd_sim.core.errors import RimdError
     from rimd_sim.verbs.faults import load_scenario
 
     path = tmp_path / "s.yaml"
     path.write_text(text)
-    with pytest.raises(CommandError) as refused:
+    with pytest.raises(RimdError) as refused:
         load_scenario(path)
-    assert expected in str(refused.value) and "\n" not in str(refused.value)
+    assert expected.format(path=path) in str(refused.value) and "\n" not in str(refused.value), str(refused.value)
 
 
 def test_faults_verb_exits_1_with_one_line_for_a_malformed_file(tmp_path):

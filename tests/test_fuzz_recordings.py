@@ -516,6 +516,7 @@ def test_verbs_on_a_foreign_type(sources, work):
             assert ", 0 impacts," in stdout
 
 
+@pytest.mark.process
 def test_verbs_as_processes(sources, work):
     """The console script itself, on a few damaged files: exit status, stderr, no traceback."""
     source = sources["rig"]
@@ -542,10 +543,14 @@ def test_verbs_as_processes(sources, work):
 
 @pytest.mark.ros
 @pytest.mark.timeout(180)
-def test_replay_of_damaged_recordings(sources, ros_processes, tmp_path):
+def test_replay_of_damaged_recordings(sources, ros_processes, ros_executor, tmp_path):
     """A truncated chunk, a flipped bit in the summary, a chunk length of 2**63, nothing readable: the node
-    publishes exactly what the reader reads and says what was damaged, or exits 1 with one line. A valid file
-    with a foreign type: refused naming it, or (``skip_unknown``) the other topics replayed."""
+    publishes exactly what the reader reads (a subscriber receives it, byte for byte, in order) and says what was
+    damaged, or exits 1 with one line. A valid file with a foreign type: refused naming it, or (``skip_unknown``)
+    the other topics replayed."""
+    from harness.rig import RIG_TOPICS, RawCollector
+    from harness.ros import spin_until
+
     source = sources["rig"]
     middle = source.chunks[len(source.chunks) // 2]
     index = next(i for i, r in enumerate(source.records) if r[0] == middle[0])
@@ -556,13 +561,12 @@ def test_replay_of_damaged_recordings(sources, ros_processes, tmp_path):
         "length.mcap": set_length(source, index, "huge", 0),
         "nothing.mcap": source.data[:source.chunks[0][0]],
     }
-    nodes = {}
     for name, damaged in cases.items():
-        path = tmp_path / name
-        path.write_bytes(damaged)
-        CASES["replay"] += 1
-        nodes[name] = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={path}",
-                                               "-p", "rate:=20.0", name=name)
+        (tmp_path / name).write_bytes(damaged)
+    # First the runs that publish no rig topic to a subscriber of this test, in parallel.
+    nodes = {"nothing.mcap": ros_processes.start_node("rimd_replay", "--ros-args", "-p",
+                                                      f"file:={tmp_path / 'nothing.mcap'}", name="nothing.mcap")}
+    CASES["replay"] += 1
     gauge = sources["gauge"]
     for skip in ("false", "true"):
         CASES["replay"] += 1
@@ -576,20 +580,36 @@ def test_replay_of_damaged_recordings(sources, ros_processes, tmp_path):
     assert skipped.wait(90) == 0 and "Traceback" not in skipped.output()
     known = sum(topic != "/lab/gauge" for topic, _, _ in gauge.messages)
     assert f"replay finished: {known} messages published" in skipped.output(), skipped.output()
-    for name, node in nodes.items():
-        status = node.wait(90)
-        output = node.output()
-        assert "Traceback" not in output, output
+    nothing = nodes.pop("nothing.mcap")
+    assert nothing.wait(90) == 1 and "Traceback" not in nothing.output()
+    last = nothing.output().strip().splitlines()[-1]
+    assert last.startswith("rimd_replay: nothing to replay") and "the recording is damaged" in last, last
+    # Then each damaged file with messages, one at a time, to a subscriber of every topic it has: what it
+    # receives is what the reader reads, byte for byte and in order.
+    for name in ("cut.mcap", "summary.mcap", "length.mcap"):
+        CASES["replay"] += 1
         recording = open_recording(tmp_path / name)
+        read: dict[str, list[bytes]] = {}
+        for msg in recording.messages():
+            read.setdefault(msg.topic, []).append(msg.data)
+        assert recording.message_count and set(read) <= set(RIG_TOPICS), (name, set(read))
+        collector = RawCollector(ros_executor, topics={t: RIG_TOPICS[t] for t in read},
+                                 name=f"collector_{name.split('.')[0]}")
+        node = nodes[name] = ros_processes.start_node(
+            "rimd_replay", "--ros-args", "-p", f"file:={tmp_path / name}", "-p", "rate:=20.0",
+            "-p", "wait_for_subscribers:=1", name=name)
+        count = recording.message_count
+        total = lambda c=collector: sum(len(v) for v in c.messages.values())  # noqa: E731
+        assert spin_until(ros_executor, lambda n=node, t=total, k=count: n.returncode is not None and t() >= k, 60), (
+            name, total(), node.tail())
+        # DDS delivers a serialized message padded with zeros to a multiple of 4 bytes (the files were written
+        # by mcap_ros2 unpadded; a recording of rimd_recorder holds what DDS delivered, padding included).
+        padded = {t: [d + b"\0" * (-len(d) % 4) for d in data] for t, data in read.items()}
+        assert collector.messages == padded, name
+        output = node.output()
+        assert node.returncode == 0 and "Traceback" not in output, output
         report = recording.reports[0]
-        assert not report.complete
-        if recording.message_count:
-            assert status == 0, output
-            assert report.describe() in output
-            assert f"replay finished: {recording.message_count} messages published" in output, output
-        else:
-            assert status == 1, output
-            last = output.strip().splitlines()[-1]
-            assert last.startswith("rimd_replay: nothing to replay") and "the recording is damaged" in last, last
+        assert not report.complete and report.describe() in output
+        assert f"replay finished: {recording.message_count} messages published" in output, output
     assert "the summary section is damaged" in nodes["summary.mcap"].output()
     assert "runs past the end of the file" in nodes["length.mcap"].output()

@@ -31,7 +31,7 @@ from rimd_sim import cli
 from rimd_sim.analysis.dynamics import steady_orbit
 from rimd_sim.core import load_config
 from rimd_sim.core.ensemble import StopRule, run_cells
-from rimd_sim.core.model import _params_vector
+from rimd_sim.core.model import model_for
 
 SRC = str(Path(rimd_sim.__file__).resolve().parent.parent)
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -39,35 +39,41 @@ DASK = str(Path(sys.executable).with_name("dask"))
 
 def test_ensemble_without_early_stop_is_the_fixed_length_run():
     """Nine cells (three gaps x three frequencies, from rest and from a kick): same class and bit-identical
-    final stroboscopic state as ``steady_orbit`` with ``RigModel``."""
+    final stroboscopic state as ``steady_orbit`` with ``RigModel``. A cell that ran to the cap reports the cap
+    + 1 cycles (the ensemble's documented count: the points of cycles 0 .. cap were used)."""
     base = load_config(None)
     gaps, freqs = [0.0, 1e-3, 2.4e-3], [3.75, 5.0, 7.25]
     cfgs = [base.with_parameters({"gap": g}) for g in gaps]
-    params = np.array([_params_vector(c.rig, c) for c in cfgs])
+    params = np.array([model_for(c).params(c) for c in cfgs])
     gi = np.repeat(np.arange(3), 3)
     ff = np.tile(freqs, 3)
+    rule = StopRule(early=False, max_cycles=60 + 36, measure_cycles=36)
     for theta_dot0 in (0.0, 0.8):
-        res = run_cells(params, gi, ff, np.zeros(9), np.full(9, theta_dot0),
-                        StopRule(early=False, max_cycles=60 + 36, measure_cycles=36))
+        res = run_cells("rigid", params, gi, ff, np.zeros(9), np.full(9, theta_dot0), rule)
         for i, label in enumerate(res.labels()):
             orbit = steady_orbit(cfgs[gi[i]], ff[i], theta_dot0=theta_dot0, transient_cycles=60, measure_cycles=36)
             assert label == orbit.label, (gaps[gi[i]], ff[i])
             assert tuple(res.final[i]) == orbit.final_state
-            assert res.cycles[i] == 97  # ran to the cap
+            assert res.cycles[i] == rule.max_cycles + 1  # ran to the cap
 
 
 def test_early_stop_stops_settled_motions_early_and_runs_chaos_to_the_cap():
-    """Gap 0: 3.75 Hz (1/1) stops at the first chance; 8.5 Hz (non-periodic) runs to the cap."""
+    """Gap 0: 3.75 Hz (1/1) stops at the first chance (the default rule: after at least 30 cycles, a period-1
+    repetition over its 24-cycle window, so by cycle 40 at the latest); 8.5 Hz (non-periodic) runs to the cap
+    and reports the cap + 1 cycles."""
     cfg = load_config(None, {"gap": 0.0})
-    res = run_cells(_params_vector(cfg.rig, cfg)[None, :], np.zeros(2, dtype=np.int64), np.array([3.75, 8.5]),
-                    np.zeros(2), np.zeros(2), StopRule())
+    rule = StopRule()
+    res = run_cells("rigid", model_for(cfg).params(cfg)[None, :], np.zeros(2, dtype=np.int64), np.array([3.75, 8.5]),
+                    np.zeros(2), np.zeros(2), rule)
     assert res.labels() == ["1/1", "chaotic/non-periodic"]
-    assert res.cycles[0] <= 40 and res.cycles[1] == 193
+    assert rule.min_cycles <= res.cycles[0] <= 40 and res.cycles[1] == rule.max_cycles + 1
 
 
+@pytest.mark.process
 def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     """Every third gap row of the default map: >= 99 % of the cells (class from rest) as the fixed-length run
-    with twice the former 96 cycles; every differing cell listed in the summary with both classes."""
+    with twice the former 96 cycles; every differing cell listed in the summary with both classes and the class
+    of a run ten times the cap (1920 cycles), which is ``steady_orbit``'s over the same cycles (its last 72)."""
     out = tmp_path / "pk"
     assert cli.main(["peterka", "--gaps", "11", "--compare-fixed", "--out", str(out)]) == 0
     summary = read_json(out / "summary.json")
@@ -78,10 +84,14 @@ def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     assert len(listed) == round((1 - comp["agreement_from_rest"]) * summary["cells"])
     rows = {(round(float(r.split(",")[0]), 6), round(float(r.split(",")[2]), 6)): r.split(",")[4]
             for r in (out / "peterka.csv").read_text().splitlines()[1:]}
+    base = load_config(None)
     for cell in listed:
         assert cell["early_stop"] != cell["fixed_length"]
         assert rows[(round(cell["gap_mm"], 6), round(cell["frequency_hz"], 6))] == cell["early_stop"]
-        assert cell["long_run"]  # the verdict of a 10x longer run is given
+        assert cell["long_run_cycles"] == 10 * 192
+        long_run = steady_orbit(base.with_parameters({"gap": cell["gap_mm"] * 1e-3}), cell["frequency_hz"],
+                                transient_cycles=10 * 192 - 72, measure_cycles=72)
+        assert cell["long_run"] == long_run.label, cell
     # Most trajectories stopped well before the cap.
     assert summary["cycles_run"]["mean"] < 0.6 * 192
 
@@ -159,6 +169,7 @@ PETERKA = ["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "6",
            "--freqs", "12", "--transient-cycles", "60", "--measure-cycles", "36"]
 
 
+@pytest.mark.process
 def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path):
     """``peterka.csv`` through the cluster equals the local one byte for byte; then again with one of the two
     workers killed (SIGKILL) after the first row came back: Dask resubmits its tasks, the map is identical."""
@@ -189,6 +200,7 @@ def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path
     assert peterka_table(result) == peterka_table(reference)
 
 
+@pytest.mark.process
 def test_dask_sweep_bifurcation_basins_equal_local(cluster, tmp_path):
     """The other three verbs accept --scheduler and write the same CSV as locally."""
     cases = [
@@ -234,9 +246,11 @@ def test_malformed_scheduler_address_is_refused(tmp_path, capsys):
     assert "localhost8786" in err and "tcp://HOST:PORT" in err
 
 
-def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path):
+def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path, monkeypatch):
     """A 600 x 700 map (classes drawn from a pattern, not simulated): the .npz holds the classes and codes that
-    give back the labels, and the PNG is drawn as an image with at least one pixel per cell."""
+    give back the labels, and the PNG is drawn as an image with at least one pixel per cell in the plot area (the
+    map's axes as laid out for the save, in the PNG's pixels; that area of the PNG is coloured throughout)."""
+    from matplotlib.figure import Figure
     from matplotlib.image import imread
 
     from rimd_sim.analysis.peterka import PeterkaResult, save_peterka_npz
@@ -254,8 +268,22 @@ def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path):
     assert data["codes"].shape == (3, rows, cols) and data["codes"].dtype == np.int16
     assert (data["classes"][data["codes"]] == labels.astype(str)).all()
     assert data["coexisting"].sum() == result.coexisting.sum() > 0
+    areas = []
+    save = Figure.savefig
+
+    def spy(fig, fname, *args, **kwargs):
+        """The axes that hold the map's image, in the saved PNG's pixels (after the figure's layout)."""
+        width, height = fig.get_size_inches() * (kwargs.get("dpi") or fig.dpi)
+        areas.extend((ax.get_position(), width, height) for ax in fig.axes if ax.images)
+        return save(fig, fname, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", spy)
     plot_peterka(result, tmp_path / "pk.png", "dense")
     image = imread(tmp_path / "pk.png")
-    # The axes' extent in pixels: the columns and rows that are not the white margin, legend and labels aside.
-    ink = (image[..., :3] < 0.99).any(axis=2)
-    assert ink.any(axis=1).sum() >= rows and image.shape[1] * 0.6 >= cols  # at least a pixel per cell
+    ((box, width, height),) = areas
+    assert image.shape[:2] == (round(height), round(width))
+    left, right = box.x0 * width, box.x1 * width
+    top, bottom = (1.0 - box.y1) * height, (1.0 - box.y0) * height  # PNG rows count from the top
+    assert right - left >= cols and bottom - top >= rows  # at least a pixel per cell
+    plot_area = image[int(top) + 1:int(bottom) - 1, int(left) + 1:int(right) - 1, :3]
+    assert (plot_area < 0.99).any(axis=2).mean() > 0.99  # the map fills it

@@ -4,7 +4,9 @@ Each of the four node executables is started and stopped several times at random
 still loading (right after its stop handlers are in place, which ``/proc/PID/status`` shows: SIGTERM
 becomes a caught signal when the entry module has run), and while it runs under heavy traffic (the
 simulator as fast as possible, about 30,000 messages/s). The moments come from a seeded generator; the seed
-is printed so that a failure can be replayed.
+is printed so that a failure can be replayed: half the stops of each node come from a fixed seed (the same
+moments in every run, so a failure there reproduces by itself), half from a seed drawn from the clock (new
+moments every run; ``RIMD_STOP_SEED`` replays one).
 
 Before the entry module runs (interpreter start-up, a few tens of milliseconds), Python's own SIGINT
 handling applies, as for any Python program; that window is not what these tests exercise.
@@ -25,6 +27,8 @@ from rimd_sim.recording.reader import open_recording
 pytestmark = pytest.mark.ros
 
 STOPS_PER_NODE = 6
+#: The fixed seed of the first half of the stops; the second half's is drawn from the clock (or RIMD_STOP_SEED).
+FIXED_SEED = 20261124
 SEED = int(os.environ.get("RIMD_STOP_SEED", time.time_ns() % 1_000_000))
 
 
@@ -48,11 +52,14 @@ def _wait_handlers(process, timeout: float = 60.0) -> None:  # noqa: ANN001
         time.sleep(0.005)
 
 
-def _stop_at_random_moments(ros_processes, executable: str, args: list[str], ready: str, rng: random.Random,
+def _stop_at_random_moments(ros_processes, executable: str, args: list[str], ready: str, offset: int,
                             check=None) -> list[str]:  # noqa: ANN001
-    """Start ``executable`` STOPS_PER_NODE times; stop each at a random moment; return what was done."""
+    """Start ``executable`` STOPS_PER_NODE times; stop each at a random moment (the first half from the fixed
+    seed, the second from the clock's; ``offset`` tells the nodes apart); return what was done."""
     done = []
+    fixed, drawn = random.Random(FIXED_SEED + offset), random.Random(SEED + offset)
     for i in range(STOPS_PER_NODE):
+        rng = fixed if i < STOPS_PER_NODE // 2 else drawn
         process = ros_processes.start_node(executable, *[a.format(i=i) for a in args], name=f"{executable}_{i}")
         _wait_handlers(process)
         if i % 2 == 0:
@@ -67,11 +74,12 @@ def _stop_at_random_moments(ros_processes, executable: str, args: list[str], rea
         status = process.wait(30)
         output = process.output()
         done.append(f"{signal.Signals(signum).name} at {when}: exit {status}")
-        assert status == 0, f"seed {SEED}: {executable} stopped by {done[-1]}\n{process.tail()}"
-        assert "Traceback" not in output, f"seed {SEED}: {executable} {done[-1]}\n{process.tail()}"
+        seed = f"seed {FIXED_SEED if rng is fixed else SEED} (+{offset}), stop {i}"
+        assert status == 0, f"{seed}: {executable} stopped by {done[-1]}\n{process.tail()}"
+        assert "Traceback" not in output, f"{seed}: {executable} {done[-1]}\n{process.tail()}"
         if check is not None:
             check(i, output)
-    print(f"{executable} (seed {SEED}):", "; ".join(done))
+    print(f"{executable} (seeds {FIXED_SEED}, then {SEED}, +{offset}):", "; ".join(done))
     return done
 
 
@@ -83,14 +91,12 @@ def _fast_simulator(ros_processes):  # noqa: ANN001
 
 
 def test_simulator_stopped_at_random_moments_exits_0(ros_processes):
-    rng = random.Random(SEED)
     _stop_at_random_moments(ros_processes, "rimd_simulator",
                             ["--ros-args", "-p", "real_time_factor:=0.0", "-p", "motor.initial_setpoint:=3.75"],
-                            r"rig ready", rng)
+                            r"rig ready", 0)
 
 
 def test_recorder_stopped_at_random_moments_exits_0_and_its_file_reads(ros_processes, tmp_path):
-    rng = random.Random(SEED + 1)
     _fast_simulator(ros_processes)
 
     def check(i: int, output: str) -> None:
@@ -105,27 +111,25 @@ def test_recorder_stopped_at_random_moments_exits_0_and_its_file_reads(ros_proce
 
     _stop_at_random_moments(ros_processes, "rimd_recorder",
                             ["--ros-args", "-p", f"output_dir:={tmp_path}/rec{{i}}", "-p", "topics:=['/rig/.*']"],
-                            r"recording /rig/truth", rng, check)
+                            r"recording /rig/truth", 1, check)
 
 
 def test_rerun_bridge_stopped_at_random_moments_exits_0(ros_processes, tmp_path):
-    rng = random.Random(SEED + 2)
     _fast_simulator(ros_processes)
     _stop_at_random_moments(ros_processes, "rimd_rerun",
                             ["--ros-args", "-p", "sink:=save", "-p", f"save_path:={tmp_path}/bridge{{i}}.rrd",
                              "-p", "status_period:=0.0"],
-                            r"rerun bridge ready", rng)
+                            r"rerun bridge ready", 2)
 
 
 def test_replay_stopped_at_random_moments_exits_0(ros_processes, tmp_path):
     from harness.rig_mcap import write_rig_mcap
 
-    rng = random.Random(SEED + 3)
     recording = tmp_path / "rig.mcap"
     write_rig_mcap(recording, seconds=3.0)
     _stop_at_random_moments(ros_processes, "rimd_replay",
                             ["--ros-args", "-p", f"file:={recording}", "-p", "rate:=20.0", "-p", "loop:=true"],
-                            r"replaying", rng)
+                            r"replaying", 3)
 
 
 def test_the_nodes_use_the_fast_dds_profile_with_a_short_heartbeat(tmp_path):

@@ -13,7 +13,8 @@ import signal
 import pytest
 
 from harness.bags import read_with_mcap_ros2, read_with_rosbags
-from harness.rig import BLOCK_TOPICS, RIG_TOPICS, record_rig, run_for, start_rig, trigger
+from harness.rig import BLOCK_TOPICS, RIG_TOPICS, Diagnostics, record_rig, start_rig, trigger
+from harness.ros import spin_until
 from rimd_sim.recording.cdr import block_span
 from rimd_sim.recording.reader import open_recording
 
@@ -138,7 +139,7 @@ def test_services_and_refusals(ros_processes, ros_executor, tmp_path):
     bad = ros_processes.start_node("rimd_recorder", "--ros-args", "-p", "compression:=rar",
                                    "-p", f"output_dir:={tmp_path / 'x'}", name="bad_recorder")
     assert bad.wait(30) == 2
-    assert "compression: 'rar' refused: must be one of zstd, lz4, none" in bad.output()
+    assert "parameter 'compression' = 'rar' refused: must be one of: zstd, lz4, none" in bad.output()
     assert "Traceback" not in bad.output()
 
     out = tmp_path / "rec"
@@ -147,22 +148,31 @@ def test_services_and_refusals(ros_processes, ros_executor, tmp_path):
 
     node = Node("test_client", context=ros_executor.context)
     ros_executor.add_node(node)
-    run_for(ros_executor, 1.0)
-    assert not list(out.glob("*.mcap"))                       # paused: nothing recorded
+    diagnostics = Diagnostics(node)
+
+    def recorder_says(key: str, above: int) -> int:
+        """Wait until the recorder reports ``key`` above ``above`` (what it did, not a guess of time)."""
+        value = lambda: int(diagnostics.of("rimd_recorder").get(key, -1))  # noqa: E731
+        assert spin_until(ros_executor, lambda: value() > above, 30), (key, diagnostics.of("rimd_recorder"))
+        return value()
+
+    skipped = recorder_says("not_recorded_while_paused_or_stopped", 0)   # the rig's messages arrive...
+    assert not list(out.glob("*.mcap"))                                  # ...paused: nothing recorded
     assert trigger(ros_executor, node, "/rimd_recorder/resume").success
-    run_for(ros_executor, 1.0)
+    written = recorder_says("messages_written", 0)
     response = trigger(ros_executor, node, "/rimd_recorder/split")
     assert response.success and "finished" in response.message
-    run_for(ros_executor, 1.0)
+    recorder_says("messages_written", written)
     response = trigger(ros_executor, node, "/rimd_recorder/stop")
     assert response.success
     assert not trigger(ros_executor, node, "/rimd_recorder/stop").success    # already stopped
     files = sorted(out.glob("*.mcap"))
     assert len(files) == 2
-    run_for(ros_executor, 0.5)
-    assert len(list(out.glob("*.mcap"))) == 2                 # stopped: no new file
+    recorder_says("not_recorded_while_paused_or_stopped", skipped)          # messages arrive while stopped...
+    assert len(list(out.glob("*.mcap"))) == 2                                # ...and no new file
+    written = recorder_says("messages_written", -1)
     assert trigger(ros_executor, node, "/rimd_recorder/start").success
-    run_for(ros_executor, 1.0)
+    recorder_says("messages_written", written)
     recorder.send_signal(signal.SIGINT)
     assert recorder.wait(30) == 0
     recording = open_recording(out)

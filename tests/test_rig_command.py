@@ -55,16 +55,18 @@ def test_rig_refuses_a_bad_recorder_section(ros_processes, tmp_path, repo_root):
     bad.write_text((repo_root / "config" / "rimd.yaml").read_text().replace("compression: zstd", "compression: rar"))
     rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--config", str(bad), name="rimd_rig_badrec")
     assert rig.wait(30) == 1
-    assert "compression: 'rar' refused: must be one of zstd, lz4, none" in rig.output()
+    refusal = "section rimd_recorder: parameter 'compression' = 'rar' refused: must be one of: zstd, lz4, none"
+    assert refusal in rig.output()
     assert "running" not in rig.output()
 
 
 def test_rig_refuses_a_bad_config_before_starting(ros_processes, tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("rimd_simulator:\n  ros__parameters:\n    mass: -1.0\n")
+    bad.write_text("/**/rimd_simulator:\n  ros__parameters:\n    mass: -1.0\n")
     rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--config", str(bad), name="rimd_rig_bad")
     assert rig.wait(30) == 1
-    assert "rimd rig: parameter 'mass' = -1.0 refused: must be > 0" in rig.output()
+    assert (f"rimd rig: {bad}, section rimd_simulator: parameter 'mass' = -1.0 refused: must be >= 0.001 and "
+            "<= 1000 kg") in rig.output()
     assert "running" not in rig.output()
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 
 import numpy as np
+import pytest
+from core import reference
 
 from harness.outputs import read_json
 from rimd_sim import cli
@@ -12,7 +14,14 @@ from rimd_sim.analysis.sweep import sweep
 from rimd_sim.core import SimConfig
 
 
+@pytest.mark.process
 def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
+    """`rimd sweep` from rest at gap 0, 3.5-4 Hz: band A at 3.75 Hz (paper Table 1) with the steady peak force of
+    the independent solve_ivp integration of the paper's model (tests/core/reference.py, from rest at 3.75 Hz,
+    its last 20 cycles of 16 s: 79.16 N), to 1e-4."""
+    ref_peak, ref_rate = reference.steady_peak(reference.simulate(frequency=3.75, gap=0.0, duration=16.0), 3.75,
+                                               16.0 - 20 / 3.75, 16.0)
+    assert ref_rate == pytest.approx(1.0)
     out = tmp_path / "sw"
     status = cli.main(["sweep", "--gap-mm", "0", "--f-min", "3.5", "--f-max", "4.0", "--f-step", "0.25",
                        "--direction", "rest", "--out", str(out)])
@@ -20,7 +29,7 @@ def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
     summary = read_json(out / "summary.json")
     assert summary["gap_mm"] == 0.0
     assert summary["band_a"]["frequency_hz"] == 3.75
-    assert abs(summary["band_a"]["peak_force_n"] - 79.2) < 0.5
+    assert summary["band_a"]["peak_force_n"] == pytest.approx(ref_peak, rel=1e-4)
     assert summary["band_b"] is None
     assert summary["simulated_seconds"] > 0 and summary["wall_seconds"] > 0
     rows = list(csv.DictReader(open(out / "sweep.csv")))
@@ -30,8 +39,11 @@ def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
 
 
 def test_rimd_sweep_refuses_bad_ranges(tmp_path, capsys):
-    assert cli.main(["sweep", "--f-step", "0", "--out", str(tmp_path)]) == 2
-    assert "--f-step > 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        cli.main(["sweep", "--f-step", "0", "--out", str(tmp_path)])
+    assert usage.value.code == 2 and "--f-step 0 refused: must be > 0 Hz" in capsys.readouterr().err
+    assert cli.main(["sweep", "--f-min", "5", "--f-max", "3", "--out", str(tmp_path)]) == 1
+    assert "--f-min 5 > --f-max 3" in capsys.readouterr().err
     assert cli.main(["sweep", "--f-max", "50", "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert "parameter 'frequencies'" in err and "<= 12.0 Hz" in err  # the motor's configured maximum

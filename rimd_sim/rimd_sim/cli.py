@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from rimd_sim import __version__
@@ -28,8 +29,84 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 
-class CommandError(Exception):
-    """A verb failed for a reason the user can act on; the message is printed as one line."""
+# The product's one exception family (rimd_sim.core.errors): a verb raises CommandError (or lets a library's
+# RimdError through) for a failure the user can act on; main() prints it as one line and exits 1.
+from rimd_sim.core.errors import CommandError, RimdError  # noqa: E402, F401 - CommandError: the verbs' import
+
+
+def number(option: str, unit: str = "", *, ge: float | None = None, gt: float | None = None,
+           le: float | None = None, lt: float | None = None, zero: str = "",
+           integer: bool = False) -> Callable[[str], float]:
+    """An argparse ``type`` for a numeric option: finite, within its bounds, refused naming the option as typed.
+
+    The bounds are in the option's own unit (``--gap-mm`` in mm), and so is the refusal:
+    ``--gap-mm 2400 refused: must be >= 0 and <= 50 mm``. ``zero``: 0 is also allowed and means that.
+    """
+    parts = [f"{op} {b:g}" for op, b in ((">=", ge), (">", gt), ("<=", le), ("<", lt)) if b is not None]
+    rule = ("must be " + (f"0 ({zero}) or " if zero else "") + " and ".join(parts) + (f" {unit}" if unit else "")
+            if parts else "must be a finite number")
+
+    def convert(text: str) -> float:
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} {text!r} refused: must be "
+                                             + ("an integer" if integer else "a number")) from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{option} {text} refused: must be finite; {rule}")
+        if zero and value == 0:
+            return value
+        if ((ge is not None and value < ge) or (gt is not None and value <= gt) or (le is not None and value > le)
+                or (lt is not None and value >= lt)):
+            raise argparse.ArgumentTypeError(f"{option} {text} refused: {rule}")
+        return value
+
+    convert.__name__ = "integer" if integer else "number"   # what argparse says for a value it cannot convert
+    convert.option, convert.rule = option, rule               # for the tests that sweep every verb's options
+    return convert
+
+
+def count(option: str, minimum: int = 1, maximum: int | None = None) -> Callable[[str], int]:
+    """An integer >= ``minimum`` (and <= ``maximum``), see :func:`number`."""
+    return number(option, ge=minimum, le=maximum, integer=True)
+
+
+def simulator_parameter(option: str, name: str, *, scale: float = 1.0,
+                        unit: str | None = None) -> Callable[[str], float]:
+    """An option that sets the simulator parameter ``name``, possibly in another unit (``--gap-mm``: ``gap`` in mm).
+
+    Its bounds are the parameter's own declaration (:mod:`rimd_sim.core.config`), scaled, so the refusal names
+    the option as typed, in its unit: ``--gap-mm 2400 refused: must be >= 0 and <= 50 mm``.
+    """
+    from rimd_sim.core.config import PARAMETERS
+
+    p = PARAMETERS[name]
+
+    def scaled(bound: float | None) -> float | None:
+        return None if bound is None else round(bound * scale, 12)
+
+    zero = p.zero if isinstance(p.zero, str) else ("" if not p.zero else "allowed")
+    return number(option, p.unit if unit is None else unit, ge=scaled(p.ge), gt=scaled(p.gt), le=scaled(p.le),
+                  lt=scaled(p.lt), zero=zero)
+
+
+def nonnegative_float(option: str, unit: str = "") -> Callable[[str], float]:
+    """A number >= 0 (see :func:`number`)."""
+    return number(option, unit, ge=0)
+
+
+def positive_float(option: str, unit: str = "") -> Callable[[str], float]:
+    """A number > 0 (see :func:`number`)."""
+    return number(option, unit, gt=0)
+
+
+def gap_mm(option: str = "--gap-mm") -> Callable[[str], float]:
+    """The gap in mm, within the bounds of the simulator's ``gap`` (see :func:`simulator_parameter`)."""
+    return simulator_parameter(option, "gap", scale=1e3, unit="mm")
+
+
+#: The simulator's real_time_factor as an option: 0 (as fast as possible) or within [0.001, 1e6].
+real_time_factor = number("--real-time-factor", zero="as fast as possible", ge=1e-3, le=1e6)
 
 
 @dataclass(frozen=True)
@@ -79,7 +156,19 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.verbs.pulse"),
     Verb("faults", "run a fault scenario (SCENARIO.yaml) against a running rig through /rig/inject_fault",
          "rimd_sim.verbs.faults"),
+    Verb("motor", "set the running rig's motor frequency (FREQ Hz) and print its answer", "rimd_sim.verbs.motor"),
+    Verb("perturb", "add a velocity (V m/s) to the hammer of the running rig", "rimd_sim.verbs.perturb"),
+    Verb("inject", "inject one fault (CHANNEL KIND) into the running rig, now, after S s or at a time",
+         "rimd_sim.verbs.inject"),
+    Verb("pause", "pause the running rig (simulation time frozen)", "rimd_sim.verbs.trigger"),
+    Verb("resume", "resume the paused rig", "rimd_sim.verbs.trigger"),
+    Verb("reset", "put the hammer back to its initial state (a new run on /rig/session)", "rimd_sim.verbs.trigger"),
+    Verb("clear-faults", "end every fault of the running rig and cancel the scheduled ones", "rimd_sim.verbs.trigger"),
+    Verb("status", "a live view of the running rig: rates, indices, gaps, lateness, motor, faults, impacts",
+         "rimd_sim.verbs.status"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
+    Verb("crop", "a time window of a recording (REC) as a new rosbag2 MCAP recording, like ros2 bag convert",
+         "rimd_sim.verbs.crop"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.verbs.info"),
 )
@@ -133,7 +222,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     try:
         return int(args._main(args) or EXIT_OK)
-    except CommandError as error:
+    except RimdError as error:
         print(f"rimd {args.verb}: {error}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:

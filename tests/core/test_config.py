@@ -30,8 +30,8 @@ def test_derived_length_from_natural_frequency():
 
 
 BAD_VALUES = [
-    ("mass", -0.15, "> 0"),
-    ("mass", 0.0, "> 0"),
+    ("mass", -0.15, ">= 0.001"),
+    ("mass", 0.0, ">= 0.001"),
     ("gap", float("nan"), "finite"),
     ("gap", -1e-3, ">= 0"),
     ("gap", 0.04, "half the pendulum length"),
@@ -49,7 +49,7 @@ BAD_VALUES = [
     ("motor.max_frequency", 0.0, "> 0"),
     ("motor.ramp_rate", -2.0, "> 0"),
     ("motor.initial_setpoint", 50.0, "motor.max_frequency"),
-    ("integrator.rtol", 0.1, "<= 1e-3"),
+    ("integrator.rtol", 0.1, "<= 0.001"),
     ("channels.impact_force.sample_rate", 0.0, "> 0"),
     ("channels.rimd_acceleration.sample_rate", -20000.0, "> 0"),
     ("channels.cart_displacement.range_max", -0.02, "range_min"),
@@ -57,9 +57,11 @@ BAD_VALUES = [
     ("channels.cart_displacement.noise_std", -1e-6, ">= 0"),
     ("noise.enabled", "yes", "true or false"),
     ("seed", -1, ">= 0"),
+    ("structure.axial_stiffness", 5.0, "0 (rigid) or >= 1000"),
+    ("real_time_factor", 1e-4, "or >= 0.001"),
     ("seed", 1.5, "integer"),
     ("real_time_factor", -1.0, ">= 0"),
-    ("block_rate", 0.0, "> 0"),
+    ("block_rate", 0.0, ">= 1"),
     ("truth.sample_rate", 0.0, "> 0"),
     ("channels.impact_force.frame_id", "", "non-empty"),
     ("channels.impact_force.frame_id", "force\0sensor", "without NUL"),
@@ -115,9 +117,69 @@ def test_wildcard_section_is_merged(tmp_path):
     assert cfg.seed == 5 and cfg.rig.gap == 0.001
 
 
+def another_valid_value(p):
+    """A valid value of parameter ``p`` other than its default (within its declared rule)."""
+    if p.kind == "bool":
+        return not p.default
+    if p.kind == "str":
+        return next(c for c in p.choices if c != p.default) if p.choices else p.default + "_2"
+    if p.kind == "int":
+        return p.default + 1
+    value = p.default * 1.01 if p.default else (p.low or 0) + ((p.high or 1.0) - (p.low or 0)) * 1e-6
+    assert p.validate(value) == value and value != p.default, p.name
+    return value
+
+
 def test_every_parameter_round_trips():
-    """Each declared parameter reads back what was set (what a node's descriptor table relies on)."""
+    """Each declared parameter reads back a new value (what a node's descriptor table relies on).
+
+    Hypothesis: setting any parameter to another valid value changes exactly that parameter; a configuration
+    that ignored a key, or wrote it elsewhere, fails here.
+    """
     cfg = SimConfig()
+    before = cfg.to_parameters()
     for key, spec in PARAMETERS.items():
-        value = spec.get(cfg)
-        assert cfg.with_parameters({key: value}).to_parameters()[key] == value, key
+        value = another_valid_value(spec)
+        after = cfg.with_parameters({key: value}).to_parameters()
+        assert after[key] == value, key
+        assert {k for k in after if after[k] != before[k]} == {key}, key
+
+
+def test_every_default_obeys_its_own_rule():
+    """The declaration is consistent: each default passes the rule declared with it."""
+    from rimd_sim.core.config import NODE_PARAMETERS
+
+    for table in (PARAMETERS, NODE_PARAMETERS):
+        for name, p in table.items():
+            assert p.validate(p.default) == p.default, name
+
+
+def test_an_integer_is_accepted_where_a_real_number_is_meant():
+    """`gap: 0`, `-p real_time_factor:=2`: an integer for a real parameter is converted, not refused (issue 22)."""
+    cfg = SimConfig().with_parameters({"real_time_factor": 2, "gap": 0, "contact.stiffness": 6000000})
+    assert cfg.real_time_factor == 2.0 and isinstance(cfg.real_time_factor, float)
+    assert cfg.rig.contact.stiffness == 6e6 and isinstance(cfg.rig.contact.stiffness, float)
+
+
+def test_yaml_errors_name_the_file_line_and_column(tmp_path):
+    """Every YAML the product reads reports where it is broken, as a compiler would (issue 22)."""
+    path = tmp_path / "rig.yaml"
+    path.write_text("/**/rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n    mass: [0.1\n")
+    with pytest.raises(ConfigError, match=rf"config file is not valid YAML: {path}:5:1: "):
+        load_config(path)
+
+
+def test_a_relative_config_is_found_from_anywhere(tmp_path, monkeypatch):
+    """`rimd rig --config config/paper_model.yaml` typed outside the repository finds the shipped preset; a file
+    found nowhere is refused saying where it was looked for (issue 22)."""
+    from rimd_sim.core.files import resolve_config
+
+    monkeypatch.chdir(tmp_path)
+    assert resolve_config("config/paper_model.yaml") == find_config_file("paper_model.yaml")
+    (tmp_path / "mine.yaml").write_text("x: 1\n")
+    assert resolve_config("mine.yaml") == tmp_path / "mine.yaml"          # the working directory first
+    with pytest.raises(ConfigError) as refused:
+        resolve_config("config/nope.yaml")
+    message = str(refused.value)
+    assert message.startswith("--config config/nope.yaml: not found; looked in ")
+    assert str(tmp_path / "config" / "nope.yaml") in message and str(find_config_file().parent / "nope.yaml") in message

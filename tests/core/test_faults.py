@@ -83,10 +83,13 @@ def test_bad_faults_are_refused_naming_the_field_and_nothing_is_scheduled(fault,
 
 def test_scenario_entries_and_capture_parameters_are_checked():
     assert parse_fault_entry("channel=impact_force kind=stuck start=1 duration=2", "faults[0]") == {
-        "channel": "impact_force", "kind": "stuck", "start": 1.0, "duration": 2.0, "magnitude": 0.0}
+        "channel": "impact_force", "kind": "stuck", "start": 1.0, "after": 0.0, "duration": 2.0, "magnitude": 0.0}
+    assert parse_fault_entry({"channel": "impact_force", "kind": "offset", "after": 2}, "faults[1]")["after"] == 2.0
+    with pytest.raises(CommandError, match=r"faults\[2\]: give start .* or after"):
+        parse_fault_entry({"channel": "impact_force", "kind": "offset", "start": 1.0, "after": 2.0}, "faults[2]")
     with pytest.raises(CommandError, match=r"faults\[3\] = 'channel=x oops' refused: 'oops' is not key=value"):
         parse_fault_entry("channel=x oops", "faults[3]")
-    with pytest.raises(ConfigError, match=r"parameter 'capture.sample_rate' = 5.0 refused: must be within"):
+    with pytest.raises(ConfigError, match=r"parameter 'capture.sample_rate' = 5.0 refused: must be >= 20000"):
         CaptureConfig.from_parameters({"capture.sample_rate": 5.0})
     with pytest.raises(ConfigError, match=r"'capture.threshold' = nan refused"):
         CaptureConfig.from_parameters({"capture.threshold": float("nan")})
@@ -178,3 +181,77 @@ def test_motor_slip_motor_states_are_the_same_however_the_passes_cut_time():
     assert one == many
     assert min(f for f, *_ in one) < 3.6
     assert {s for *_, s in one} == {3.75}   # the sag is not a new setpoint: it returns to the user's one
+
+
+def test_block_loss_loses_the_stated_fraction_of_blocks_and_only_within_its_window():
+    """``block_loss`` 0.2 over 1000 blocks (10 s at 100 blocks/s): the lost count is Binomial(1000, 0.2), so
+    within 5 standard deviations of 200 (137..263); a rule inverted to 1 - p, or one ignoring the magnitude,
+    loses 800 or 1000. Nothing is lost outside the window (before 1 s, after 11 s)."""
+    sim = RigSimulator(CFG.with_parameters({"seed": 9}))
+    sim.inject_fault("cart_displacement", "block_loss", 1.0, 10.0, 0.2)
+    firsts = []
+    for b in sim.advance_blocks([Fraction(k, 100) for k in range(1, 1201)]):
+        firsts += [c.first_index for c in b.deliveries.get("cart_displacement", [])]
+    per_block = round(CFG.channel("cart_displacement").sample_rate / 100)   # samples per block
+    received = set(firsts)
+    lost = [k for k in range(1200) if k * per_block not in received]    # block k covers [k, k + 1) / 100 s
+    assert all(100 <= k < 1100 for k in lost), "a block lost outside the fault's window"
+    assert 137 <= len(lost) <= 263, len(lost)
+
+
+def test_clock_drift_100_ppm_over_600_s():
+    """+100 ppm on the force channel from t = 0: 600 s later its impact times lag the acceleration channel's
+    by 60 ms (within one sample: 100e-6 * 600 s), and every block stays on the nominal grid. On the core: the
+    drift is a property of the fault layer, not of the transport (the fault runs over DDS check that a drift
+    reaches a client and a recording)."""
+    from rimd_sim.analysis.faultscan import drift_fit
+
+    rate = 20000.0
+    config = SimConfig().with_parameters({"block_rate": 20.0, "motor.initial_frequency": 3.75,
+                                          "motor.initial_setpoint": 3.75})
+    sim = RigSimulator(config, truth=False)
+    sim.inject_fault("impact_force", "clock_drift", 0.0, 0.0, 100.0)
+    above = {"rimd_acceleration": [], "impact_force": []}
+    thresholds = {"rimd_acceleration": 200.0, "impact_force": 20.0}   # |x| of an impact on each channel
+    expected_first = dict.fromkeys(above, 0)
+    for second in range(601):
+        for b in sim.advance_blocks([Fraction(20 * second + k, 20) for k in range(1, 21)]):
+            for name in above:
+                c = b.channels[name]
+                assert c.first_index == expected_first[name], (name, c.first_index)   # no hole, on the grid
+                expected_first[name] += len(c.samples)
+                above[name].append(np.flatnonzero(np.abs(c.samples) >= thresholds[name]) + c.first_index)
+
+    def crossings(name: str) -> np.ndarray:
+        idx = np.unique(np.concatenate(above[name]))
+        return idx[np.r_[True, np.diff(idx) > int(0.002 * rate)]] / rate
+
+    t, lag = drift_fit(crossings("rimd_acceleration"), crossings("impact_force"))
+    assert t.size > 2000 and t.max() > 590   # one impact per cycle at 3.75 Hz: 2250 in 600 s
+    slope, intercept = np.polyfit(t, lag, 1)
+    at_600 = slope * 600.0 + intercept - (lag[:20].mean() - slope * t[:20].mean())   # accumulated since 0
+    assert abs(at_600 - 0.060) <= 1.0 / rate, f"drift at 600 s: {at_600 * 1e3:.4f} ms"
+    assert np.max(np.abs(lag - (slope * t + intercept))) <= 1.0 / rate + 1e-9   # each impact within a sample
+    assert slope == pytest.approx(1e-4, rel=0.01)
+
+
+def test_delay_releases_the_blocks_of_its_window_late_by_the_latency_plus_jitter():
+    """The timing of ``delay``, behind the core's clock (the DDS test keeps a coarse check of arrival times): a
+    block of the window leaves between ``latency`` and 1.5 ``latency`` (plus one block period, as blocks leave
+    at block boundaries) after its last sample, in a random order; every other block leaves with its own."""
+    start, duration, latency = 0.6, 0.3, 0.1
+    sim = RigSimulator(CFG)
+    sim.inject_fault("impact_force", "delay", start, duration, latency)
+    rate, period = 20000, 0.01
+    late, order = [], []
+    for b in sim.advance_blocks([Fraction(k, 100) for k in range(1, 151)]):
+        leaves = float(b.t_stop)   # the DAQ receives the deliveries at the end of the block
+        for c in b.deliveries["impact_force"]:
+            order.append(c.first_index)
+            data_end = (c.first_index + len(c.samples)) / rate
+            late.append((c.first_index / rate, leaves - data_end))
+    in_window = [d for t, d in late if start <= t < start + duration]
+    outside = [d for t, d in late if not start <= t < start + duration]
+    assert len(in_window) == round(duration / period) and all(d == pytest.approx(0.0, abs=1e-9) for d in outside)
+    assert all(latency - 1e-9 <= d <= 1.5 * latency + period + 1e-9 for d in in_window), in_window
+    assert sorted(order) == list(range(0, 150 * 200, 200)) and order != sorted(order)   # late and reordered

@@ -1,9 +1,12 @@
 """A DAQ-style client in its own process: subscribes to the rig's channels over DDS and saves what it got.
 
-    python daq_client.py OUT.pkl --until 6.5 [--mode store|impacts] [--topics T ...] [--timeout S] [--resume]
+    python daq_client.py OUT.pkl --until 6.5 [--margin 0.3] [--mode store|impacts] [--topics T ...] [--timeout S]
+                         [--resume]
+                         [--lockstep NAME [--work-ms MS] [--jitter-ms MS] [--seed N]]
 
 It prints ``daq ready`` once every topic has a publisher (then the test resumes the paused rig) and exits 0
-after every channel has delivered samples up to ``--until`` s of simulation time, having written ``OUT.pkl``:
+after every channel has delivered samples up to ``--until`` s of simulation time (and ``--margin`` s more, for
+what was still in flight), having written ``OUT.pkl``:
 
 * ``store``: per topic, the serialized messages in arrival order with the simulation time the client had
   seen when each arrived (the largest end time of any channel block received so far; at
@@ -12,6 +15,11 @@ after every channel has delivered samples up to ``--until`` s of simulation time
 * ``impacts``: per channel only the indices of the samples whose magnitude reaches a threshold (the
   impacts), plus the holes in ``first_index`` (expected, received) and the count of stamps off the nominal
   grid ``first_index / sample_rate``: enough for a 600 s run without keeping 24 million samples.
+
+With ``--lockstep NAME`` it is a lockstep consumer (``rimd_sim.client.ProgressReporter``, one line): it works
+``--work-ms`` per block (plus a random ``--jitter-ms``, seeded), reports each block done, and also writes
+``OUT.pkl.timing`` (JSON): its busy time, the wall time from its first block to its last, and the simulation
+time covered, so a test can tell whether the rig went as fast as this client allowed.
 """
 
 from __future__ import annotations
@@ -37,7 +45,13 @@ def main() -> int:
     parser.add_argument("--topics", nargs="*", default=list(CHANNELS))
     parser.add_argument("--extra", nargs="*", default=["/rig/faults"], help="other topics stored (store mode)")
     parser.add_argument("--timeout", type=float, default=120.0)
+    parser.add_argument("--margin", type=float, default=0.3,
+                        help="simulation seconds received past --until before it stops (what was in flight)")
     parser.add_argument("--resume", action="store_true", help="call /rig/resume once subscribed (a paused rig)")
+    parser.add_argument("--lockstep", default="", help="report progress under this name (a lockstep consumer)")
+    parser.add_argument("--work-ms", type=float, default=0.0, help="time spent on each block (lockstep)")
+    parser.add_argument("--jitter-ms", type=float, default=0.0, help="random extra time per block, up to this")
+    parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
 
     import numpy as np
@@ -58,7 +72,28 @@ def main() -> int:
     latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
+    import json
+    import random
+
+    rng = random.Random(args.seed)
+    timing = {"busy_s": 0.0, "first_wall": None, "last_wall": None, "blocks": 0}
+    subs = {}
+
     def on_block(data, topic):  # noqa: ANN001
+        started = time.perf_counter()
+        if args.work_ms or args.jitter_ms:
+            time.sleep((args.work_ms + rng.uniform(0.0, args.jitter_ms)) / 1e3)
+        on_block_work(data, topic)
+        if reporter is not None:
+            msg = deserialize_message(data, msgs.SampleBlock)
+            reporter.done(msg.header.stamp, subs[topic])
+        now = time.perf_counter()
+        timing["busy_s"] += now - started
+        timing["first_wall"] = timing["first_wall"] or started
+        timing["last_wall"] = now
+        timing["blocks"] += 1
+
+    def on_block_work(data, topic):  # noqa: ANN001
         msg = deserialize_message(data, msgs.SampleBlock)
         n = len(msg.samples)
         end = (msg.first_index + n) / msg.sample_rate
@@ -82,12 +117,22 @@ def main() -> int:
             s["above"].append(hits + msg.first_index)
 
     for topic in args.topics:
-        node.create_subscription(msgs.SampleBlock, topic, lambda d, t=topic: on_block(d, t), qos, raw=True)
+        subs[topic] = node.create_subscription(msgs.SampleBlock, topic, lambda d, t=topic: on_block(d, t), qos,
+                                               raw=True)
+    extra = []   # the volatile ones: a message published before they matched would never reach them
     for topic in args.extra:
         kind = {"/rig/faults": msgs.FaultEvent, "/rig/impact/events": msgs.ImpactEvent,
                 "/rig/motor/state": msgs.MotorState}.get(topic, msgs.Capture)
-        node.create_subscription(kind, topic, lambda d, t=topic: stored[t].append((d, state["now"], time.time_ns())),
-                                 latched if topic == "/rig/faults" else qos, raw=True)
+        sub = node.create_subscription(
+            kind, topic, lambda d, t=topic: stored[t].append((d, state["now"], time.time_ns())),
+            latched if topic == "/rig/faults" else qos, raw=True)
+        if topic != "/rig/faults":   # transient local: its history reaches a late reader (and a replay may have none)
+            extra.append(sub)
+    reporter = None
+    if args.lockstep:   # it joins once every subscription matched: the rig's first messages reach each of them
+        from rimd_sim.client import ProgressReporter
+
+        reporter = ProgressReporter(node, args.lockstep, subscriptions=[*subs.values(), *extra])
 
     deadline = time.monotonic() + args.timeout
     while time.monotonic() < deadline and not all(node.count_publishers(t) for t in [*args.topics, *args.extra]):
@@ -103,13 +148,17 @@ def main() -> int:
         while time.monotonic() < deadline and not future.done():
             rclpy.spin_once(node, timeout_sec=0.05)
         print(f"resume: {future.result().message if future.done() else 'no answer'}", flush=True)
-    while time.monotonic() < deadline and min(reached.values()) < args.until:
+    # Past --until by --margin of simulation time on every channel: what was still in flight at --until (delayed
+    # blocks, the last fault events) has arrived by then. An observable condition, not a wall-clock wait.
+    # A lockstep consumer also stays until it has joined (a rig running free after dropping it may have passed
+    # --until before the reporter's first report).
+    while time.monotonic() < deadline and (min(reached.values()) < args.until + args.margin
+                                           or (reporter is not None and not reporter.joined)):
         rclpy.spin_once(node, timeout_sec=0.05)
-    end = time.monotonic() + 0.5   # anything still in flight (delayed blocks, the last fault events)
-    while time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.05)
-    if min(reached.values()) < args.until:
-        print(f"daq timeout: reached {reached}", flush=True)
+    if min(reached.values()) < args.until + args.margin or (reporter is not None and not reporter.joined):
+        print(f"daq timeout: reached {reached}"
+              + ("" if reporter is None else f"; lockstep joined: {reporter.joined}, {reporter.reports} reports"),
+              flush=True)
         return 1
     if args.mode == "impacts":
         for s in summary.values():
@@ -119,6 +168,11 @@ def main() -> int:
         out = stored
     with open(args.out, "wb") as f:
         pickle.dump(out, f)
+    if args.lockstep:
+        timing["wall_s"] = (timing["last_wall"] or 0.0) - (timing["first_wall"] or 0.0)
+        timing["simulated_s"] = min(reached.values())
+        with open(args.out + ".timing", "w") as f:
+            json.dump(timing, f)
     print(f"daq done: {sum(len(v) for v in stored.values())} messages", flush=True)
     node.destroy_node()
     rclpy.try_shutdown()

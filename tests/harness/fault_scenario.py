@@ -30,16 +30,6 @@ def entries() -> list[str]:
     return [f"channel={CHANNEL} kind={k} start={s} duration={d} magnitude={m}" for k, s, d, m, _ in SEQUENCE]
 
 
-def parameters(with_faults: bool) -> list[str]:
-    """``--ros-args`` of the simulator for a run at 4x real time from sample 0, with the capture.
-
-    Not as fast as possible: at ``real_time_factor 0`` on a loaded machine the subscribers (the DAQ client,
-    the recorder) fell behind the simulator and lost blocks in transport (a recording whose acceleration
-    channel had holes put the clock drift's start 1.5 s late: 1 of 5 loaded runs). At 4x the 6.5 s take 1.6 s.
-    """
-    args = ["-p", "real_time_factor:=4.0", "-p", "start_paused:=true", "-p", f"seed:={SEED}",
-            "-p", "capture.enabled:=true",
-            "-p", "motor.initial_frequency:=3.75", "-p", "motor.initial_setpoint:=3.75"]
-    if with_faults:
-        args += ["-p", "faults:=[" + ",".join(f"'{e}'" for e in entries()) + "]"]
-    return args
+def settings() -> dict:
+    """The simulator's parameters of the fault runs (besides the seed and the faults), with the capture."""
+    return {"capture.enabled": True, "motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75}

@@ -22,23 +22,93 @@ BLOCK_TOPICS = [t for t, kind in RIG_TOPICS.items() if kind in ("SampleBlock", "
 class RawCollector:
     """A node in the test process holding the serialized bytes of every message of the rig topics."""
 
-    def __init__(self, executor, topics=RIG_TOPICS, remap=None):  # noqa: ANN001
+    def __init__(self, executor, topics=RIG_TOPICS, remap=None, name: str = "test_collector"):  # noqa: ANN001
         from rclpy.node import Node
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
         import rimd_msgs.msg
 
-        self.node = Node("test_collector", context=executor.context)
+        self.node = Node(name, context=executor.context)
         executor.add_node(self.node)
         self.messages: dict[str, list[bytes]] = {t: [] for t in topics}
         self.times: dict[str, list[float]] = {t: [] for t in topics}
         qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
+        self.subscriptions = []
         for topic, kind in topics.items():
             def callback(data, topic=topic):  # noqa: ANN001
                 self.messages[topic].append(data)
                 self.times[topic].append(time.monotonic())
             name = (remap or {}).get(topic, topic)
-            self.node.create_subscription(getattr(rimd_msgs.msg, kind), name, callback, qos, raw=True)
+            self.subscriptions.append(
+                self.node.create_subscription(getattr(rimd_msgs.msg, kind), name, callback, qos, raw=True))
+
+
+class Diagnostics:
+    """The latest ``/diagnostics`` values of each node, read by the tests to wait on what a node says it did.
+
+    The simulator reports per topic ``<topic> published`` (messages sent since its start) and ``<topic>
+    subscribers`` (matched subscriptions); the recorder ``<topic> written``; both publish about once a second.
+    """
+
+    def __init__(self, node) -> None:  # noqa: ANN001
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.values: dict[str, dict[str, str]] = {}
+        self.received: dict[str, float] = {}   # status name -> monotonic time of its last report
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 100)
+
+    def _on(self, msg) -> None:  # noqa: ANN001
+        for status in msg.status:
+            self.values[status.name] = {kv.key: kv.value for kv in status.values}
+            self.received[status.name] = time.monotonic()
+
+    def of(self, node_name: str, since: float = 0.0) -> dict[str, str]:
+        """The values of the statuses of ``node_name`` reported after ``since`` (monotonic; empty if none)."""
+        out: dict[str, str] = {}
+        for name, values in self.values.items():
+            if node_name in name and self.received[name] > since:
+                out.update(values)
+        return out
+
+
+def wait_until_matched(executor, collector: RawCollector, diagnostics: Diagnostics, readers: int,  # noqa: ANN001
+                       timeout: float = 30.0) -> None:
+    """Wait until the collector's subscriptions have matched their publishers and the simulator's publishers
+    of those topics have matched ``readers`` subscriptions each (the collector, the recorder...), so that the
+    first message a resumed rig publishes reaches every one of them."""
+    def matched() -> bool:
+        sim = diagnostics.of("rimd_simulator")
+        return (all(sub.get_publisher_count() > 0 for sub in collector.subscriptions)
+                and all(int(sim.get(f"{t} subscribers", 0)) >= readers for t in collector.messages))
+
+    assert spin_until(executor, matched, timeout), (
+        "not matched: collector "
+        + str({s.topic_name: s.get_publisher_count() for s in collector.subscriptions})
+        + ", simulator " + str({k: v for k, v in diagnostics.of("rimd_simulator").items() if "subscribers" in k}))
+
+
+def wait_until_delivered(executor, collector: RawCollector, diagnostics: Diagnostics, paused_at: float,  # noqa: ANN001
+                         recorder: bool = True, timeout: float = 30.0) -> None:
+    """After a pause (at monotonic time ``paused_at``): wait until every message the simulator says it published
+    on the collector's topics has reached the collector and, with ``recorder``, reached the recorder (written, or
+    counted as not written after a write failure)."""
+    def counts() -> tuple[dict, dict, dict]:
+        sim = diagnostics.of("rimd_simulator", since=paused_at)
+        rec = diagnostics.of("rimd_recorder", since=paused_at)
+        published = {t: int(sim.get(f"{t} published", -1)) for t in collector.messages}
+        received = {t: len(m) for t, m in collector.messages.items()}
+        written = {t: int(rec.get(f"{t} written", -1)) + int(rec.get(f"{t} not_written", 0))
+                   for t in collector.messages}
+        return published, received, written
+
+    def delivered() -> bool:
+        sim = diagnostics.of("rimd_simulator", since=paused_at)
+        if sim.get("paused") != "true":
+            return False   # counts reported before the pause took effect
+        published, received, written = counts()
+        return received == published and (not recorder or written == published)
+
+    assert spin_until(executor, delivered, timeout), "published / received / written: " + str(counts())
 
 
 def start_rig(ros_processes, out: Path, *recorder_args: str, paused: bool = True):  # noqa: ANN001
@@ -61,21 +131,22 @@ def trigger(executor, node, service: str, timeout: float = 10.0):  # noqa: ANN00
 
 
 def run_for(executor, seconds: float) -> None:  # noqa: ANN001
+    """Spin for ``seconds`` of wall time: how long a rig runs, never a guess at delivery (wait on a condition)."""
     deadline = time.monotonic() + seconds
     spin_until(executor, lambda: time.monotonic() >= deadline, seconds + 1)
 
 
 def record_rig(ros_processes, ros_executor, out: Path, seconds: float, *recorder_args: str):  # noqa: ANN001
-    """Run the rig for ``seconds`` with recorder and collector; pause the rig; return both processes."""
+    """Run the rig for ``seconds`` of simulation time with the recorder and a collector; pause it once that
+    much reached the collector; return both processes and the collector once every message published has reached
+    the collector and been written by the recorder (counted by the simulator and the recorder)."""
     recorder, simulator = start_rig(ros_processes, out, *recorder_args)
     collector = RawCollector(ros_executor)
-    for topic in RIG_TOPICS:  # the collector is matched with every publisher before the rig starts
-        spin_until(ros_executor, lambda t=topic: collector.node.count_publishers(t) > 0, 10)
-    run_for(ros_executor, 0.5)
+    diagnostics = Diagnostics(collector.node)
+    wait_until_matched(ros_executor, collector, diagnostics, readers=2)
     assert trigger(ros_executor, collector.node, "/rig/resume").success
-    run_for(ros_executor, seconds)
+    blocks = round(seconds * 100)   # /rig/truth: one message per block, 100 blocks/s by default
+    assert spin_until(ros_executor, lambda: len(collector.messages["/rig/truth"]) >= blocks, seconds * 3 + 30)
     assert trigger(ros_executor, collector.node, "/rig/pause").success
-    run_for(ros_executor, 1.0)  # everything published reaches both sides
+    wait_until_delivered(ros_executor, collector, diagnostics, time.monotonic())
     return recorder, simulator, collector
-
-

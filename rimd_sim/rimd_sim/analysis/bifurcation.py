@@ -16,11 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import SimConfig
+from rimd_sim.core import RigModel, SimConfig
 from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.structural import make_model
 
-from .dynamics import classify, nondimensional
+from .dynamics import check_frequencies, classify, nondimensional
 from .executor import run_tasks
 
 __all__ = ["BifurcationBranch", "BifurcationPoint", "bifurcation"]
@@ -59,7 +58,7 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
     order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
     rig = cfg.rig
-    model = make_model(cfg, channels=False, truth=False, strobe=True)
+    model = RigModel(cfg, channels=False, truth=False, strobe=True)
     points = []
     for i, f in enumerate(order):
         if i:
@@ -103,11 +102,9 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
     Raises:
         ConfigError: For a bad direction, frequency or cycle count.
     """
-    freqs = [float(f) for f in frequencies]
     if direction not in ("up", "down", "both"):
         raise ConfigError("direction", direction, "must be up, down or both")
-    if not freqs or any(not (0 < f <= config.motor.max_frequency) for f in freqs):
-        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {config.motor.max_frequency} Hz")
+    freqs = check_frequencies(config, frequencies)
     if transient_cycles < 0 or sample_cycles < 3:
         raise ConfigError("cycles", (transient_cycles, sample_cycles),
                           "need transient_cycles >= 0 and sample_cycles >= 3")

@@ -30,12 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import SimConfig
+from rimd_sim.core import RigModel, SimConfig
 from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.structural import make_model
 
 __all__ = [
-    "CHAOTIC", "NO_IMPACT", "Orbit", "classify", "class_label", "constant_frequency", "steady_orbit",
+    "CHAOTIC", "NO_IMPACT", "Orbit", "check_frequencies", "check_frequency", "classify", "class_label",
+    "constant_frequency", "steady_orbit",
 ]
 
 NO_IMPACT = "no impact"
@@ -117,17 +117,27 @@ def classify(u: np.ndarray, v: np.ndarray, impacts_per_cycle: np.ndarray, *, max
     return CHAOTIC, 0, 0, spread
 
 
-def require_rigid(config: SimConfig, what: str) -> None:
-    """Refuse the structural model (``structure.model: two_mass``) in an analysis built on the paper's kernel.
+def check_frequency(config: SimConfig, frequency_hz: float) -> float:
+    """The motor frequency of an analysis (Hz), as a float.
 
     Raises:
-        ConfigError: Naming ``structure.model`` and the analysis.
+        ConfigError: Unless finite, > 0 and <= the motor's maximum (``motor.max_frequency``).
     """
-    if config.rig.structure.model != "rigid":
-        raise ConfigError("structure.model", config.rig.structure.model,
-                          f"not supported by {what}, which integrates the paper's (rigid) model; use "
-                          "structure.model: rigid, or rimd sweep / bifurcation / poincare (without --lyapunov), "
-                          "which run the structural model")
+    if not (math.isfinite(frequency_hz) and 0 < frequency_hz <= config.motor.max_frequency):
+        raise ConfigError("frequency", frequency_hz, f"must be > 0 and <= {config.motor.max_frequency} Hz")
+    return float(frequency_hz)
+
+
+def check_frequencies(config: SimConfig, frequencies) -> list[float]:
+    """The motor frequencies of a sweep or a map (Hz), as floats in the order given.
+
+    Raises:
+        ConfigError: Unless non-empty, each > 0 and <= the motor's maximum (``motor.max_frequency``).
+    """
+    freqs = [float(f) for f in frequencies]
+    if not freqs or any(not (0 < f <= config.motor.max_frequency) for f in freqs):
+        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {config.motor.max_frequency} Hz")
+    return freqs
 
 
 def constant_frequency(config: SimConfig, frequency_hz: float, theta0: float = 0.0, theta_dot0: float = 0.0
@@ -155,14 +165,12 @@ def steady_orbit(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0,
     Raises:
         ConfigError: For a bad frequency or cycle count (and from the configuration).
     """
-    if not (math.isfinite(frequency_hz) and 0 < frequency_hz <= config.motor.max_frequency):
-        raise ConfigError("frequency", frequency_hz, f"must be > 0 and <= {config.motor.max_frequency} Hz")
+    f = check_frequency(config, frequency_hz)
     if transient_cycles < 0 or measure_cycles < 3:
         raise ConfigError("cycles", (transient_cycles, measure_cycles),
                           "need transient_cycles >= 0 and measure_cycles >= 3")
-    f = float(frequency_hz)
     cfg = constant_frequency(config, f, theta0, theta_dot0)
-    model = make_model(cfg, channels=False, truth=False, strobe=True)
+    model = RigModel(cfg, channels=False, truth=False, strobe=True)
     if transient_cycles:
         model.advance((transient_cycles + 0.5) / f)
     # The stroboscopic point of cycle c is the state at t = c / f, when cycle c starts. Window: the points of

@@ -37,9 +37,9 @@ import numpy as np
 from rimd_sim.core import SimConfig
 from rimd_sim.core.ensemble import StopRule, run_cells
 from rimd_sim.core.errors import ConfigError, IntegrationError
-from rimd_sim.core.model import _params_vector
+from rimd_sim.core.model import model_for
 
-from .dynamics import require_rigid, steady_orbit
+from .dynamics import check_frequencies, check_frequency, steady_orbit
 from .executor import run_tasks
 
 __all__ = ["BasinsResult", "PeterkaResult", "START_NAMES", "basins", "peterka"]
@@ -123,20 +123,20 @@ def _row(args: tuple[SimConfig, float, list[float], int, int, int]) -> list[tupl
     return out
 
 
-def _row_ensemble(args: tuple[np.ndarray, float, np.ndarray, StopRule, StopRule]):
+def _row_ensemble(args: tuple[str, np.ndarray, float, np.ndarray, StopRule, StopRule]):
     """One gap row in two compiled calls: rest and kick starts, then the continuation along the row.
 
     Returns ``(labels, cycles)``: per start, the class and the cycles run of each frequency.
     """
-    p, kick, freqs, rule, continued_rule = args
+    model, p, kick, freqs, rule, continued_rule = args
     nf = len(freqs)
     zeros = np.zeros(nf)
-    both = run_cells(p[None, :], np.zeros(2 * nf, dtype=np.int64), np.concatenate([freqs, freqs]),
+    both = run_cells(model, p[None, :], np.zeros(2 * nf, dtype=np.int64), np.concatenate([freqs, freqs]),
                      np.zeros(2 * nf), np.concatenate([zeros, np.full(nf, kick)]), rule)
     chain = np.ones(nf, dtype=bool)
     chain[0] = False
-    cont = run_cells(p[None, :], np.zeros(nf, dtype=np.int64), freqs, zeros, zeros, continued_rule, chain=chain,
-                     fallback=(both.final[:nf, 0].copy(), both.final[:nf, 1].copy()))
+    cont = run_cells(model, p[None, :], np.zeros(nf, dtype=np.int64), freqs, zeros, zeros, continued_rule,
+                     chain=chain, fallback=(both.final[:nf, 0].copy(), both.final[:nf, 1].copy()))
     labels = both.labels()
     return ([labels[:nf], labels[nf:], cont.labels()],
             [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()])
@@ -177,15 +177,12 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
         SchedulerError: For an unusable scheduler.
     """
     gaps = [float(g) for g in gaps_m]
-    freqs = sorted(float(f) for f in frequencies_hz)
     if not gaps or any(not (math.isfinite(g) and g >= 0) for g in gaps):
         raise ConfigError("gaps", gaps, "must be non-empty, each finite and >= 0 m")
-    if not freqs or any(not (0 < f <= config.motor.max_frequency) for f in freqs):
-        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {config.motor.max_frequency} Hz")
+    freqs = sorted(check_frequencies(config, frequencies_hz))
     _check_cycles(transient_cycles, measure_cycles)
     _check_cycles(continued_transient_cycles, measure_cycles)
     start = time.perf_counter()
-    require_rigid(config, "the Peterka map (its ensemble kernel)")
     rule = stop_rule(transient_cycles, measure_cycles, early_stop)
     continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop)
     rig = config.rig
@@ -193,7 +190,8 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
     for g in gaps:
         cfg = config.with_parameters({"gap": g})
         kick = rig.omega_n * (g + 2.0 * rig.amplitude) / rig.length  # rad/s
-        jobs.append((_params_vector(cfg.rig, cfg), kick, np.array(freqs), rule, continued_rule))
+        model = model_for(cfg)
+        jobs.append((model.name, model.params(cfg), kick, np.array(freqs), rule, continued_rule))
     rows, n, where = run_tasks(_row_ensemble, jobs, workers=workers, scheduler=scheduler, progress=progress)
     labels = np.array([r[0] for r in rows], dtype=object).transpose(1, 0, 2)
     cycles = np.array([r[1] for r in rows], dtype=np.int64).transpose(1, 0, 2)
@@ -238,7 +236,8 @@ def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, 
                 cfg = config.with_parameters({"gap": early.gaps_mm[i] * 1e-3})
                 kick = rig.omega_n * (cfg.rig.gap + 2.0 * rig.amplitude) / rig.length if name == "kick" else 0.0
                 cap = long_factor * fixed.cycles_per_start
-                res = run_cells(_params_vector(cfg.rig, cfg)[None, :], np.zeros(1, dtype=np.int64),
+                model = model_for(cfg)
+                res = run_cells(model.name, model.params(cfg)[None, :], np.zeros(1, dtype=np.int64),
                                 np.array([early.frequencies_hz[j]]), np.zeros(1), np.array([kick]),
                                 StopRule(early=False, max_cycles=cap, measure_cycles=measure_cycles))
                 cell["long_run"] = res.labels()[0]
@@ -307,14 +306,15 @@ class BasinsResult:
 INSIDE = "inside the stop"
 
 
-def _basin_row(args: tuple[np.ndarray, float, np.ndarray, float, float, StopRule]) -> tuple[list[str], list[int]]:
+def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, StopRule]
+               ) -> tuple[list[str], list[int]]:
     """One row of initial conditions (one rate, every angle) in one compiled call: ``(labels, cycles)``."""
-    p, f, thetas, theta_dot, limit, rule = args
+    model, p, f, thetas, theta_dot, limit, rule = args
     run = np.flatnonzero(thetas <= limit)
     labels = [INSIDE] * len(thetas)
     cycles = [0] * len(thetas)
     if len(run):
-        res = run_cells(p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
+        res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
                         np.full(len(run), theta_dot), rule)
         for j, label, c in zip(run.tolist(), res.labels(), res.cycles.tolist(), strict=True):
             labels[j] = label
@@ -352,9 +352,7 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
         ConfigError: For a bad frequency, range, size or cycle count.
         SchedulerError: For an unusable scheduler.
     """
-    require_rigid(config, "the basins map (its ensemble kernel)")
-    if not (math.isfinite(frequency_hz) and 0 < frequency_hz <= config.motor.max_frequency):
-        raise ConfigError("frequency", frequency_hz, f"must be > 0 and <= {config.motor.max_frequency} Hz")
+    frequency_hz = check_frequency(config, frequency_hz)
     for name, (lo, hi) in (("theta_range", theta_range), ("theta_dot_range", theta_dot_range)):
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ConfigError(name, (lo, hi), "must be finite with min < max")
@@ -366,10 +364,11 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
     start = time.perf_counter()
     thetas = np.linspace(*theta_range, size[0])
     rates = np.linspace(*theta_dot_range, size[1])
-    p = _params_vector(config.rig, config)
+    model = model_for(config)
+    p = model.params(config)
     limit = math.asin(min(1.0, config.rig.gap / config.rig.length))
     rule = stop_rule(transient_cycles, measure_cycles, early_stop)
-    jobs = [(p, float(frequency_hz), thetas, float(r), limit, rule) for r in rates]
+    jobs = [(model.name, p, frequency_hz, thetas, float(r), limit, rule) for r in rates]
     rows, n, where = run_tasks(_basin_row, jobs, workers=workers, scheduler=scheduler, progress=progress)
     return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates,
                         np.array([r[0] for r in rows], dtype=object), time.perf_counter() - start, n,

@@ -15,9 +15,9 @@ import numpy as np
 
 from ..core.config import SimConfig
 from ..core.errors import ConfigError
-from ..core.structural import make_model
+from ..core.model import RigModel
 
-__all__ = ["PulseResult", "force_peaks", "make_model", "pulse", "ring_frequency"]
+__all__ = ["PulseResult", "force_peaks", "pulse", "ring_frequency"]
 
 #: Time simulated after the contact starts (s): the ringing decays within it.
 PULSE_SPAN = 0.02
@@ -100,7 +100,7 @@ def pulse(config: SimConfig, velocity: float, rate: float = 1e6, span: float = P
         "integrator.max_step": min(config.integrator.max_step, 1e-4),
     }
     cfg = config.with_parameters(params)
-    model = make_model(cfg, channels=True, truth=False)
+    model = RigModel(cfg, channels=True, truth=False)
     t_lead = LEAD_GAP / velocity
     out = model.advance(t_lead + span)
     rate = float(cfg.channel("impact_force").sample_rate)

@@ -23,10 +23,10 @@ from typing import Literal
 
 import numpy as np
 
-from rimd_sim.core import SimConfig
+from rimd_sim.core import RigModel, SimConfig
 from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.structural import make_model
 
+from .dynamics import check_frequencies
 from .executor import run_tasks, scheduler_address
 
 __all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
@@ -100,7 +100,7 @@ def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
     base, f, cycles, measure_cycles = args
     cfg = base.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
     duration = cycles / f
-    impacts = make_model(cfg, channels=False, truth=False).advance(duration).impacts
+    impacts = RigModel(cfg, channels=False, truth=False).advance(duration).impacts
     return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration)
 
 
@@ -112,7 +112,7 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
     """An up or down sweep: one run, the motor ramped from point to point."""
     config, order, cycles, measure_cycles, ramp_rate = job
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
-    model = make_model(cfg, channels=False, truth=False)
+    model = RigModel(cfg, channels=False, truth=False)
     points = []
     for i, f in enumerate(order):
         t0 = model.time
@@ -148,11 +148,9 @@ def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: D
     Raises:
         ConfigError: For a bad direction, frequency or cycle count.
     """
-    freqs = [float(f) for f in frequencies]
     if direction not in ("up", "down", "rest"):
         raise ConfigError("direction", direction, "must be up, down or rest")
-    if not freqs or any(not (0 < f <= config.motor.max_frequency) for f in freqs):
-        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {config.motor.max_frequency} Hz")
+    freqs = check_frequencies(config, frequencies)
     if not 0 < measure_cycles <= cycles:
         raise ConfigError("measure_cycles", measure_cycles, f"must be > 0 and <= cycles = {cycles}")
     start = time.perf_counter()

@@ -21,60 +21,40 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .config import ChannelConfig
-from .errors import ConfigError
+from .params import build, group, param
 
-__all__ = ["CAPTURE_PARAMETERS", "CaptureConfig", "CaptureRecord", "TriggeredCapture"]
+if TYPE_CHECKING:
+    from .config import ChannelConfig
+
+__all__ = ["CaptureConfig", "CaptureRecord", "CaptureSettings", "TriggeredCapture"]
 
 #: Extra model channels: (name, quantity of the channel named).
 FORCE_CHANNEL = "capture_force"
 ACC_CHANNEL = "capture_acceleration"
 
-#: Node parameters of the capture: name -> (default, description and rule).
-CAPTURE_PARAMETERS: dict[str, tuple[Any, str]] = {
-    "capture.enabled": (False, "publish a triggered capture of force and acceleration for each impact"),
-    "capture.sample_rate": (1.0e6, "Hz, capture sample rate; must be within [20000, 10000000]"),
-    "capture.pre_trigger": (1.0e-4, "s kept before the trigger; must be within [0, 0.1]"),
-    "capture.post_trigger": (1.0e-3, "s kept from the trigger on; must be within (0, 0.1]"),
-    "capture.threshold": (5.0, "N, trigger level on the rising force; must be > 0 and finite"),
-}
-
-
 @dataclass(frozen=True)
 class CaptureConfig:
-    """The capture's settings (see :data:`CAPTURE_PARAMETERS`)."""
+    """The capture's settings: node parameters ``capture.*`` of the simulator (read at start)."""
 
-    enabled: bool = False
-    sample_rate: float = 1.0e6
-    pre_trigger: float = 1.0e-4
-    post_trigger: float = 1.0e-3
-    threshold: float = 5.0
+    enabled: bool = param(False, "publish a triggered capture of force and acceleration for each impact",
+                          read_only=True)
+    sample_rate: float = param(1.0e6, "capture sample rate", unit="Hz", ge=20_000, le=1.0e7, read_only=True)
+    pre_trigger: float = param(1.0e-4, "time kept before the trigger", unit="s", ge=0, le=0.1, read_only=True)
+    post_trigger: float = param(1.0e-3, "time kept from the trigger on", unit="s", gt=0, le=0.1, read_only=True)
+    threshold: float = param(5.0, "trigger level on the rising force", unit="N", gt=0, read_only=True)
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, Any]) -> CaptureConfig:
-        """From node parameters (``capture.*``), validated.
+        """From node parameters (``capture.*``), validated; other names are ignored.
 
         Raises:
             ConfigError: Naming the parameter and its rule.
         """
-        v = {k: values.get(k, d) for k, (d, _) in CAPTURE_PARAMETERS.items()}
-        if not isinstance(v["capture.enabled"], bool):
-            raise ConfigError("capture.enabled", v["capture.enabled"], "must be true or false")
-        for key, lo, hi, lo_open in (("capture.sample_rate", 20_000.0, 1.0e7, False),
-                                     ("capture.pre_trigger", 0.0, 0.1, False),
-                                     ("capture.post_trigger", 0.0, 0.1, True),
-                                     ("capture.threshold", 0.0, math.inf, True)):
-            x = v[key]
-            rule = CAPTURE_PARAMETERS[key][1].split("; ", 1)[1]
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) \
-                    or x < lo or (lo_open and x == lo) or x > hi:
-                raise ConfigError(key, x, rule)
-        return cls(v["capture.enabled"], float(v["capture.sample_rate"]), float(v["capture.pre_trigger"]),
-                   float(v["capture.post_trigger"]), float(v["capture.threshold"]))
+        return build(CaptureSettings, {k: v for k, v in values.items() if k.startswith("capture.")}).capture
 
     def extra_channels(self) -> tuple[tuple[str, Fraction, str], ...]:
         """The model's extra channels for this capture (none when disabled)."""
@@ -82,6 +62,13 @@ class CaptureConfig:
             return ()
         rate = Fraction(repr(self.sample_rate))
         return ((FORCE_CHANNEL, rate, "impact_force"), (ACC_CHANNEL, rate, "rimd_acceleration_in_contact"))
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    """The capture as a group of the simulator node's parameters (``capture.*``)."""
+
+    capture: CaptureConfig = group(CaptureConfig, "capture.")
 
 
 @dataclass(frozen=True)

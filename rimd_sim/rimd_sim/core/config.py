@@ -22,14 +22,17 @@ and the structural damping ratio 0.08, chosen so that the model reproduces Table
 from __future__ import annotations
 
 import math
-import sys
-from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .capture import CaptureConfig
 from .contact import CONTACT_LAWS
 from .errors import ConfigError
+from .files import read_yaml
+from .pacing import LockstepSettings
+from .params import Param, build, group, keyed, param, parameters, to_flat
 
 __all__ = [
     "CHANNEL_NAMES",
@@ -39,7 +42,9 @@ __all__ = [
     "MotorParams",
     "RigParams",
     "SimConfig",
+    "SimulatorNodeSettings",
     "StructureParams",
+    "check_simulator_section",
     "find_config_file",
     "flatten_parameters",
     "load_config",
@@ -51,62 +56,40 @@ __all__ = [
 #: Node name whose ``ros__parameters`` section holds the rig configuration.
 NODE_NAME = "rimd_simulator"
 
-#: Parameters of the simulator node's own (read at start by the node, not part of the model's configuration),
-#: besides ``capture.*`` (rimd_sim.core.capture).
-NODE_PARAMETERS = frozenset({"start_paused", "faults"})
 
 #: The four DAQ channels, in publication order.
 CHANNEL_NAMES = ("cart_displacement", "rimd_displacement", "rimd_acceleration", "impact_force")
 
 
+#: Largest magnitude of an instrument's range, noise or resolution (SI units).
+MAX_SI_MAGNITUDE = 1e9
+
+#: Largest motor ramp rate (Hz/s), of ``motor.ramp_rate`` and of a ``set_motor_frequency`` request.
+MAX_RAMP_RATE = 1e4
+
+# Upper bounds (here and below) far beyond any instrument or rig refuse the absurd (1e300), which was accepted
+# and, for some parameters, stopped or hung the running rig's integrator; each lower bound that is not 0 says why.
+
+
 @dataclass(frozen=True)
 class ContactParams:
-    """Contact law between the hammer and the force sensor (paper Eq. 1).
+    """Contact law between the hammer and the force sensor (paper Eq. 1); parameters ``contact.*``.
 
-    Attributes:
-        model: Name in :data:`~rimd_sim.core.contact.CONTACT_LAWS`.
-        stiffness: ``k`` (N/m for the spring-dashpot; N/m^n for the others).
-        damping: ``c`` (N s/m for the spring-dashpot; N s/m^(n+1) for Hunt-Crossley).
-        exponent: ``n`` of the Hertz-type laws (ignored by the spring-dashpot law).
-        restitution: ``e`` of the Lankarani-Nikravesh law.
-        min_impact_velocity: Floor (m/s) on the impact velocity that divides the Lankarani-Nikravesh
-            damping term, so that a contact starting at rest has finite damping. Assumption.
+    ``min_impact_velocity`` floors the impact velocity that divides the Lankarani-Nikravesh damping term, so
+    that a contact starting at rest has finite damping (an assumption).
     """
 
-    model: str = "spring_dashpot"
-    stiffness: float = 5.5e6
-    damping: float = 1.2e3
-    exponent: float = 1.5
-    restitution: float = 0.8
-    min_impact_velocity: float = 1e-3
-
-
-@dataclass(frozen=True)
-class StructureParams:
-    """Optional structural contact model (issue 15, docs/physics.md "Structural model").
-
-    ``model = "rigid"`` is the paper's single-mass hammer (the default). ``"two_mass"`` splits the hammer
-    into the impact device (front, ``impactor_mass``) and the aluminium coupling that carries the
-    accelerometer (rear, the rest of ``mass``), joined by the hammer's axial stiffness and damping, and puts
-    the force sensor's top (``sensor_mass``) on a compliant mount. A stiffness of 0 means rigid.
-
-    Attributes:
-        model: ``rigid`` or ``two_mass``.
-        impactor_mass: Front mass (kg), less than ``mass``.
-        axial_stiffness: Axial stiffness of the hammer between its two masses (N/m); 0 = rigid link.
-        axial_damping_ratio: Damping ratio of the hammer's axial mode (< 1).
-        sensor_mass: Moving mass of the force sensor's top and impact cap (kg).
-        mount_stiffness: Stiffness of the force sensor and its mount on the cart (N/m); 0 = rigid mount.
-        mount_damping_ratio: Damping ratio of the sensor-on-mount mode (< 1).
-    """
-
-    model: str = "rigid"
-    impactor_mass: float = 0.06
-    axial_stiffness: float = 0.0
-    axial_damping_ratio: float = 0.05
-    sensor_mass: float = 0.01
-    mount_stiffness: float = 0.0
-    mount_damping_ratio: float = 0.05
+    model: str = param("spring_dashpot", "contact law (paper Eq. 1)", choices=tuple(CONTACT_LAWS))
+    # k = 1e300 or c = 1e300 stopped the rig at its first contact (step size underflow, non-finite state); the
+    # bounds are well inside what the integrator was checked to handle (k = 1e14, c = 1e7 at the defaults).
+    stiffness: float = param(5.5e6, "contact stiffness k (N/m^n for the Hertz-type laws)", unit="N/m", gt=0,
+                             le=1e12)
+    damping: float = param(1.2e3, "contact damping c (N s/m^(n+1) for Hunt-Crossley)", unit="N s/m", ge=0, le=1e6)
+    exponent: float = param(1.5, "exponent n of the Hertz-type laws", ge=1, le=3)
+    restitution: float = param(0.8, "restitution e of the Lankarani-Nikravesh law", gt=0, le=1)
+    # >= 1e-6 m/s: the floor divides the contact damping, and below ~1e-12 the integrator stalled or hung.
+    min_impact_velocity: float = param(1e-3, "floor of the Lankarani-Nikravesh impact velocity", unit="m/s",
+                                       ge=1e-6, le=10)
 
 
 #: Names of the contact models (``structure.model``).
@@ -114,27 +97,57 @@ STRUCTURE_MODELS = ("rigid", "two_mass")
 
 
 @dataclass(frozen=True)
+class StructureParams:
+    """Optional structural contact model (issue 15, docs/physics.md "Structural model"); ``structure.*``.
+
+    ``model = "rigid"`` is the paper's single-mass hammer (the default). ``"two_mass"`` splits the hammer
+    into the impact device (front, ``impactor_mass``) and the aluminium coupling that carries the
+    accelerometer (rear, the rest of ``mass``), joined by the hammer's axial stiffness and damping, and puts
+    the force sensor's top (``sensor_mass``) on a compliant mount. A stiffness of 0 means rigid. The upper
+    bounds keep the fast modes within what the integrator resolves affordably (a 1e12 N/m link on 1 g would
+    need sub-ns steps).
+    """
+
+    model: str = param("rigid", "contact model: rigid (the paper's single-mass hammer) or two_mass (axial mode "
+                                "and sensor mount)", choices=STRUCTURE_MODELS)
+    impactor_mass: float = param(0.06, "front (impact device) mass of the two-mass hammer, < mass", unit="kg",
+                                 ge=1e-3, le=1000)
+    axial_stiffness: float = param(0.0, "axial stiffness of the hammer, 0 = rigid", unit="N/m", zero="rigid",
+                                   ge=1e3, le=1e10)
+    axial_damping_ratio: float = param(0.05, "damping ratio of the hammer's axial mode", ge=0, lt=1)
+    sensor_mass: float = param(0.01, "moving mass of the force sensor's top", unit="kg", ge=1e-4, le=10)
+    mount_stiffness: float = param(0.0, "stiffness of the force sensor on its mount, 0 = rigid", unit="N/m",
+                                   zero="rigid", ge=1e3, le=1e10)
+    mount_damping_ratio: float = param(0.05, "damping ratio of the sensor-on-mount mode", ge=0, lt=1)
+
+
+@dataclass(frozen=True)
 class RigParams:
     """Mechanical parameters of the RIMD on its cart (SI units).
 
-    Attributes:
-        gap: Distance (m) between the hammer at rest and the force sensor.
-        mass: Hammer (RIMD) mass ``m`` in kg. Not in the paper: 0.15 kg reproduces Table 1.
-        amplitude: Cart displacement amplitude ``A0`` (m).
-        natural_frequency: Pendulum natural frequency without impact (Hz); sets ``l = g / (2 pi f)^2``.
-        damping_ratio: Structural damping ratio of the pendulum (not in the paper's model).
-        gravity: ``g`` in m/s^2.
-        contact: The contact law.
+    Not in the paper: the hammer mass (0.15 kg) and the structural damping ratio (0.08), which reproduce
+    Table 1 (README); the rest are the paper's.
     """
 
-    gap: float = 0.0
-    mass: float = 0.15
-    amplitude: float = 1e-3
-    natural_frequency: float = 1.82
-    damping_ratio: float = 0.08
-    gravity: float = 9.81
-    contact: ContactParams = field(default_factory=ContactParams)
-    structure: StructureParams = field(default_factory=StructureParams)
+    gap: float = param(0.0, "gap between hammer at rest and force sensor", unit="m", ge=0, le=0.05)
+    # At least 1 g: a lighter hammer (1e-9 kg) made the contact so stiff that the integrator hung.
+    mass: float = param(0.15, "hammer mass m", unit="kg", ge=1e-3, le=1000)
+    amplitude: float = param(1e-3, "cart displacement amplitude A0", unit="m", ge=0, le=0.05)
+    natural_frequency: float = param(1.82, "pendulum natural frequency without impact (sets l = g / (2 pi f)^2)",
+                                     unit="Hz", gt=0, le=1000)
+    damping_ratio: float = param(0.08, "structural damping ratio zeta", ge=0, le=2)
+    gravity: float = param(9.81, "gravitational acceleration", unit="m/s^2", gt=0, le=100)
+    contact: ContactParams = group(ContactParams, "contact.")
+    structure: StructureParams = group(StructureParams, "structure.")
+
+    def __post_init__(self) -> None:
+        """Rules between the fields."""
+        s = self.structure
+        if s.model == "two_mass" and s.axial_stiffness > 0.0 and s.impactor_mass >= self.mass:
+            raise ConfigError("structure.impactor_mass", s.impactor_mass,
+                              f"must be < mass = {self.mass:g} kg (the rest of the hammer is the rear mass)")
+        if self.gap >= 0.5 * self.length:
+            raise ConfigError("gap", self.gap, f"must be < half the pendulum length l/2 = {0.5 * self.length:.6g} m")
 
     @property
     def length(self) -> float:
@@ -149,68 +162,71 @@ class RigParams:
 
 @dataclass(frozen=True)
 class MotorParams:
-    """The AC motor that shakes the cart.
+    """The AC motor that shakes the cart; parameters ``motor.*``.
 
-    Attributes:
-        max_frequency: Highest setpoint accepted (Hz).
-        ramp_rate: Default ramp rate of the frequency towards a new setpoint (Hz/s).
-        initial_frequency: Frequency at simulation start (Hz), reached without a ramp.
-        initial_setpoint: Setpoint at simulation start (Hz); the motor ramps to it from
-            ``initial_frequency``.
+    The motor starts at ``initial_frequency`` (reached without a ramp) and ramps to ``initial_setpoint``.
     """
 
-    max_frequency: float = 12.0
-    ramp_rate: float = 2.0
-    initial_frequency: float = 0.0
-    initial_setpoint: float = 3.75
+    max_frequency: float = param(12.0, "highest motor frequency accepted", unit="Hz", gt=0, le=1000)
+    ramp_rate: float = param(2.0, "default ramp rate of the motor frequency", unit="Hz/s", gt=0, le=MAX_RAMP_RATE)
+    initial_frequency: float = param(0.0, "motor frequency at start, <= motor.max_frequency", unit="Hz", ge=0)
+    initial_setpoint: float = param(3.75, "motor setpoint at start, <= motor.max_frequency", unit="Hz", ge=0)
+
+    def __post_init__(self) -> None:
+        """Rules between the fields."""
+        for key, value in (("motor.initial_frequency", self.initial_frequency),
+                           ("motor.initial_setpoint", self.initial_setpoint)):
+            if value > self.max_frequency:
+                raise ConfigError(key, value, f"must be <= motor.max_frequency = {self.max_frequency:g} Hz")
 
 
 @dataclass(frozen=True)
 class IntegratorParams:
-    """Adaptive Dormand-Prince 5(4) integrator settings.
+    """Adaptive Dormand-Prince 5(4) integrator settings; parameters ``integrator.*``."""
 
-    Attributes:
-        rtol: Relative tolerance of the local error.
-        atol: Absolute tolerance (rad for theta, rad/s for theta_dot).
-        max_step: Largest step (s).
-        event_tolerance: Tolerance (s) of the switch-time root finding on the dense output.
-    """
-
-    rtol: float = 1e-7
-    atol: float = 1e-9
-    max_step: float = 1e-2
-    event_tolerance: float = 1e-12
+    rtol: float = param(1e-7, "relative tolerance of the local error", ge=1e-13, le=1e-3)
+    atol: float = param(1e-9, "absolute tolerance (rad for theta, rad/s for theta_dot)", gt=0, le=1e-3)
+    # >= 1 us: 1e-7 s already took 17 s of CPU per simulated second, smaller values hang the rig.
+    max_step: float = param(1e-2, "largest integration step", unit="s", ge=1e-6, le=0.05)
+    event_tolerance: float = param(1e-12, "tolerance of the switch-time root finding on the dense output",
+                                   unit="s", gt=0, le=1e-6)
 
 
 @dataclass(frozen=True)
 class ChannelConfig:
-    """One DAQ channel: an instrument sampled at a fixed rate.
+    """One DAQ channel: an instrument sampled at a fixed rate; parameters ``channels.<name>.*``.
 
-    Attributes:
-        name: Channel name, one of :data:`CHANNEL_NAMES`.
-        sample_rate: Samples per second (Hz).
-        range_min: Lower end of the instrument's measuring range (SI); readings are clipped to it.
-        range_max: Upper end of the measuring range (SI).
-        noise_std: Standard deviation of the additive white noise (SI), when noise is enabled.
-        resolution: Quantisation step of the reading (SI), 0 for none.
-        bandwidth: -3 dB frequency (Hz) of the instrument's 2nd-order low-pass, 0 for none. A value at or
-            above 0.45 x sample_rate cannot be represented at that rate and has no effect.
-        highpass: -3 dB frequency (Hz) of the 1st-order high-pass of AC-coupled (piezoelectric)
-            instruments, 0 for DC-coupled.
-        reliable: Publish with reliable QoS (default) or best effort.
-        frame_id: Sensor id placed in ``header.frame_id``.
+    ``bandwidth``: -3 dB frequency of the instrument's 2nd-order low-pass; a value at or above
+    0.45 x sample_rate cannot be represented at that rate and has no effect. ``highpass``: -3 dB frequency of
+    the 1st-order high-pass of AC-coupled (piezoelectric) instruments. Ranges, noise and resolution are in the
+    channel's unit (:attr:`unit`).
     """
 
     name: str
-    sample_rate: float
-    range_min: float
-    range_max: float
-    noise_std: float = 0.0
-    resolution: float = 0.0
-    bandwidth: float = 0.0
-    highpass: float = 0.0
-    reliable: bool = True
-    frame_id: str = ""
+    sample_rate: float = param(1000.0, "samples per second", unit="Hz", gt=0, le=1e6)
+    range_min: float = param(-1.0, "lower end of the measuring range (readings are clipped to it; the channel's "
+                                   "unit)", ge=-MAX_SI_MAGNITUDE, le=MAX_SI_MAGNITUDE)
+    range_max: float = param(1.0, "upper end of the measuring range (the channel's unit)", ge=-MAX_SI_MAGNITUDE,
+                             le=MAX_SI_MAGNITUDE)
+    noise_std: float = param(0.0, "white noise standard deviation (the channel's unit)", ge=0, le=MAX_SI_MAGNITUDE)
+    resolution: float = param(0.0, "quantisation step, 0 = none (the channel's unit)", ge=0, le=MAX_SI_MAGNITUDE)
+    bandwidth: float = param(0.0, "-3 dB low-pass frequency, 0 = none", unit="Hz", ge=0, le=1e6)
+    highpass: float = param(0.0, "-3 dB high-pass frequency, 0 = DC-coupled", unit="Hz", ge=0, le=1e6)
+    reliable: bool = param(True, "reliable QoS (else best effort); read at start")
+    frame_id: str = param("", "sensor id in header.frame_id",
+                          rule="a non-empty string without NUL characters (a ROS 2 string is a C string)",
+                          check=lambda v: bool(v) and "\0" not in v, breaks=("", "force\0sensor"))
+
+    def __post_init__(self) -> None:
+        """Rules between the fields."""
+        p = f"channels.{self.name}."
+        if not self.range_min < self.range_max:
+            raise ConfigError(p + "range_max", self.range_max, f"must be > {p}range_min = {self.range_min:g}")
+        if self.highpass > 0 and self.highpass >= 0.45 * self.sample_rate:
+            raise ConfigError(p + "highpass", self.highpass,
+                              f"must be < 0.45 x sample_rate = {0.45 * self.sample_rate:g} Hz")
+        if self.highpass > 0 and 0 < self.bandwidth <= self.highpass:
+            raise ConfigError(p + "bandwidth", self.bandwidth, f"must be > {p}highpass = {self.highpass:g} Hz")
 
     @property
     def unit(self) -> str:
@@ -235,33 +251,32 @@ _DEFAULT_CHANNELS = (
 
 @dataclass(frozen=True)
 class SimConfig:
-    """The whole simulator configuration.
+    """The whole simulator configuration: every parameter of the model, its instruments and its pacing.
 
-    Attributes:
-        rig: Mechanical parameters.
-        motor: Motor parameters.
-        integrator: Integrator settings.
-        channels: The four DAQ channels, in :data:`CHANNEL_NAMES` order.
-        truth_rate: Sample rate (Hz) of the noise-free ground-truth stream.
-        noise_enabled: Add instrument noise (off gives the ideal, quantised, clipped readings).
-        seed: Seed of every random stream; same seed and commands give identical data.
-        real_time_factor: Pacing of the node (1 = real time, 0 = as fast as possible).
-        block_rate: Sample blocks published per second of simulation time.
-        initial_theta: Pendulum angle at start (rad).
-        initial_theta_dot: Pendulum angular velocity at start (rad/s).
+    Build it from flat ROS parameters with :meth:`from_parameters` or :meth:`with_parameters`; each value
+    is validated (:mod:`rimd_sim.core.params`). ``seed``: same seed and commands give identical data.
+    ``real_time_factor`` and ``block_rate`` concern the node's pacing only (the core ignores them).
     """
 
-    rig: RigParams = field(default_factory=RigParams)
-    motor: MotorParams = field(default_factory=MotorParams)
-    integrator: IntegratorParams = field(default_factory=IntegratorParams)
-    channels: tuple[ChannelConfig, ...] = _DEFAULT_CHANNELS
-    truth_rate: float = 1000.0
-    noise_enabled: bool = True
-    seed: int = 0
-    real_time_factor: float = 1.0
-    block_rate: float = 100.0
-    initial_theta: float = 0.0
-    initial_theta_dot: float = 0.0
+    rig: RigParams = group(RigParams, "")
+    motor: MotorParams = group(MotorParams, "motor.")
+    integrator: IntegratorParams = group(IntegratorParams, "integrator.")
+    channels: tuple[ChannelConfig, ...] = keyed("channels.{}.", _DEFAULT_CHANNELS)
+    truth_rate: float = param(1000.0, "sample rate of the noise-free ground truth (/rig/truth)", unit="Hz", gt=0,
+                              le=1e6, name="truth.sample_rate")
+    noise_enabled: bool = param(True, "add instrument noise (off: ideal, quantised, clipped readings)",
+                                name="noise.enabled")
+    seed: int = param(0, "seed of every random stream (read at start)", ge=0, lt=2**63)
+    # 0 or >= 1e-3: a tiny factor (1e-300) put one block a near-infinite wall time away, and the pacing thread
+    # died on the wait (OverflowError), leaving the rig silent.
+    real_time_factor: float = param(1.0, "pacing: 1 = real time (wall-clock stamps), 0 = as fast as possible",
+                                    zero="as fast as possible", ge=1e-3, le=1e6)
+    # At least 1 block/s: a tiny rate made one block of a near-infinite span, computed at once (memory, time).
+    block_rate: float = param(100.0, "sample blocks per second of simulation time (a block spans at most 1 s)",
+                              unit="blocks/s", ge=1, le=10000)
+    initial_theta: float = param(0.0, "pendulum angle at start", unit="rad", ge=-1.5, le=1.5, name="initial.theta")
+    initial_theta_dot: float = param(0.0, "pendulum angular velocity at start", unit="rad/s", ge=-1000, le=1000,
+                                     name="initial.theta_dot")
 
     def channel(self, name: str) -> ChannelConfig:
         """Return the channel called ``name``."""
@@ -272,7 +287,7 @@ class SimConfig:
 
     def to_parameters(self) -> dict[str, Any]:
         """Return the configuration as flat ROS parameter names and values."""
-        return {key: spec.get(self) for key, spec in PARAMETERS.items()}
+        return to_flat(self)
 
     def with_parameters(self, overrides: Mapping[str, Any]) -> SimConfig:
         """Return a new validated configuration with some parameters changed.
@@ -284,334 +299,50 @@ class SimConfig:
             ConfigError: For an unknown key, a value of the wrong type or out of range, or an
                 inconsistent combination.
         """
-        values = self.to_parameters()
-        for key, value in overrides.items():
-            if key not in PARAMETERS:
-                raise ConfigError(key, value, "unknown parameter (known: " + ", ".join(PARAMETERS) + ")")
-            values[key] = PARAMETERS[key].check(key, value)
-        return _build(values)
+        return build(SimConfig, overrides, base=self)
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> SimConfig:
         """Build a configuration from flat ROS parameters over the defaults (see :meth:`with_parameters`).
 
-        The simulator node's own parameters (:data:`NODE_PARAMETERS`: ``start_paused``, the fault scenario
-        ``faults``, the capture's ``capture.*``) may stand in the same file; the node reads and checks them.
+        The simulator node's own parameters (:func:`is_node_parameter`: ``start_paused``, the fault scenario
+        ``faults``, ``capture.*``, ``lockstep.*``) may stand in the same file; the node reads and checks them.
         """
-        return cls().with_parameters({k: v for k, v in params.items()
-                                      if k not in NODE_PARAMETERS and not k.startswith("capture.")})
-
-
-# --------------------------------------------------------------------------------------------------
-# Parameter table: name -> type, rule, getter. The table is what the node declares (with descriptors).
-# --------------------------------------------------------------------------------------------------
+        return build(cls, params, ignore=is_node_parameter)
 
 
 @dataclass(frozen=True)
-class ParameterSpec:
-    """One ROS parameter: its type, its rule in words, how to check it and where it lives.
+class SimulatorNodeSettings:
+    """The simulator node's own parameters, besides :class:`SimConfig`'s: read at start, not by the core."""
 
-    Attributes:
-        kind: ``float``, ``int``, ``bool`` or ``str``.
-        rule: The rule, in words, shown in refusals and descriptors.
-        description: What the parameter is, with its unit.
-        ok: Predicate on the converted value.
-        get: Reads the value from a :class:`SimConfig`.
-        low: Lower bound for a ROS range descriptor, if any.
-        high: Upper bound for a ROS range descriptor, if any.
-        choices: Allowed strings, if any.
+    start_paused: bool = param(False, "start paused: publish nothing until /rig/resume (at real time, t0 is then "
+                                      "the time of that call)", read_only=True)
+    faults: tuple[str, ...] = param((), "fault scenario loaded at start: one 'channel=NAME kind=KIND start=S "
+                                        "duration=S magnitude=M' string per fault (\"\" entries are ignored); "
+                                        "docs/faults.md", read_only=True)
+    capture: CaptureConfig = group(CaptureConfig, "capture.")
+    lockstep: LockstepSettings = group(LockstepSettings, "lockstep.")
+
+
+#: Every parameter of :class:`SimConfig`, by ROS name (the declarations of :mod:`rimd_sim.core.params`).
+PARAMETERS: dict[str, Param] = parameters(SimConfig)
+#: The simulator node's own parameters (:class:`SimulatorNodeSettings`).
+NODE_PARAMETERS: dict[str, Param] = parameters(SimulatorNodeSettings)
+
+
+def check_simulator_section(values: Mapping[str, Any]) -> tuple[SimConfig, SimulatorNodeSettings]:
+    """The simulator's configuration and node settings from a parameter-file section, each value checked.
+
+    Raises:
+        ConfigError: Naming the first refused parameter (an unknown one included) and its rule.
     """
-
-    kind: str
-    rule: str
-    description: str
-    ok: Callable[[Any], bool]
-    get: Callable[[SimConfig], Any]
-    low: float | None = None
-    high: float | None = None
-    choices: tuple[str, ...] = ()
-
-    def check(self, key: str, value: Any) -> Any:
-        """Convert ``value`` to the parameter's type and check its rule.
-
-        Raises:
-            ConfigError: When the type is wrong or the rule is broken.
-        """
-        if self.kind == "float":
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                hint = ""
-                if isinstance(value, str):
-                    try:
-                        float(value)
-                        hint = " (YAML read it as text: write exponents with a sign and a dot, e.g. 5.5e+6)"
-                    except ValueError:
-                        pass
-                raise ConfigError(key, value, "must be a number" + hint)
-            value = float(value)
-            if not math.isfinite(value):
-                raise ConfigError(key, value, "must be finite; " + self.rule)
-            if value != 0.0 and abs(value) < SMALLEST_NORMAL:
-                # A subnormal number has lost its precision, and the kernels' products of such values
-                # underflow to 0 (amplitude = 5e-324 divided by zero inside the integrator).
-                raise ConfigError(key, value, f"must be 0 or at least {SMALLEST_NORMAL:.3g} in magnitude "
-                                              f"(not a subnormal number); {self.rule}")
-        elif self.kind == "int":
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ConfigError(key, value, "must be an integer")
-        elif self.kind == "bool":
-            if not isinstance(value, bool):
-                raise ConfigError(key, value, "must be true or false")
-        elif self.kind == "str" and not isinstance(value, str):
-            raise ConfigError(key, value, "must be a string")
-        if not self.ok(value):
-            raise ConfigError(key, value, self.rule)
-        return value
+    config = SimConfig.from_parameters(values)
+    return config, build(SimulatorNodeSettings, {k: v for k, v in values.items() if is_node_parameter(k)})
 
 
-def _positive(desc: str, get: Callable[[SimConfig], Any], high: float | None = None) -> ParameterSpec:
-    if high is None:
-        return ParameterSpec("float", "must be > 0", desc, lambda v: v > 0, get, low=0.0)
-    return ParameterSpec("float", f"must be > 0 and <= {high:g}", desc, lambda v: 0 < v <= high, get, 0.0, high)
-
-
-def _nonneg(desc: str, get: Callable[[SimConfig], Any], high: float | None = None) -> ParameterSpec:
-    if high is None:
-        return ParameterSpec("float", "must be >= 0", desc, lambda v: v >= 0, get, low=0.0)
-    return ParameterSpec("float", f"must be >= 0 and <= {high:g}", desc, lambda v: 0 <= v <= high, get, 0.0, high)
-
-
-def _between(desc: str, get: Callable[[SimConfig], Any], low: float, high: float) -> ParameterSpec:
-    return ParameterSpec("float", f"must be >= {low:g} and <= {high:g}", desc, lambda v: low <= v <= high, get,
-                         low, high)
-
-
-def _channel_specs() -> Iterator[tuple[str, ParameterSpec]]:
-    for index, name in enumerate(CHANNEL_NAMES):
-
-        def getter(attr: str, i: int = index) -> Callable[[SimConfig], Any]:
-            return lambda c: getattr(c.channels[i], attr)
-
-        prefix = f"channels.{name}."
-        yield prefix + "sample_rate", _positive("samples per second (Hz)", getter("sample_rate"), 1e6)
-        # Upper bounds (here and below): far beyond any instrument or rig, they refuse the absurd (1e300), which
-        # was accepted and, for some parameters, stopped or hung the running rig's integrator.
-        yield prefix + "range_min", _between("lower end of the measuring range (SI)", getter("range_min"),
-                                             -MAX_SI_MAGNITUDE, MAX_SI_MAGNITUDE)
-        yield prefix + "range_max", _between("upper end of the measuring range (SI)", getter("range_max"),
-                                             -MAX_SI_MAGNITUDE, MAX_SI_MAGNITUDE)
-        yield prefix + "noise_std", _nonneg("white noise standard deviation (SI)", getter("noise_std"),
-                                            MAX_SI_MAGNITUDE)
-        yield prefix + "resolution", _nonneg("quantisation step (SI), 0 = none", getter("resolution"),
-                                             MAX_SI_MAGNITUDE)
-        yield prefix + "bandwidth", _nonneg("-3 dB low-pass frequency (Hz), 0 = none", getter("bandwidth"), 1e6)
-        yield prefix + "highpass", _nonneg("-3 dB high-pass frequency (Hz), 0 = DC-coupled", getter("highpass"))
-        yield prefix + "reliable", ParameterSpec(
-            "bool", "must be true or false", "reliable QoS (else best effort)", lambda v: True, getter("reliable")
-        )
-        yield prefix + "frame_id", ParameterSpec(
-            "str", "must be a non-empty string without NUL characters (a ROS 2 string is a C string)",
-            "sensor id in header.frame_id", lambda v: bool(v) and "\0" not in v, getter("frame_id")
-        )
-
-
-#: Largest magnitude of an instrument's range, noise or resolution (SI units).
-MAX_SI_MAGNITUDE = 1e9
-
-#: Largest motor ramp rate (Hz/s), of ``motor.ramp_rate`` and of a ``set_motor_frequency`` request.
-MAX_RAMP_RATE = 1e4
-
-#: Smallest positive normal float; smaller non-zero values (subnormal) are refused.
-SMALLEST_NORMAL = sys.float_info.min
-
-PARAMETERS: dict[str, ParameterSpec] = {
-    "gap": _nonneg("gap between hammer at rest and force sensor (m)", lambda c: c.rig.gap, 0.05),
-    # At least 1 g: a lighter hammer (1e-9 kg) made the contact so stiff that the integrator hung.
-    "mass": ParameterSpec("float", "must be > 0 and <= 1000 (at least 0.001 kg)", "hammer mass (kg)",
-                          lambda v: 1e-3 <= v <= 1000.0, lambda c: c.rig.mass, 1e-3, 1000.0),
-    "amplitude": _nonneg("cart displacement amplitude A0 (m)", lambda c: c.rig.amplitude, 0.05),
-    "natural_frequency": _positive(
-        "pendulum natural frequency without impact (Hz)", lambda c: c.rig.natural_frequency, 1000.0),
-    "damping_ratio": _nonneg("structural damping ratio zeta", lambda c: c.rig.damping_ratio, 2.0),
-    "gravity": _positive("gravitational acceleration (m/s^2)", lambda c: c.rig.gravity, 100.0),
-    "contact.model": ParameterSpec(
-        "str",
-        "must be one of: " + ", ".join(CONTACT_LAWS),
-        "contact law (paper Eq. 1)",
-        lambda v: v in CONTACT_LAWS,
-        lambda c: c.rig.contact.model,
-        choices=tuple(CONTACT_LAWS),
-    ),
-    # k = 1e300 or c = 1e300 stopped the rig at its first contact (step size underflow, non-finite state); the
-    # bounds are well inside what the integrator was checked to handle (k = 1e14, c = 1e7 at the defaults).
-    "contact.stiffness": _positive("contact stiffness k (N/m^n)", lambda c: c.rig.contact.stiffness, 1e12),
-    "contact.damping": _nonneg(
-        "contact damping c (N s/m, N s/m^(n+1) for Hunt-Crossley)", lambda c: c.rig.contact.damping, 1e6),
-    "contact.exponent": ParameterSpec(
-        "float", "must be >= 1 and <= 3", "exponent n of the Hertz-type laws", lambda v: 1.0 <= v <= 3.0,
-        lambda c: c.rig.contact.exponent, 1.0, 3.0,
-    ),
-    "contact.restitution": ParameterSpec(
-        "float", "must be > 0 and <= 1", "restitution e of the Lankarani-Nikravesh law", lambda v: 0 < v <= 1,
-        lambda c: c.rig.contact.restitution, 0.0, 1.0,
-    ),
-    # >= 1e-6 m/s: the floor divides the contact damping, and below ~1e-12 the integrator stalled or hung.
-    "contact.min_impact_velocity": _between(
-        "floor of the Lankarani-Nikravesh impact velocity (m/s)", lambda c: c.rig.contact.min_impact_velocity,
-        1e-6, 10.0),
-    # Structural contact model (issue 15). Stiffness 0 = rigid; the upper bounds keep the fast modes within
-    # what the integrator resolves affordably (a 1e12 N/m link on 1 g would need sub-ns steps).
-    "structure.model": ParameterSpec(
-        "str", "must be one of: " + ", ".join(STRUCTURE_MODELS),
-        "contact model: rigid (the paper's single-mass hammer) or two_mass (axial mode and sensor mount)",
-        lambda v: v in STRUCTURE_MODELS, lambda c: c.rig.structure.model, choices=STRUCTURE_MODELS),
-    "structure.impactor_mass": _between(
-        "front (impact device) mass of the two-mass hammer (kg), < mass", lambda c: c.rig.structure.impactor_mass,
-        1e-3, 1000.0),
-    "structure.axial_stiffness": ParameterSpec(
-        "float", "must be 0 (rigid) or >= 1000 and <= 1e+10", "axial stiffness of the hammer (N/m), 0 = rigid",
-        lambda v: v == 0.0 or 1e3 <= v <= 1e10, lambda c: c.rig.structure.axial_stiffness, 0.0, 1e10),
-    "structure.axial_damping_ratio": ParameterSpec(
-        "float", "must be >= 0 and < 1", "damping ratio of the hammer's axial mode", lambda v: 0.0 <= v < 1.0,
-        lambda c: c.rig.structure.axial_damping_ratio, 0.0, 0.999),
-    "structure.sensor_mass": _between(
-        "moving mass of the force sensor's top (kg)", lambda c: c.rig.structure.sensor_mass, 1e-4, 10.0),
-    "structure.mount_stiffness": ParameterSpec(
-        "float", "must be 0 (rigid) or >= 1000 and <= 1e+10", "stiffness of the force sensor on its mount (N/m), "
-        "0 = rigid", lambda v: v == 0.0 or 1e3 <= v <= 1e10, lambda c: c.rig.structure.mount_stiffness, 0.0, 1e10),
-    "structure.mount_damping_ratio": ParameterSpec(
-        "float", "must be >= 0 and < 1", "damping ratio of the sensor-on-mount mode", lambda v: 0.0 <= v < 1.0,
-        lambda c: c.rig.structure.mount_damping_ratio, 0.0, 0.999),
-    "motor.max_frequency": _positive("highest motor frequency accepted (Hz)", lambda c: c.motor.max_frequency, 1000.0),
-    "motor.ramp_rate": _positive("default ramp rate of the motor frequency (Hz/s)", lambda c: c.motor.ramp_rate,
-                                 MAX_RAMP_RATE),
-    "motor.initial_frequency": _nonneg("motor frequency at start (Hz)", lambda c: c.motor.initial_frequency),
-    "motor.initial_setpoint": _nonneg("motor setpoint at start (Hz)", lambda c: c.motor.initial_setpoint),
-    "integrator.rtol": ParameterSpec(
-        "float", "must be >= 1e-13 and <= 1e-3", "relative tolerance", lambda v: 1e-13 <= v <= 1e-3,
-        lambda c: c.integrator.rtol, 1e-13, 1e-3,
-    ),
-    "integrator.atol": _positive("absolute tolerance (rad, rad/s)", lambda c: c.integrator.atol, 1e-3),
-    # >= 1 us: 1e-7 s already took 17 s of CPU per simulated second, smaller values hang the rig.
-    "integrator.max_step": _between("largest integration step (s)", lambda c: c.integrator.max_step, 1e-6, 0.05),
-    "integrator.event_tolerance": _positive(
-        "switch time tolerance (s)", lambda c: c.integrator.event_tolerance, 1e-6
-    ),
-    "initial.theta": ParameterSpec(
-        "float", "must be in [-1.5, 1.5] rad", "pendulum angle at start (rad)", lambda v: abs(v) <= 1.5,
-        lambda c: c.initial_theta, -1.5, 1.5,
-    ),
-    "initial.theta_dot": _between("pendulum angular velocity at start (rad/s)", lambda c: c.initial_theta_dot,
-                                  -1000.0, 1000.0),
-    "truth.sample_rate": _positive("ground-truth sample rate (Hz)", lambda c: c.truth_rate, 1e6),
-    "noise.enabled": ParameterSpec(
-        "bool", "must be true or false", "add instrument noise", lambda v: True, lambda c: c.noise_enabled
-    ),
-    "seed": ParameterSpec(
-        "int", "must be >= 0 and < 2**63", "seed of the noise streams", lambda v: 0 <= v < 2**63, lambda c: c.seed,
-        0, 2**63 - 1,
-    ),
-    # 0 or >= 1e-3: a tiny factor (1e-300) put one block a near-infinite wall time away, and the pacing thread
-    # died on the wait (OverflowError), leaving the rig silent.
-    "real_time_factor": ParameterSpec(
-        "float", "must be 0 (as fast as possible) or >= 0.001 and <= 1e+06",
-        "pacing: 1 = real time, 0 = as fast as possible", lambda v: v == 0 or 1e-3 <= v <= 1e6,
-        lambda c: c.real_time_factor, 0.0, 1e6,
-    ),
-    # At least 1 block/s: a tiny rate made one block of a near-infinite span, computed at once (memory, time).
-    "block_rate": ParameterSpec(
-        "float", "must be > 0 and <= 10000 (at least 1: a block spans at most 1 s)",
-        "sample blocks per second of simulation time", lambda v: 1.0 <= v <= 10000.0, lambda c: c.block_rate,
-        1.0, 10000.0,
-    ),
-}
-PARAMETERS.update(dict(_channel_specs()))
-
-
-def _build(v: Mapping[str, Any]) -> SimConfig:
-    """Assemble a :class:`SimConfig` from checked flat values and check the cross-field rules."""
-    contact = ContactParams(
-        model=v["contact.model"],
-        stiffness=v["contact.stiffness"],
-        damping=v["contact.damping"],
-        exponent=v["contact.exponent"],
-        restitution=v["contact.restitution"],
-        min_impact_velocity=v["contact.min_impact_velocity"],
-    )
-    structure = StructureParams(
-        model=v["structure.model"],
-        impactor_mass=v["structure.impactor_mass"],
-        axial_stiffness=v["structure.axial_stiffness"],
-        axial_damping_ratio=v["structure.axial_damping_ratio"],
-        sensor_mass=v["structure.sensor_mass"],
-        mount_stiffness=v["structure.mount_stiffness"],
-        mount_damping_ratio=v["structure.mount_damping_ratio"],
-    )
-    rig = RigParams(
-        gap=v["gap"],
-        mass=v["mass"],
-        amplitude=v["amplitude"],
-        natural_frequency=v["natural_frequency"],
-        damping_ratio=v["damping_ratio"],
-        gravity=v["gravity"],
-        contact=contact,
-        structure=structure,
-    )
-    if structure.model == "two_mass" and structure.axial_stiffness > 0.0 and structure.impactor_mass >= rig.mass:
-        raise ConfigError("structure.impactor_mass", structure.impactor_mass,
-                          f"must be < mass = {rig.mass:g} kg (the rest of the hammer is the rear mass)")
-    if rig.gap >= 0.5 * rig.length:
-        raise ConfigError("gap", rig.gap, f"must be < half the pendulum length l/2 = {0.5 * rig.length:.6g} m")
-    motor = MotorParams(
-        max_frequency=v["motor.max_frequency"],
-        ramp_rate=v["motor.ramp_rate"],
-        initial_frequency=v["motor.initial_frequency"],
-        initial_setpoint=v["motor.initial_setpoint"],
-    )
-    for key in ("motor.initial_frequency", "motor.initial_setpoint"):
-        if v[key] > motor.max_frequency:
-            raise ConfigError(key, v[key], f"must be <= motor.max_frequency = {motor.max_frequency:g} Hz")
-    integrator = IntegratorParams(
-        rtol=v["integrator.rtol"],
-        atol=v["integrator.atol"],
-        max_step=v["integrator.max_step"],
-        event_tolerance=v["integrator.event_tolerance"],
-    )
-    channels = []
-    for name in CHANNEL_NAMES:
-        p = f"channels.{name}."
-        ch = ChannelConfig(
-            name=name,
-            sample_rate=v[p + "sample_rate"],
-            range_min=v[p + "range_min"],
-            range_max=v[p + "range_max"],
-            noise_std=v[p + "noise_std"],
-            resolution=v[p + "resolution"],
-            bandwidth=v[p + "bandwidth"],
-            highpass=v[p + "highpass"],
-            reliable=v[p + "reliable"],
-            frame_id=v[p + "frame_id"],
-        )
-        if not ch.range_min < ch.range_max:
-            raise ConfigError(p + "range_max", ch.range_max, f"must be > {p}range_min = {ch.range_min:g}")
-        if ch.highpass > 0 and ch.highpass >= 0.45 * ch.sample_rate:
-            raise ConfigError(p + "highpass", ch.highpass,
-                              f"must be < 0.45 x sample_rate = {0.45 * ch.sample_rate:g} Hz")
-        if ch.highpass > 0 and 0 < ch.bandwidth <= ch.highpass:
-            raise ConfigError(p + "bandwidth", ch.bandwidth, f"must be > {p}highpass = {ch.highpass:g} Hz")
-        channels.append(ch)
-    return SimConfig(
-        rig=rig,
-        motor=motor,
-        integrator=integrator,
-        channels=tuple(channels),
-        truth_rate=v["truth.sample_rate"],
-        noise_enabled=v["noise.enabled"],
-        seed=v["seed"],
-        real_time_factor=v["real_time_factor"],
-        block_rate=v["block_rate"],
-        initial_theta=v["initial.theta"],
-        initial_theta_dot=v["initial.theta_dot"],
-    )
+def is_node_parameter(name: str) -> bool:
+    """Whether ``name`` is a parameter of the simulator node's own, not of :class:`SimConfig` (the node checks it)."""
+    return name in NODE_PARAMETERS
 
 
 # --------------------------------------------------------------------------------------------------
@@ -640,15 +371,8 @@ def read_ros_parameters(path: str | Path, node: str = NODE_NAME) -> dict[str, An
     Raises:
         ConfigError: When the file cannot be read or parsed, or has no section for the node.
     """
-    import yaml
-
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ConfigError("config file", str(path), f"cannot be read: {exc.strerror}") from exc
-    except yaml.YAMLError as exc:
-        raise ConfigError("config file", str(path), f"is not valid YAML: {exc}") from exc
+    doc = read_yaml(path, what="config file")
     if not isinstance(doc, Mapping):
         raise ConfigError("config file", str(path), "must be a mapping of node names to 'ros__parameters'")
     flat: dict[str, Any] = {}

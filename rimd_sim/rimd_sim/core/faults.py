@@ -137,10 +137,12 @@ def _number(name: str, value: Any) -> float:
 
 
 def validate_fault(channel: Any, kind: Any, start: Any, duration: Any, magnitude: Any, *, now: Fraction,
-                   channels: Mapping[str, ChannelConfig]) -> tuple[str, str, Fraction, Fraction, float]:
+                   channels: Mapping[str, ChannelConfig], after: Any = 0.0
+                   ) -> tuple[str, str, Fraction, Fraction, float]:
     """Check a fault request; returns ``(channel, kind, start, duration, magnitude)`` with exact times.
 
-    ``start`` 0 means ``now`` (the next block boundary).
+    ``start`` is simulation time, 0 meaning ``now`` (the next block boundary); ``after`` (with ``start`` 0) is
+    a time relative to ``now``, for a client that does not know how long the rig has run.
 
     Raises:
         CommandError: Naming the field and the rule it broke.
@@ -158,16 +160,23 @@ def validate_fault(channel: Any, kind: Any, start: Any, duration: Any, magnitude
                            + (f" (kind '{kind}' is a sensor fault; 'motor' takes motor_slip)" if channel == MOTOR
                               else ""))
     start_s = _number("start", start)
+    after_s = _number("after", after)
     duration_s = _number("duration", duration)
     magnitude = _number("magnitude", magnitude)
     if duration_s < 0:
         raise CommandError(f"duration = {duration_s!r} refused: must be >= 0 s (0 = until cleared)")
     if start_s < 0:
         raise CommandError(f"start = {start_s!r} refused: must be >= 0 s of simulation time (0 = next block boundary)")
-    t_start = now if start_s == 0 else Fraction(repr(start_s))
+    if after_s < 0 or after_s > MAX_AHEAD_S:
+        raise CommandError(f"after = {after_s!r} refused: must be >= 0 and <= {MAX_AHEAD_S} s (seconds of simulation "
+                           "time from when the request arrives)")
+    if after_s and start_s:
+        raise CommandError(f"after = {after_s!r} refused: give start (simulation time) or after (relative to now), "
+                           f"not both (start = {start_s!r})")
+    t_start = now + Fraction(repr(after_s)) if after_s else now if start_s == 0 else Fraction(repr(start_s))
     if t_start < now:
         raise CommandError(f"start = {start_s!r} refused: in the past (simulation time is {float(now):.6f} s); "
-                           "must be 0 (next block boundary) or a time from now on")
+                           "must be 0 (next block boundary), a time from now on, or use after (seconds from now)")
     lo_bad = rule.low is not None and (magnitude <= rule.low if rule.low_open else magnitude < rule.low)
     hi_bad = rule.high is not None and magnitude > rule.high
     if kind == "spike" and channel in channels and magnitude > channels[channel].sample_rate:
@@ -177,8 +186,15 @@ def validate_fault(channel: Any, kind: Any, start: Any, duration: Any, magnitude
     return channel, kind, t_start, Fraction(repr(duration_s)), magnitude
 
 
+#: Longest a fault may be scheduled ahead (s of simulation time): one day, as the rig's other commands.
+MAX_AHEAD_S = 86_400
+
+#: The fields of a fault entry: ``start`` (simulation time) or ``after`` (relative to when it is injected).
+ENTRY_FIELDS = ("channel", "kind", "start", "after", "duration", "magnitude")
+
+
 def parse_fault_entry(entry: Any, where: str) -> dict[str, Any]:
-    """One scenario entry as a dict of ``channel, kind, start, duration, magnitude``.
+    """One scenario entry as a dict of ``channel, kind, start, after, duration, magnitude``.
 
     An entry is a mapping (a scenario file) or a string ``"channel=impact_force kind=dropout start=5
     duration=1 magnitude=0"`` (the simulator's ``faults`` parameter: ROS parameters hold no list of maps).
@@ -195,18 +211,20 @@ def parse_fault_entry(entry: Any, where: str) -> dict[str, Any]:
             fields[key] = value if key in ("channel", "kind") else _float_field(where, key, value)
         entry = fields
     if not isinstance(entry, Mapping):
-        raise CommandError(f"{where} = {entry!r} refused: must be a mapping of channel, kind, start, duration, "
-                           "magnitude")
-    unknown = set(entry) - {"channel", "kind", "start", "duration", "magnitude"}
+        raise CommandError(f"{where} = {entry!r} refused: must be a mapping of " + ", ".join(ENTRY_FIELDS))
+    unknown = set(entry) - set(ENTRY_FIELDS)
     if unknown:
-        raise CommandError(f"{where}.{sorted(unknown)[0]} refused: unknown field (fields: channel, kind, start, "
-                           "duration, magnitude)")
-    for key in ("channel", "kind", "start"):
+        raise CommandError(f"{where}.{sorted(unknown)[0]} refused: unknown field (fields: {', '.join(ENTRY_FIELDS)})")
+    for key in ("channel", "kind"):
         if key not in entry:
-            raise CommandError(f"{where}.{key} missing: every fault needs channel, kind and start")
-    out = {"channel": entry["channel"], "kind": entry["kind"], "start": entry["start"],
-           "duration": entry.get("duration", 0.0), "magnitude": entry.get("magnitude", 0.0)}
-    for key in ("start", "duration", "magnitude"):
+            raise CommandError(f"{where}.{key} missing: every fault needs channel, kind and start or after")
+    if ("start" in entry) == ("after" in entry):
+        raise CommandError(f"{where}: give start (s of simulation time) or after (s from when the fault is injected), "
+                           "one of the two")
+    out = {"channel": entry["channel"], "kind": entry["kind"], "start": entry.get("start", 0.0),
+           "after": entry.get("after", 0.0), "duration": entry.get("duration", 0.0),
+           "magnitude": entry.get("magnitude", 0.0)}
+    for key in ("start", "after", "duration", "magnitude"):
         if isinstance(out[key], int) and not isinstance(out[key], bool):
             out[key] = float(out[key])
     return out

@@ -1,9 +1,14 @@
 """The rig model as a streaming integrator: advance in simulation time, get exact samples and impacts.
 
-:class:`RigModel` owns the state of one trajectory of the paper's model (SPEC section 2) and the compiled
-kernel (:mod:`rimd_sim.core.kernel`). It knows nothing of noise or ROS: it returns noise-free physical
-quantities on exact sample grids (sample ``n`` of a channel at ``n / rate`` seconds of simulation time),
-the impacts completed so far, stroboscopic (Poincare) points and the motor state.
+:class:`RigModel` owns the state of one trajectory of the model the configuration selects
+(``structure.model``, SPEC section 2 and issue 15) and its compiled driver (:mod:`rimd_sim.core.kernel`). It
+knows nothing of noise or ROS: it returns noise-free physical quantities on exact sample grids (sample ``n``
+of a channel at ``n / rate`` seconds of simulation time), the impacts completed so far, stroboscopic
+(Poincare) points and the motor state.
+
+The models are data: :data:`MODELS` is the one place that picks one. Each entry names the physics module
+(the contract of :mod:`rimd_sim.core.kernel`) the driver is built from, once per model and process, at its
+first use. ``RigModel``, the simulator, the ensemble of the maps and every analysis look the model up there.
 
 Commands act *now*, at the model's current time :attr:`RigModel.time`: the current integration step is
 ended exactly there (see :func:`~rimd_sim.core.kernel.truncate`). :class:`~rimd_sim.core.simulator.RigSimulator`
@@ -15,16 +20,21 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from fractions import Fraction
+from functools import cache
+from types import ModuleType
 from typing import NamedTuple
 
 import numpy as np
 
 from . import kernel as k
-from .config import CHANNEL_NAMES, RigParams, SimConfig
-from .contact import CONTACT_LAWS
-from .errors import CommandError, IntegrationError
+from . import rigid, structural
+from .config import CHANNEL_NAMES, STRUCTURE_MODELS, SimConfig
+from .errors import CommandError, ConfigError, IntegrationError
 
-__all__ = ["Impact", "ModelOutput", "MotorState", "RigModel", "StroboPoint", "as_time", "samples_before"]
+__all__ = [
+    "MODELS", "Impact", "ModelOutput", "MotorState", "PhysicsModel", "RigModel", "StroboPoint", "as_time",
+    "model_for", "samples_before",
+]
 
 #: Channel name -> quantity computed by the kernel.
 CHANNEL_QUANTITY = {
@@ -75,12 +85,18 @@ class Impact(NamedTuple):
 
 
 class StroboPoint(NamedTuple):
-    """State when the motor phase crosses a multiple of 2 pi (the cart at 0, moving forward)."""
+    """State when the motor phase crosses a multiple of 2 pi (the cart at 0, moving forward).
+
+    ``modes`` holds the model's own modes at that instant (the two-mass model's ``u, u', s, s'``; none for the
+    paper's model), so that a trajectory can be started again from the whole state (``RigModel(...,
+    initial_modes=...)``).
+    """
 
     t: float
     theta: float
     theta_dot: float
     cycle_index: int
+    modes: tuple[float, ...] = ()
 
 
 class MotorState(NamedTuple):
@@ -139,32 +155,69 @@ def as_time(x: float | int | Fraction) -> Fraction:
     return Fraction(int(x))
 
 
-def _params_vector(rig: RigParams, config: SimConfig) -> np.ndarray:
-    p = np.zeros(k.N_PARAM)
-    c = rig.contact
-    length = rig.length
-    p[k.P_L] = length
-    p[k.P_M] = rig.mass
-    p[k.P_A0] = rig.amplitude
-    p[k.P_GL] = rig.gravity / length
-    p[k.P_WN] = rig.omega_n
-    p[k.P_ZETA] = rig.damping_ratio
-    p[k.P_GAP] = rig.gap
-    p[k.P_LAW] = CONTACT_LAWS[c.model].code
-    p[k.P_K] = c.stiffness
-    p[k.P_C] = c.damping
-    p[k.P_N] = 1.0 if c.model == "spring_dashpot" else c.exponent
-    p[k.P_E] = c.restitution
-    p[k.P_VMIN] = c.min_impact_velocity
-    p[k.P_RTOL] = config.integrator.rtol
-    p[k.P_ATOL] = config.integrator.atol
-    p[k.P_HMAX] = config.integrator.max_step
-    p[k.P_EVTOL] = config.integrator.event_tolerance
-    # First contact step: 1/40 of the period of the linearised contact oscillator at 1 um penetration.
-    n = p[k.P_N]
-    k_eff = c.stiffness * n * (1e-6 ** (n - 1.0))
-    p[k.P_HCONT0] = min(config.integrator.max_step, 2.0 * math.pi * math.sqrt(rig.mass / k_eff) / 40.0)
-    return p
+@dataclass(frozen=True)
+class PhysicsModel:
+    """One model of the hammer and its stop: an entry of :data:`MODELS`.
+
+    Attributes:
+        name: The ``structure.model`` value that selects it.
+        summary: What it is, in words.
+        physics: Its physics module (the contract of :mod:`rimd_sim.core.kernel`).
+        sources: Further modules the physics compiles in (part of the compiled driver's cache key).
+        capture: Whether the triggered capture (``capture.*``) can run on it.
+    """
+
+    name: str
+    summary: str
+    physics: ModuleType
+    sources: tuple[ModuleType, ...] = ()
+    capture: bool = True
+
+    @property
+    def n_state(self) -> int:
+        """Components of the integrated state: ``theta``, ``theta_dot``, ``J`` and the model's modes."""
+        return 3 + self.physics.N_MODES
+
+    @property
+    def n_modes(self) -> int:
+        """The model's own modes (a stroboscopic point carries them)."""
+        return self.physics.N_MODES
+
+    @property
+    def hammer_modes(self) -> tuple[int, ...]:
+        """State indices a reset of the hammer puts at rest, beyond ``theta`` and ``theta_dot``."""
+        return tuple(self.physics.HAMMER_MODES)
+
+    def params(self, config: SimConfig) -> np.ndarray:
+        """The parameter vector of ``config`` for this model's driver."""
+        return self.physics.params(config)
+
+    @property
+    def driver(self) -> ModuleType:
+        """The compiled driver (:func:`rimd_sim.core.kernel.build_driver`), built at the first use."""
+        return _driver(self.name)
+
+
+#: The registry of models: ``structure.model`` -> :class:`PhysicsModel`.
+MODELS: dict[str, PhysicsModel] = {m.name: m for m in (
+    PhysicsModel("rigid", "the paper's model: one rigid hammer against a rigid force sensor", rigid),
+    PhysicsModel("two_mass", "the hammer as two masses joined by its axial stiffness, the force sensor on a "
+                 "compliant mount (issue 15)", structural, sources=(rigid,),
+                 # The capture samples the acceleration in contact only; this model's rings after it.
+                 capture=False),
+)}
+assert tuple(MODELS) == STRUCTURE_MODELS, "every structure.model value has its entry in MODELS"
+
+
+@cache
+def _driver(name: str) -> ModuleType:
+    spec = MODELS[name]
+    return k.build_driver(spec.physics, name, spec.sources)
+
+
+def model_for(config: SimConfig) -> PhysicsModel:
+    """The model ``config`` selects (``structure.model``)."""
+    return MODELS[config.rig.structure.model]
 
 
 _STATUS_MESSAGES = {
@@ -176,14 +229,16 @@ _STATUS_MESSAGES = {
 
 
 class RigModel:
-    """One trajectory of the rig model, advanced in simulation time.
+    """One trajectory of the rig model ``config`` selects (:data:`MODELS`), advanced in simulation time.
 
     Args:
-        config: The validated configuration; its rig, motor, integrator, channel rates, truth rate and
-            initial state are used.
+        config: The validated configuration; its rig (the model included), motor, integrator, channel rates,
+            truth rate and initial state are used.
         channels: Produce the four DAQ channels (noise-free).
         truth: Produce the ground-truth block.
         strobe: Produce stroboscopic (Poincare) points.
+        extra_channels: ``(name, rate, like)``: further channels (the triggered capture's fast signals).
+        initial_modes: The model's modes at the start (default: at rest), as a stroboscopic point holds them.
 
     Example:
         >>> from rimd_sim.core import RigModel, SimConfig
@@ -194,25 +249,23 @@ class RigModel:
         True
     """
 
-    #: The compiled kernel (a module with ``advance``, ``truncate`` and ``resync``) and its state size; the
-    #: structural model (:mod:`rimd_sim.core.structural`) subclasses with its own.
-    _kernel = k
-    _n_state = 3
-    _n_fstate = k.N_FSTATE
-
-    def _params(self, config: SimConfig) -> np.ndarray:
-        return _params_vector(config.rig, config)
-
     def __init__(self, config: SimConfig, *, channels: bool = True, truth: bool = True, strobe: bool = False,
-                 extra_channels: tuple[tuple[str, Fraction, str], ...] = ()):
+                 extra_channels: tuple[tuple[str, Fraction, str], ...] = (), initial_modes=()):
         self._config = config
-        self._p = self._params(config)
-        self._fs = np.zeros(self._n_fstate)
+        self._physics = model_for(config)
+        self._kernel = self._physics.driver
+        if len(initial_modes) not in (0, self._physics.n_modes):
+            raise ConfigError("initial_modes", tuple(initial_modes), f"the {self._physics.name} model has "
+                              f"{self._physics.n_modes} modes")
+        n_state = self._physics.n_state
+        self._p = self._physics.params(config)
+        self._fs = np.zeros(k.N_FSTATE)
         self._is = np.zeros(k.N_ISTATE, dtype=np.int64)
-        self._ya = np.zeros(self._n_state)
-        self._yb = np.zeros(self._n_state)
-        self._fa = np.zeros(self._n_state)
-        self._Q = np.zeros((self._n_state, 4))
+        self._ya = np.zeros(n_state)
+        self._yb = np.zeros(n_state)
+        self._fa = np.zeros(n_state)
+        self._Q = np.zeros((n_state, 4))
+        self._initial_modes = tuple(float(m) for m in initial_modes)
         self._time = Fraction(0)
         self._want_channels = channels
         self._want_truth = truth
@@ -242,6 +295,8 @@ class RigModel:
         ist[:] = 0
         self._ya[:] = 0.0
         self._ya[:3] = (cfg.initial_theta, cfg.initial_theta_dot, 0.0)
+        if self._initial_modes:
+            self._ya[3:] = self._initial_modes
         self._yb[:] = self._ya
         fs[k.F_H] = min(1e-4, cfg.integrator.max_step)
         fs[k.F_HFREE] = cfg.integrator.max_step
@@ -263,6 +318,11 @@ class RigModel:
     def config(self) -> SimConfig:
         """The configuration in force."""
         return self._config
+
+    @property
+    def physics_model(self) -> PhysicsModel:
+        """The model integrated (the entry of :data:`MODELS` the configuration selects)."""
+        return self._physics
 
     @property
     def time(self) -> Fraction:
@@ -339,7 +399,7 @@ class RigModel:
         strobe: list[StroboPoint] = []
         cycles = float(t_stop - t_start) * max(self._fs[k.F_MW0], self._fs[k.F_MWSET])
         imp_out = np.empty((64, k.N_RECORD))
-        st_out = np.empty((int(min(cycles, 1e5)) + 8 if self._want_strobe else 0, k.N_STROBE))
+        st_out = np.empty((int(min(cycles, 1e5)) + 8 if self._want_strobe else 0, k.N_STROBE + self._physics.n_modes))
         tr_base = np.array([tr_first], dtype=np.int64)
         while True:
             self._is[k.I_IMPOUT] = 0
@@ -349,7 +409,8 @@ class RigModel:
                                           ch_out, float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out,
                                           imp_out, st_out)
             impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
-            strobe.extend(StroboPoint(float(r[0]), float(r[1]), float(r[2]), int(r[3]))
+            strobe.extend(StroboPoint(float(r[k.S_T]), float(r[k.S_THETA]), float(r[k.S_OMEGA]), int(r[k.S_CYCLE]),
+                                      tuple(r[k.S_MODES:].tolist()))
                           for r in st_out[: self._is[k.I_STROUT]])
             if status == k.ST_OK:
                 break
@@ -459,10 +520,15 @@ class RigModel:
         return done + self._resync()
 
     def reset_hammer(self) -> list[Impact]:
-        """Put the hammer back to its initial state now (the motor keeps running)."""
+        """Put the hammer back to its initial state now, its own modes at rest.
+
+        The motor keeps running (and the two-mass model's sensor keeps ringing).
+        """
         done = self._truncate()
         self._ya[0] = self._config.initial_theta
         self._ya[1] = self._config.initial_theta_dot
+        for i in self._physics.hammer_modes:
+            self._ya[i] = 0.0
         return done + self._resync()
 
     def reconfigure(self, config: SimConfig) -> list[Impact]:
@@ -471,15 +537,18 @@ class RigModel:
         Channel and truth sample rates cannot change on a running model (create a new one).
 
         Raises:
-            CommandError: If a sample rate differs.
+            CommandError: If a sample rate or the model (``structure.model``) differs.
         """
         old = self._config
         if [c.sample_rate for c in config.channels] != [c.sample_rate for c in old.channels] or \
                 config.truth_rate != old.truth_rate:
             raise CommandError("sample rates cannot change while the model runs; restart it with the new rates")
+        if model_for(config) is not self._physics:
+            raise CommandError(f"structure.model cannot change while the model runs ({self._physics.name} to "
+                               f"{config.rig.structure.model}); create a new one")
         done = self._truncate()
         self._config = config
-        self._p = self._params(config)
+        self._p = self._physics.params(config)
         return done + self._resync()
 
 

@@ -23,7 +23,7 @@ from .capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig, CaptureRecord, T
 from .config import CHANNEL_NAMES, SimConfig
 from .errors import CommandError, ConfigError
 from .faults import FaultEvent, FaultLayer, FaultSpec, validate_fault
-from .model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, samples_before
+from .model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, model_for, samples_before
 from .sensors import Instrument
 
 __all__ = ["AppliedCommand", "ChannelBlock", "RigSimulator", "SimBlock"]
@@ -94,15 +94,13 @@ class RigSimulator:
                  capture: CaptureConfig | None = None) -> None:
         self._config = config
         self._rates_cache: tuple[SimConfig, dict[str, Fraction], Fraction] | None = None
-        from .structural import make_model  # the model structure.model selects (issue 15)
-
         capture = capture if capture is not None and capture.enabled else None
-        if capture is not None and config.rig.structure.model != "rigid":
+        if capture is not None and not model_for(config).capture:
             raise ConfigError("capture.enabled", True, "not supported with structure.model "
-                              f"'{config.rig.structure.model}' yet (the triggered capture samples the paper "
-                              "kernel's contact acceleration); use structure.model: rigid")
-        self._model = make_model(config, channels=True, truth=truth, strobe=strobe,
-                                 extra_channels=capture.extra_channels() if capture else ())
+                              f"'{config.rig.structure.model}' yet (the triggered capture samples the hammer's "
+                              "acceleration in contact only); use structure.model: rigid")
+        self._model = RigModel(config, channels=True, truth=truth, strobe=strobe,
+                               extra_channels=capture.extra_channels() if capture else ())
         self._capture = (TriggeredCapture(capture, config.channel("impact_force"),
                                           config.channel("rimd_acceleration"), config.seed,
                                           noise=config.noise_enabled) if capture else None)
@@ -187,15 +185,17 @@ class RigSimulator:
         return self._push(when, "set_parameters", dict(params))
 
     def inject_fault(self, channel: str, kind: str, start: float = 0.0, duration: float = 0.0,
-                     magnitude: float = 0.0) -> FaultSpec:
-        """Schedule a fault (see :mod:`rimd_sim.core.faults`); ``start`` 0 = now (the next block boundary).
+                     magnitude: float = 0.0, after: float = 0.0) -> FaultSpec:
+        """Schedule a fault (see :mod:`rimd_sim.core.faults`).
+
+        ``start``: simulation time, 0 = now (the next block boundary); or ``after``: seconds from now.
 
         Raises:
             CommandError: Naming the field and its rule; nothing is scheduled.
         """
         channel, kind, t_start, duration_t, magnitude = validate_fault(
             channel, kind, start, duration, magnitude, now=self.time,
-            channels={c.name: c for c in self._config.channels})
+            channels={c.name: c for c in self._config.channels}, after=after)
         if kind == "motor_slip":
             if self._config.rig.structure.model != "rigid":
                 raise CommandError("kind = 'motor_slip' refused: not supported with structure.model "

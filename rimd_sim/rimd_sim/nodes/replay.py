@@ -1,24 +1,23 @@
-"""Node ``rimd_replay``: republishes a recording with its original timing (SPEC section 6).
+"""Node ``rimd_replay``: republishes a recording with its original timing, driven like rosbag2's player.
 
-The recording (an MCAP file or a recording directory) is opened with :mod:`rimd_sim.recording.reader`: a
-truncated or damaged file replays what is readable, and the node says first what was lost. Each message is
-published as the recorded bytes (a raw publish: what a subscriber gets is byte for byte what was recorded)
-when it is due: message ``i`` leaves at ``start + (log_time_i - log_time_first - start_offset) / rate`` of
-the monotonic clock, shifted by the time spent paused. Publishers use the QoS the original publishers
-offered (reliability, durability), with a deep history.
+A thin adapter over :class:`rimd_sim.recording.player.Player` (what goes next and when, the controls) and
+:func:`rimd_sim.recording.reader.open_recording` (a truncated or damaged file replays what is readable; the
+node first says what was lost). Each message is published as the recorded bytes (a raw publish: what a
+subscriber gets is byte for byte what was recorded, or restamped with ``restamp``) on a publisher with the QoS
+the original publishers offered (reliability, durability) and a deep history.
 
-Parameters: ``file`` (required), ``rate`` (> 0), ``loop``, ``start_offset`` (s into the recording),
-``topics`` (regular expressions, full match; default all), ``remap`` (``"/from:=/to"`` entries), ``clock``
-(publish ``/clock`` from the recorded log time at ``clock_frequency`` Hz; a recorded ``/clock`` is then not
-replayed), ``start_paused``, ``wait_for_subscribers`` (wait, up to 10 s, until every publisher has this many
-subscribers), ``skip_unknown`` (replay the other topics when some types are not installed; otherwise the
-node refuses to start and names them). Services ``~/pause`` and ``~/resume`` (``std_srvs/srv/Trigger``).
+Services, with rosbag2's player names (types: ``std_srvs/srv/Trigger`` for pause, resume and toggle_paused,
+which answer a message where rosbag2's answer nothing; ``rimd_msgs/srv`` IsPaused, GetRate, SetRate, Seek,
+PlayNext, Burst for the others, with rosbag2_interfaces' fields, since that package is not installable here):
+``~/pause``, ``~/resume``, ``~/toggle_paused``, ``~/is_paused``, ``~/get_rate``, ``~/set_rate``, ``~/seek``,
+``~/play_next``, ``~/burst``. Parameters: :class:`rimd_sim.recording.player.ReplaySettings` (one declaration
+each); in lockstep (``lockstep.*``) the replay waits for its consumers like the simulator, publishes
+``/clock`` and names each pass on ``/rig/session`` (reason ``replay``).
 """
 
 from __future__ import annotations
 
 import importlib
-import math
 import re
 import sys
 import threading
@@ -26,7 +25,7 @@ import time
 from typing import Any
 
 import yaml
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -34,27 +33,26 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from rimd_sim.nodes._params import refuse_unnamed
+from rimd_msgs.msg import ConsumerProgress, RigSession
+from rimd_msgs.srv import Burst, GetRate, IsPaused, PlayNext, Seek, SetRate
+from rimd_sim.client import PROGRESS_QOS, PROGRESS_TOPIC, SESSION_QOS, SESSION_TOPIC
+from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.pacing import Hold, Wait
+from rimd_sim.core.params import build, parameters
+from rimd_sim.nodes._params import declare, refuse_unnamed
 from rimd_sim.nodes._run import run_node, spin_until_stopped
+from rimd_sim.recording.player import Finished, Paused, Player, ReplaySettings
 from rimd_sim.recording.reader import Recording, RecordingError, open_recording
 
-__all__ = ["ReplayNode", "main"]
+__all__ = ["PARAMETERS", "ReplayError", "ReplayNode", "main"]
 
 NODE_NAME = "rimd_replay"
-
-PARAMETERS: dict[str, tuple[Any, str]] = {
-    "file": ("", "recording to replay: an .mcap file or a recording directory"),
-    "rate": (1.0, "replay speed factor (2.0 = twice as fast)"),
-    "loop": (False, "start again from the beginning when the end is reached"),
-    "start_offset": (0.0, "s into the recording where the replay starts"),
-    "topics": ([".*"], "topics to replay: regular expressions (full match)"),
-    "remap": ([""], "topic renames, entries '/from:=/to'"),
-    "clock": (False, "publish /clock from the recorded time (a recorded /clock is then not replayed)"),
-    "clock_frequency": (100.0, "Hz, /clock publications per second of recorded time"),
-    "start_paused": (False, "wait for ~/resume before publishing"),
-    "wait_for_subscribers": (0, "wait (at most 10 s) until every publisher has this many subscribers"),
-    "skip_unknown": (False, "replay the other topics when some message types are not installed"),
-}
+#: The replay's parameters by name (one declaration each: ReplaySettings).
+PARAMETERS = parameters(ReplaySettings)
+#: Longest wait for subscribers (wait_for_subscribers), s.
+SUBSCRIBER_WAIT_S = 10.0
+#: A lockstep hold is logged once it has lasted this long (s), then every 10 s.
+HOLD_REPORT_S = 0.5
 
 
 class ReplayError(Exception):
@@ -83,7 +81,7 @@ def _qos(offered: str) -> QoSProfile:
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
-def parse_remap(entries: list[str]) -> dict[str, str]:
+def parse_remap(entries: tuple[str, ...] | list[str]) -> dict[str, str]:
     """Parse ``"/from:=/to"`` entries (empty entries ignored)."""
     remap = {}
     for entry in entries:
@@ -96,26 +94,22 @@ def parse_remap(entries: list[str]) -> dict[str, str]:
     return remap
 
 
-#: name -> (rule, predicate) of the numbers, checked at start (every parameter is read-only afterwards). Each
-#: must be finite with an upper bound: rate = inf published a looping recording in a busy loop, and an
-#: infinite start_offset killed the replay thread (OverflowError) with a traceback.
-NUMBER_RULES: dict[str, tuple[str, Any]] = {
-    "rate": ("must be > 0 and <= 10000", lambda v: 0 < v <= 1e4),
-    "start_offset": ("must be >= 0 and <= 1e9 s", lambda v: 0 <= v <= 1e9),
-    "clock_frequency": ("must be > 0 and <= 1e6 Hz", lambda v: 0 < v <= 1e6),
-    "wait_for_subscribers": ("must be >= 0 and <= 1000", lambda v: 0 <= v <= 1000),
-}
+def _patterns(key: str, values: tuple[str, ...]) -> list[re.Pattern[str]]:
+    try:
+        return [re.compile(x) for x in values if x]
+    except re.error as exc:
+        raise ReplayError(f"{key}: not a regular expression ({exc})") from None
 
 
-def check_parameters(p: dict[str, Any]) -> None:
-    """Check the replay's parameters at start; ReplayError names the first refused one and its rule."""
-    if not p["file"]:
+def check_parameters(values: dict[str, Any]) -> ReplaySettings:
+    """The replay's settings from its parameters; ReplayError names the first refused one and its rule."""
+    try:
+        settings = build(ReplaySettings, values)
+    except ConfigError as exc:
+        raise ReplayError(str(exc)) from None
+    if not settings.file:
         raise ReplayError("file: no recording given (set -p file:=REC.mcap or a recording directory)")
-    for name, (rule, ok) in NUMBER_RULES.items():
-        value = p[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                or not ok(value):
-            raise ReplayError(f"{name}: {value!r} refused: {rule}")
+    return settings
 
 
 class ReplayNode(Node):
@@ -123,25 +117,23 @@ class ReplayNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, description) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        check_parameters(p)
+        p = self._p = check_parameters(declare(self, PARAMETERS))
+        patterns = _patterns("topics", p.topics)
+        self._wait_patterns = _patterns("wait_topics", p.wait_topics)
+        remap = parse_remap(p.remap)
         try:
-            patterns = [re.compile(x) for x in p["topics"] if x]
-        except re.error as exc:
-            raise ReplayError(f"topics: not a regular expression ({exc})") from None
-        remap = parse_remap(p["remap"])
-        self._p = p
-        try:
-            self._recording: Recording = open_recording(p["file"])
+            self._recording: Recording = open_recording(p.file)
         except RecordingError as exc:
             raise ReplayError(str(exc)) from None
         log = self.get_logger()
         for report in self._recording.reports:
             (log.info if report.complete else log.warning)(report.describe())
+        self._lockstep = p.lockstep.enabled
+        self._with_clock = p.clock or self._lockstep
+        # The replay names its own runs on /rig/session: a recorded session is not replayed.
+        skip = {SESSION_TOPIC} | ({"/clock"} if self._with_clock else set())
         selected = {name: topic for name, topic in self._recording.topics.items()
-                    if any(x.fullmatch(name) for x in patterns) and not (p["clock"] and name == "/clock")}
+                    if any(x.fullmatch(name) for x in patterns) and name not in skip}
         unknown = {}
         self._pubs: dict[str, Any] = {}
         for name, topic in sorted(selected.items()):
@@ -150,31 +142,47 @@ class ReplayNode(Node):
             except (ImportError, AttributeError):
                 unknown[name] = topic.type_name or "(no schema)"
                 continue
-            qos = _qos(topic.offered_qos_profiles)
-            self._pubs[name] = self.create_publisher(msg_type, remap.get(name, name), qos)
+            self._pubs[name] = self.create_publisher(msg_type, remap.get(name, name), _qos(topic.offered_qos_profiles))
         if unknown:
             listing = ", ".join(f"{t} ({name})" for name, t in unknown.items())
-            if not p["skip_unknown"]:
+            if not p.skip_unknown:
                 raise ReplayError(f"the recording has message types not installed here: {listing}; install their "
                                   "packages, leave the topics out with -p topics:=..., or set skip_unknown:=true")
             log.warning(f"not replaying topics of unknown types: {listing}")
         if not self._pubs:
             # A damaged recording may have lost every topic with its first chunk: say so in the one line.
             damage = "; ".join(r.describe() for r in self._recording.reports if not r.complete)
-            raise ReplayError(f"nothing to replay: no topic of {p['file']} matches {p['topics']}"
+            raise ReplayError(f"nothing to replay: no topic of {p.file} matches {list(p.topics)}"
                               + (f" (the recording is damaged: {damage})" if damage else ""))
-        self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p["clock"] else None
-        self._paused = threading.Event()
-        if p["start_paused"]:
-            self._paused.set()
+        try:
+            self.player = Player(self._recording, self._pubs, p,
+                                 published_name=lambda t: self._pubs[t].topic_name)
+        except ConfigError as exc:
+            raise ReplayError(str(exc)) from None
+        self._clock_pub = self.create_publisher(Clock, "/clock", 1000) if self._with_clock else None
+        self._session_pub = self.create_publisher(RigSession, remap.get(SESSION_TOPIC, SESSION_TOPIC), SESSION_QOS)
+        if self._lockstep:
+            self.create_subscription(ConsumerProgress, remap.get(PROGRESS_TOPIC, PROGRESS_TOPIC), self._on_progress,
+                                     PROGRESS_QOS)
         self._stop = threading.Event()
+        self._wake = threading.Event()
         self.finished = threading.Event()
-        self.published = 0
-        self.create_service(Trigger, "~/pause", self._on_pause)
-        self.create_service(Trigger, "~/resume", self._on_resume)
+        self._last_clock: int | None = None
+        self._hold_logged = 0.0
+        self._warned: set[tuple[str, str]] = set()
+        for name, srv, handler in (("pause", Trigger, self._on_pause), ("resume", Trigger, self._on_resume),
+                                   ("toggle_paused", Trigger, self._on_toggle), ("is_paused", IsPaused,
+                                   self._on_is_paused), ("get_rate", GetRate, self._on_get_rate),
+                                   ("set_rate", SetRate, self._on_set_rate), ("seek", Seek, self._on_seek),
+                                   ("play_next", PlayNext, self._on_play_next), ("burst", Burst, self._on_burst)):
+            self.create_service(srv, f"~/{name}", handler)
         self._thread = threading.Thread(target=self._run, name="rimd_replay", daemon=True)
-        log.info(f"replaying {len(self._pubs)} topics of {p['file']} ({self._recording.message_count} "
-                 f"messages) at {p['rate']:g}x" + (", looping" if p["loop"] else ""))
+        window = (f" from {p.start_offset:g} s" if p.start_offset else "") + (
+            f" for {p.playback_duration:g} s" if p.playback_duration else "")
+        log.info(f"replaying {len(self._pubs)} topics of {p.file} ({self._recording.message_count} messages){window} "
+                 f"at {p.rate:g}x" + (", looping" if p.loop else "") + (", restamped" if p.restamp else "")
+                 + (f", in lockstep with {', '.join(p.lockstep.consumers)}" if self._lockstep else "")
+                 + (" (paused: ~/resume, ~/play_next or ~/burst)" if p.start_paused else ""))
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
         """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
@@ -188,7 +196,7 @@ class ReplayNode(Node):
     def stop(self) -> None:
         """Stop publishing and wait for the thread."""
         self._stop.set()
-        self._paused.clear()
+        self._wake.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
 
@@ -197,72 +205,176 @@ class ReplayNode(Node):
         for pub in self._pubs.values():
             pub.wait_for_all_acked(Duration(seconds=timeout))
 
+    # -- the thread -------------------------------------------------------------------------------------------
     def _wait_for_subscribers(self) -> None:
-        wanted = self._p["wait_for_subscribers"]
-        deadline = time.monotonic() + 10.0
-        while wanted > 0 and time.monotonic() < deadline and not self._stop.is_set():
-            if all(pub.get_subscription_count() >= wanted for pub in self._pubs.values()):
-                # The publisher side has matched; give the subscribers' side the moment it needs to match
-                # too, or a reliable volatile subscriber can still miss the first messages.
-                time.sleep(0.3)
+        """Wait (bounded) for ``wait_for_subscribers`` matched subscribers, on the topics it names in the log."""
+        wanted = self._p.wait_for_subscribers
+        if wanted <= 0:
+            return
+        named = self._wait_patterns
+        pubs = {name: pub for name, pub in self._pubs.items()
+                if not named or any(x.fullmatch(pub.topic_name) for x in named)}
+        if not pubs:
+            self.get_logger().warning("wait_for_subscribers: no replayed topic matches wait_topics "
+                                      f"{list(self._p.wait_topics)}: not waiting")
+            return
+
+        def waited() -> dict[str, Any]:
+            if named:
+                return pubs
+            # Without wait_topics: the topics that have a subscriber in the graph (at least one must).
+            return {n: p for n, p in pubs.items() if self.count_subscribers(p.topic_name) > 0}
+
+        self.get_logger().info(f"waiting (at most {SUBSCRIBER_WAIT_S:g} s) for {wanted} matched subscriber(s) on "
+                               + (", ".join(sorted(p.topic_name for p in pubs.values())) if named
+                                  else "each replayed topic that has a subscriber"))
+        deadline = time.monotonic() + SUBSCRIBER_WAIT_S
+        while time.monotonic() < deadline and not self._stop.is_set():
+            current = waited()
+            if current and all(p.get_subscription_count() >= max(wanted, self.count_subscribers(p.topic_name))
+                               for p in current.values()):
+                self.get_logger().info("subscribers matched on " + ", ".join(sorted(p.topic_name
+                                                                                    for p in current.values())))
                 return
             time.sleep(0.02)
-
-    def _sleep_until(self, due: float) -> bool:
-        """Sleep until the monotonic time ``due``; False when stopping."""
-        while not self._stop.is_set():
-            remaining = due - time.monotonic()
-            if remaining <= 0:
-                return True
-            time.sleep(min(remaining, 0.05))
-        return False
+        short = sorted(p.topic_name for p in (waited() or pubs).values() if p.get_subscription_count() < wanted)
+        self.get_logger().warning(f"wait_for_subscribers: after {SUBSCRIBER_WAIT_S:g} s, fewer than {wanted} "
+                                  f"subscriber(s) on {', '.join(short) or 'every replayed topic'}: replaying anyway")
 
     def _run(self) -> None:
         try:
             self._wait_for_subscribers()
-            rate, offset_ns = self._p["rate"], round(self._p["start_offset"] * 1e9)
-            clock_period_ns = 1e9 / self._p["clock_frequency"]
-            # Times count from the recording's first message (all topics), as rosbag2 play does.
-            first = next(iter(self._recording.messages()), None)
-            first_ns = first.log_time if first is not None else 0
+            player = self.player
+            player.start()
             while not self._stop.is_set():
-                start = time.monotonic()
-                last_clock = None
-                for msg in self._recording.messages(self._pubs):
-                    if msg.log_time - first_ns < offset_ns:
-                        continue
-                    if self._paused.is_set():
-                        paused_at = time.monotonic()
-                        while self._paused.is_set() and not self._stop.is_set():
-                            time.sleep(0.01)
-                        start += time.monotonic() - paused_at
-                    due = start + (msg.log_time - first_ns - offset_ns) / 1e9 / rate
-                    if not self._sleep_until(due):
-                        return
-                    if self._clock_pub is not None and (last_clock is None
-                                                        or msg.log_time - last_clock >= clock_period_ns):
-                        clock = Clock()
-                        clock.clock.sec, clock.clock.nanosec = divmod(msg.log_time, 1_000_000_000)
-                        self._clock_pub.publish(clock)
-                        last_clock = msg.log_time
-                    self._pubs[msg.topic].publish(msg.data)
-                    self.published += 1
-                if not self._p["loop"]:
+                if player.take_new_pass():
+                    self._name_pass()
+                outcome = player.step()
+                for level, line in player.pacer_events():
+                    (self.get_logger().error if level == "error" else self.get_logger().warning)(f"lockstep: {line}")
+                if isinstance(outcome, list):
+                    self._hold_logged = 0.0
+                    for out in outcome:
+                        self._publish(out)
+                elif isinstance(outcome, Finished):
                     break
-            self.get_logger().info(f"replay finished: {self.published} messages published")
+                elif isinstance(outcome, Hold):
+                    self._on_hold(outcome)
+                    self._wait(0.1)
+                elif isinstance(outcome, Wait):
+                    self._wait(min(outcome.seconds, 0.05))
+                elif isinstance(outcome, Paused):
+                    self._wait(0.05)
+            self.get_logger().info(f"replay finished: {player.published} messages published")
         finally:
             self.finished.set()
 
+    def _wait(self, seconds: float) -> None:
+        self._wake.wait(seconds)
+        self._wake.clear()
+
+    def _publish(self, out: Any) -> None:
+        if self._clock_pub is not None:
+            period = 1e9 / self._p.clock_frequency
+            if self._last_clock is None or out.log_time - self._last_clock >= period:
+                clock = Clock()
+                clock.clock.sec, clock.clock.nanosec = divmod(out.log_time, 1_000_000_000)
+                self._clock_pub.publish(clock)
+                self._last_clock = out.log_time
+        self._pubs[out.topic].publish(out.data)
+
+    def _name_pass(self) -> None:
+        player = self.player
+        msg = RigSession(run_id=player.run_id, reason="replay", sequence=player.passes - 1,
+                         real_time_factor=float(player.rate), lockstep=self._lockstep,
+                         node=self.get_fully_qualified_name(), time_base="recording")
+        msg.header.frame_id = "rimd_replay"
+        self._session_pub.publish(msg)
+
+    def _on_hold(self, hold: Hold) -> None:
+        now = time.monotonic()
+        if now - hold.since < HOLD_REPORT_S or (self._hold_logged and now - self._hold_logged < 10.0):
+            return
+        self._hold_logged = now
+        self.get_logger().warning(f"lockstep: holding for {now - hold.since:.1f} s, waiting for "
+                                  f"{self.player.holders_text()}")
+
+    def _on_progress(self, msg: ConsumerProgress) -> None:
+        topics = None
+        if msg.topics and len(msg.topics) == len(msg.topics_done_through):
+            topics = {t: d.sec * 1_000_000_000 + d.nanosec for t, d in zip(msg.topics, msg.topics_done_through,
+                                                                             strict=True)}
+        done = msg.done_through.sec * 1_000_000_000 + msg.done_through.nanosec
+        verdict = self.player.progress(msg.consumer, done, msg.instance, topics, leaving=msg.leaving)
+        if verdict.log and verdict.accepted and verdict.reason != "topics":
+            self.get_logger().info(f"lockstep: {verdict.log}")
+        elif verdict.log and (msg.consumer, verdict.reason) not in self._warned:
+            self._warned.add((msg.consumer, verdict.reason))
+            self.get_logger().warning(f"lockstep: {verdict.log} (said once)")
+        self._wake.set()
+
+    # -- services ---------------------------------------------------------------------------------------------
     def _on_pause(self, request, response):  # noqa: ARG002
-        response.success = not self._paused.is_set()
-        response.message = "paused" if response.success else "already paused"
-        self._paused.set()
+        response.success = self.player.pause()
+        count = f"{self.player.published} messages published"   # taken: each reaches its subscribers
+        response.message = f"paused after {count}" if response.success else f"already paused ({count})"
         return response
 
     def _on_resume(self, request, response):  # noqa: ARG002
-        response.success = self._paused.is_set()
+        response.success = self.player.resume()
         response.message = "resumed" if response.success else "not paused"
-        self._paused.clear()
+        self._wake.set()
+        return response
+
+    def _on_toggle(self, request, response):  # noqa: ARG002
+        paused = self.player.toggle()
+        response.success, response.message = True, "paused" if paused else "resumed"
+        self._wake.set()
+        return response
+
+    def _on_is_paused(self, request, response):  # noqa: ARG002
+        response.paused = self.player.paused
+        return response
+
+    def _on_get_rate(self, request, response):  # noqa: ARG002
+        response.rate = float(self.player.rate)
+        return response
+
+    def _on_set_rate(self, request, response):
+        try:
+            self.player.set_rate(request.rate)
+        except ConfigError as exc:
+            response.success, response.message = False, str(exc).replace("parameter 'rate'", "rate", 1)
+            return response
+        response.success, response.message = True, f"rate {self.player.rate:g}"
+        self._wake.set()
+        return response
+
+    def _on_seek(self, request, response):
+        if request.time.nanosec >= 1_000_000_000:
+            response.success = False
+            response.message = f"time.nanosec = {request.time.nanosec} refused: must be < 1000000000"
+            return response
+        try:
+            landed = self.player.seek(request.time.sec * 1_000_000_000 + request.time.nanosec)
+        except ConfigError as exc:
+            response.success, response.message = False, str(exc).replace("parameter 'time'", "time", 1)
+            return response
+        response.success, response.message = True, f"sought: {landed}"
+        self._wake.set()
+        return response
+
+    def _on_play_next(self, request, response):  # noqa: ARG002
+        out = self.player.play_next()
+        if out is not None:
+            self._publish(out)
+        response.success = out is not None
+        return response
+
+    def _on_burst(self, request, response):
+        for out in (outs := self.player.burst(int(request.num_messages))):
+            self._publish(out)
+        response.actually_burst = len(outs)
         return response
 
 
@@ -276,6 +388,7 @@ def main(args: list[str] | None = None) -> int:
 
     return run_node("rimd_replay", ReplayNode, (ReplayError,), args=args, refused_status=1, spin=spin,
                     close=lambda node: node.stop())
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -29,7 +29,7 @@ from __future__ import annotations
 import datetime as _dt
 import errno
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -216,7 +216,7 @@ class McapFile:
     """
 
     def __init__(self, path: Path, *, compression: str, chunk_size: int, library: str,
-                 metadata: Mapping[str, Mapping[str, str]]) -> None:
+                 metadata: Mapping[str, Mapping[str, str]], opener: Callable[[Path], Any] | None = None) -> None:
         self.info = FileInfo(path)
         #: Log time of the first message given to the file (also while it is still in the chunk in progress).
         self.first_log_time: int | None = None
@@ -224,7 +224,7 @@ class McapFile:
         self._pending_start: int | None = None
         self._pending_end: int | None = None
         self._committed = 0
-        self._raw = _UnbufferedFile(path)
+        self._raw = (opener or _UnbufferedFile)(path)
         try:
             self._writer = Writer(self._raw, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
             self._writer.start(profile="ros2", library=library)
@@ -415,6 +415,9 @@ class BagWriter:
             up to one chunk).
         library: Written into each file's header.
         metadata: MCAP metadata records written into every file (name -> string mapping).
+        opener: Opens a new file for writing (default: unbuffered OS writes); it must offer ``write``,
+            ``tell``, ``flush``, ``truncate`` and ``close``, and raise ``OSError`` as a disk does (the tests
+            give it a disk that fills up).
 
     Attributes:
         written: Per topic, messages accepted that are in a file or in the chunk in progress.
@@ -427,7 +430,8 @@ class BagWriter:
 
     def __init__(self, output_dir: str | Path, *, prefix: str = "rimd", compression: str = "zstd",
                  chunk_size: int = 768 * 1024, max_duration_ns: int = 0, max_size: int = 0,
-                 library: str = "rimd_recorder", metadata: Mapping[str, Mapping[str, str]] | None = None) -> None:
+                 library: str = "rimd_recorder", metadata: Mapping[str, Mapping[str, str]] | None = None,
+                 opener: Callable[[Path], Any] | None = None) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression '{compression}' is not one of {', '.join(COMPRESSIONS)}")
         self.output_dir = Path(output_dir)
@@ -438,6 +442,7 @@ class BagWriter:
         self.max_duration_ns = int(max_duration_ns)
         self.max_size = int(max_size)
         self.library = library
+        self.opener = opener
         self.metadata: dict[str, dict[str, str]] = {k: dict(v) for k, v in (metadata or {}).items()}
         self.topics: dict[str, TopicInfo] = {}
         self.files: list[FileInfo] = []
@@ -451,11 +456,16 @@ class BagWriter:
         self._previous = self._read_previous_metadata()
 
     # -- topics and metadata ---------------------------------------------------------------------------------
-    def add_topic(self, name: str, type_name: str, qos_profiles: Sequence[Mapping[str, Any]]) -> TopicInfo:
-        """Declare a topic (its definition is looked up now; raises MessageDefinitionError if unknown)."""
+    def add_topic(self, name: str, type_name: str, qos_profiles: Sequence[Mapping[str, Any]],
+                  definition: MessageDefinition | None = None) -> TopicInfo:
+        """Declare a topic; its definition is looked up now unless given (raises MessageDefinitionError if unknown).
+
+        ``definition``: the schema to write, e.g. the one a recording being copied carries.
+        """
         topic = self.topics.get(name)
         if topic is None:
-            topic = TopicInfo(name, type_name, [dict(p) for p in qos_profiles], message_definition(type_name))
+            topic = TopicInfo(name, type_name, [dict(p) for p in qos_profiles],
+                              definition if definition is not None else message_definition(type_name))
             self.topics[name] = topic
         current = self._current
         if current is not None:
@@ -516,7 +526,7 @@ class BagWriter:
             self._next_index += 1
             try:
                 current = McapFile(path, compression=self.compression, chunk_size=self.chunk_size,
-                                   library=self.library, metadata=self.metadata)
+                                   library=self.library, metadata=self.metadata, opener=self.opener)
                 break
             except FileExistsError:
                 continue

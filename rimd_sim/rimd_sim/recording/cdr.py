@@ -1,44 +1,37 @@
-"""Reading the few fields the recorder needs straight from CDR bytes (no deserialisation of the samples).
+"""The CDR layout of the rig's messages, written once: read in place, and encoded, in either byte order.
 
-``rimd_msgs/msg/SampleBlock`` and ``rimd_msgs/msg/RigState`` both start with ``std_msgs/Header header``,
-``uint64 first_index``, ``float64 sample_rate`` and then a ``float64[]`` (``samples``; ``theta`` for
-RigState), so the index of the first sample and the number of samples of a block are at fixed places after
-the frame id. That is all loss counting needs, at a few hundred nanoseconds per message.
+ROS 2 serializes messages as XCDR1: a 4-byte encapsulation header (``00 00``: big-endian, ``00 01``: little-endian,
+then two option bytes), then the body, each primitive aligned to its own size from the body's start. The rig's
+block messages, ``rimd_msgs/msg/SampleBlock`` and ``rimd_msgs/msg/RigState``, start alike: ``std_msgs/Header``
+(``int32 sec``, ``uint32 nanosec``, ``string frame_id``), ``uint64 first_index``, ``float64 sample_rate``, then
+``float64[]`` fields. :class:`CdrReader` and :class:`CdrWriter` are the one implementation of that alignment and
+of the two byte orders; :func:`_read_block_head` and :meth:`SampleBlockEncoder.configure` the one description of
+the leading fields. On them stand what the nodes need without deserialising: the stamp (:func:`header_stamp`,
+:func:`with_header_stamp`, for any message whose first field is a header), the span of a block
+(:func:`block_span`: loss counting at a few hundred nanoseconds a message), the block's arrays as NumPy views
+(:func:`read_block`: the Rerun bridge), and the simulator's encoder (:class:`SampleBlockEncoder`).
 """
 
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 
 import numpy as np
+
+__all__ = ["BLOCK_ARRAYS", "BLOCK_TYPES", "HEADER_FIRST_TYPES", "BlockView", "CdrReader", "CdrWriter",
+           "SampleBlockEncoder", "block_span", "header_stamp", "read_block", "with_header_stamp"]
 
 #: Types whose blocks carry ``first_index`` and a sample count in this layout.
 BLOCK_TYPES = frozenset({"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"})
 
-_U32 = {0: struct.Struct("<I"), 1: struct.Struct(">I")}
-_U64 = {0: struct.Struct("<Q"), 1: struct.Struct(">Q")}
-
-
-def block_span(data: bytes) -> tuple[int, int]:
-    """Return ``(first_index, sample_count)`` of a serialized SampleBlock or RigState.
-
-    Raises:
-        ValueError: The bytes are too short or not CDR.
-    """
-    if len(data) < 4 + 12:
-        raise ValueError("too short for a CDR block message")
-    big = 0 if data[1] & 1 else 1          # encapsulation kind: CDR_BE = 0x0000, CDR_LE = 0x0001
-    u32, u64 = _U32[big], _U64[big]
-    offset = 8                              # body offset of frame_id's length (after sec, nanosec)
-    (length,) = u32.unpack_from(data, 4 + offset)
-    offset += 4 + length
-    offset = (offset + 7) & ~7              # align 8 for uint64 first_index
-    (first_index,) = u64.unpack_from(data, 4 + offset)
-    offset += 16                            # first_index, sample_rate
-    offset = (offset + 3) & ~3
-    (count,) = u32.unpack_from(data, 4 + offset)
-    return first_index, count
-
+#: Types whose first field is a ``std_msgs/Header`` (or, for Clock, a ``builtin_interfaces/Time``): their stamp
+#: is the CDR body's first 8 bytes (:func:`header_stamp`, :func:`with_header_stamp`).
+HEADER_FIRST_TYPES = frozenset({
+    "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState", "rimd_msgs/msg/MotorState", "rimd_msgs/msg/ImpactEvent",
+    "rimd_msgs/msg/FaultEvent", "rimd_msgs/msg/Capture", "rimd_msgs/msg/RigSession",
+    "diagnostic_msgs/msg/DiagnosticArray", "rosgraph_msgs/msg/Clock", "std_msgs/msg/Header",
+})
 
 #: The ``float64[]`` fields of each block type, in message order (RigState's ``bool[] in_contact`` follows).
 BLOCK_ARRAYS = {
@@ -47,10 +40,208 @@ BLOCK_ARRAYS = {
                                "rimd_acceleration", "penetration", "contact_force", "motor_phase",
                                "motor_frequency"),
 }
-_F8 = {0: np.dtype("<f8"), 1: np.dtype(">f8")}
-_I32 = {0: struct.Struct("<i"), 1: struct.Struct(">i")}
-_F64 = {0: struct.Struct("<d"), 1: struct.Struct(">d")}
 
+#: The encapsulation header of each byte order (CDR_LE: 0x0001, CDR_BE: 0x0000), options zero.
+ENCAPSULATION = {"<": b"\0\x01\0\0", ">": b"\0\0\0\0"}
+_PRIMITIVES = {order: {code: struct.Struct(order + code) for code in "iIQdB"} for order in "<>"}
+_TIME = {order: struct.Struct(order + "iI") for order in "<>"}
+_F8 = {"<": np.dtype("<f8"), ">": np.dtype(">f8")}
+
+
+def byte_order(data: bytes | bytearray | memoryview) -> str:
+    """``"<"`` or ``">"``, from the encapsulation header (its second byte's low bit: 1 for little-endian).
+
+    Raises:
+        ValueError: Fewer than the header's 4 bytes.
+    """
+    if len(data) < 4:
+        raise ValueError(f"{len(data)} bytes: too short for a CDR encapsulation header")
+    return "<" if data[1] & 1 else ">"
+
+
+def _aligned(offset: int, size: int) -> int:
+    """``offset`` rounded up to a multiple of ``size`` (1, 2, 4 or 8): XCDR1 aligns a primitive to its size."""
+    return (offset + size - 1) & ~(size - 1)
+
+
+class CdrReader:
+    """A cursor over the body of serialized bytes (offsets count from the end of the encapsulation header).
+
+    Raises:
+        ValueError: On construction, bytes without an encapsulation header; on a read, bytes too short for it.
+    """
+
+    __slots__ = ("data", "order", "pos", "_p")
+
+    def __init__(self, data: bytes | bytearray | memoryview) -> None:
+        self.data, self.order, self.pos = data, byte_order(data), 0
+        self._p = _PRIMITIVES[self.order]
+
+    def _primitive(self, code: str) -> int | float:
+        s = self._p[code]
+        self.pos = _aligned(self.pos, s.size)
+        try:
+            (value,) = s.unpack_from(self.data, 4 + self.pos)
+        except struct.error:
+            raise ValueError(f"{len(self.data)} bytes: too short for a field at body offset {self.pos}") from None
+        self.pos += s.size
+        return value
+
+    def u32(self) -> int:
+        """``uint32``."""
+        return self._primitive("I")
+
+    def u64(self) -> int:
+        """``uint64``."""
+        return self._primitive("Q")
+
+    def f64(self) -> float:
+        """``float64``."""
+        return self._primitive("d")
+
+    def time(self) -> tuple[int, int]:
+        """``builtin_interfaces/Time``: ``(sec, nanosec)``."""
+        return self._primitive("i"), self._primitive("I")
+
+    def string(self, *, skip: bool = False) -> str:
+        """``string``: a ``uint32`` length counting the terminating NUL, the bytes, the NUL ('' with ``skip``)."""
+        length = self.u32()
+        end = 4 + self.pos + length
+        if end > len(self.data):
+            raise ValueError(f"a string of {length} bytes does not fit in {len(self.data)} bytes")
+        text = "" if skip else bytes(self.data[4 + self.pos:end - 1 if length else end]).decode("utf-8", "replace")
+        self.pos += length
+        return text
+
+    def f64_array(self) -> np.ndarray:
+        """``float64[]``: a read-only NumPy view over the bytes (no copy), in the data's byte order."""
+        count = self.u32()
+        if count:
+            self.pos = _aligned(self.pos, 8)
+        if 4 + self.pos + 8 * count > len(self.data):
+            raise ValueError(f"{count} float64 values do not fit in {len(self.data)} bytes")
+        values = np.frombuffer(self.data, _F8[self.order], count, 4 + self.pos)
+        self.pos += 8 * count
+        return values
+
+    def array_length(self) -> int:
+        """The element count of the sequence that starts here (the cursor stays on it)."""
+        pos = self.pos
+        count = self.u32()
+        self.pos = pos
+        return count
+
+
+class CdrWriter:
+    """Serialized bytes built field by field, in either byte order (``"<"``, as ROS 2 publishes; or ``">"``)."""
+
+    __slots__ = ("order", "parts", "pos", "_p")
+
+    def __init__(self, order: str = "<", *, at: int = 0) -> None:
+        self.order, self.parts, self.pos = order, [], at
+        self._p = _PRIMITIVES[order]
+
+    def _pad(self, size: int) -> None:
+        aligned = _aligned(self.pos, size)
+        if aligned > self.pos:
+            self.parts.append(b"\0" * (aligned - self.pos))
+            self.pos = aligned
+
+    def _primitive(self, code: str, value: int | float) -> CdrWriter:
+        s = self._p[code]
+        self._pad(s.size)
+        self.parts.append(s.pack(value))
+        self.pos += s.size
+        return self
+
+    def u32(self, value: int) -> CdrWriter:
+        """``uint32``."""
+        return self._primitive("I", value)
+
+    def u64(self, value: int) -> CdrWriter:
+        """``uint64``."""
+        return self._primitive("Q", value)
+
+    def f64(self, value: float) -> CdrWriter:
+        """``float64``."""
+        return self._primitive("d", value)
+
+    def time(self, sec: int, nanosec: int) -> CdrWriter:
+        """``builtin_interfaces/Time``."""
+        return self._primitive("i", sec)._primitive("I", nanosec)
+
+    def string(self, text: str) -> CdrWriter:
+        """``string``, NUL-terminated.
+
+        A ROS 2 string is a C string: one holding NUL would be cut there by every reader (rclpy reads "a", NUL,
+        "b" as ``"a"``), so it is refused rather than published as something other than asked.
+
+        Raises:
+            ValueError: The text holds a NUL character.
+        """
+        if "\0" in text:
+            raise ValueError(f"a ROS 2 string cannot hold a NUL character: {text!r}")
+        raw = text.encode("utf-8") + b"\0"
+        self.u32(len(raw))
+        self.parts.append(raw)
+        self.pos += len(raw)
+        return self
+
+    def boolean(self, value: bool) -> CdrWriter:
+        """``bool`` (one byte)."""
+        return self._primitive("B", 1 if value else 0)
+
+    def strings(self, texts: Sequence[str]) -> CdrWriter:
+        """``string[]``."""
+        self.u32(len(texts))
+        for text in texts:
+            self.string(text)
+        return self
+
+    def times(self, stamps: Sequence[tuple[int, int]]) -> CdrWriter:
+        """``builtin_interfaces/Time[]`` from ``(sec, nanosec)`` pairs."""
+        self.u32(len(stamps))
+        for sec, nanosec in stamps:
+            self.time(sec, nanosec)
+        return self
+
+    def f64_array(self, values: np.ndarray | Sequence[float]) -> CdrWriter:
+        """``float64[]``."""
+        values = np.ascontiguousarray(values, dtype=_F8[self.order])
+        self.u32(int(values.size))
+        if values.size:
+            self._pad(8)
+            self.parts.append(values.tobytes())
+            self.pos += 8 * int(values.size)
+        return self
+
+    def body(self) -> bytes:
+        """The body written so far (no encapsulation header)."""
+        return b"".join(self.parts)
+
+    def message(self) -> bytes:
+        """The serialized message: the encapsulation header, then the body."""
+        return ENCAPSULATION[self.order] + self.body()
+
+
+# ---- the stamp of any message whose first field is a header -----------------------------------------------------
+
+def header_stamp(data: bytes) -> int | None:
+    """The stamp (ns) of a serialized message whose first field is a header (or a ``Time``), None if too short."""
+    if len(data) < 12:
+        return None
+    sec, nanosec = _TIME[byte_order(data)].unpack_from(data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def with_header_stamp(data: bytes, stamp_ns: int) -> bytes:
+    """The serialized message with its leading stamp replaced by ``stamp_ns`` (same byte order, same length)."""
+    out = bytearray(data)
+    _TIME[byte_order(data)].pack_into(out, 4, stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+    return bytes(out)
+
+
+# ---- the block messages ------------------------------------------------------------------------------------------
 
 class Stamp:
     """``builtin_interfaces/Time`` as read from CDR: ``sec`` and ``nanosec``."""
@@ -84,12 +275,37 @@ class BlockView:
         self.__dict__.update(arrays)
 
 
+def _read_block_head(r: CdrReader, *, header: bool = True) -> tuple[Header | None, int, float]:
+    """The leading fields of a block message: header (None: skipped), ``first_index``, ``sample_rate``.
+
+    The cursor is left on the first array.
+    """
+    if header:
+        sec, nanosec = r.time()
+        head = Header(Stamp(sec, nanosec), r.string())
+    else:
+        r.pos = 8           # after the stamp: int32 sec, uint32 nanosec, at the body's start
+        r.string(skip=True)
+        head = None
+    return head, r.u64(), r.f64()
+
+
+def block_span(data: bytes) -> tuple[int, int]:
+    """Return ``(first_index, sample_count)`` of a serialized SampleBlock or RigState.
+
+    Raises:
+        ValueError: The bytes are too short or not CDR.
+    """
+    r = CdrReader(data)
+    _, first_index, _ = _read_block_head(r, header=False)
+    return first_index, r.array_length()
+
+
 def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays: int | None = None) -> BlockView:
     """Read a serialized SampleBlock or RigState up to its ``arrays`` first ``float64[]`` fields (default all).
 
     About ten times cheaper than ``rclpy.serialization.deserialize_message`` for the Rerun bridge: no message
-    objects, no copy of the samples. The layout is XCDR1 (ROS 2's CDR): each field aligned to its size from
-    the start of the body, after the 4-byte encapsulation header.
+    objects, no copy of the samples.
 
     Raises:
         ValueError: Bytes too short for what the layout says, or not CDR.
@@ -97,109 +313,43 @@ def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays
     names = BLOCK_ARRAYS[type_name]
     if arrays is not None:
         names = names[:arrays]
-    try:
-        big = 0 if data[1] & 1 else 1
-        u32, u64 = _U32[big], _U64[big]
-        sec = _I32[big].unpack_from(data, 4)[0]
-        nanosec, length = u32.unpack_from(data, 8)[0], u32.unpack_from(data, 12)[0]
-        frame_id = bytes(data[16:16 + max(length - 1, 0)]).decode("utf-8", "replace")
-        offset = (12 + length + 7) & ~7          # body offset of first_index
-        first_index = u64.unpack_from(data, 4 + offset)[0]
-        sample_rate = _F64[big].unpack_from(data, 12 + offset)[0]
-        offset += 16
-        dtype = _F8[big]
-        out = {}
-        for name in names:
-            offset = (offset + 3) & ~3
-            count = u32.unpack_from(data, 4 + offset)[0]
-            offset += 4
-            if count:
-                offset = (offset + 7) & ~7
-            if 4 + offset + 8 * count > len(data):
-                raise ValueError(f"{name}: {count} samples do not fit in {len(data)} bytes")
-            out[name] = np.frombuffer(data, dtype, count, 4 + offset)
-            offset += 8 * count
-    except (struct.error, IndexError) as exc:
-        raise ValueError(f"not a serialized {type_name}: {exc}") from None
-    return BlockView(Header(Stamp(sec, nanosec), frame_id), first_index, sample_rate, out)
-
-
-def _cdr_string(text: str, offset: int) -> tuple[bytes, int]:
-    """A CDR string (uint32 length with the NUL, the bytes, NUL) aligned at body ``offset``; its end offset.
-
-    A ROS 2 string is a C string: one holding NUL would be cut there by every reader (rclpy reads "a", NUL, "b" as
-    ``"a"``), so it is refused here rather than published as something other than what was asked.
-    """
-    if "\0" in text:
-        raise ValueError(f"a ROS 2 string cannot hold a NUL character: {text!r}")
-    raw = text.encode("utf-8") + b"\0"
-    pad = -offset % 4
-    return b"\0" * pad + struct.pack("<I", len(raw)) + raw, offset + pad + 4 + len(raw)
+    r = CdrReader(data)
+    header, first_index, sample_rate = _read_block_head(r)
+    return BlockView(header, first_index, sample_rate, {name: r.f64_array() for name in names})
 
 
 class SampleBlockEncoder:
-    """Serializes ``rimd_msgs/msg/SampleBlock`` messages of one channel straight from NumPy (little-endian CDR).
+    """Serializes ``rimd_msgs/msg/SampleBlock`` messages of one channel straight from NumPy.
 
     The fields that only change with the configuration (``frame_id``, ``sample_rate``, ``unit``, the range) are
-    encoded once per :meth:`configure`; each block then costs a few ``struct.pack`` calls and one copy of the
-    samples, against rclpy building a message object and converting it field by field. The bytes are those
-    ``rclpy.serialization.serialize_message`` gives (tested), and ``Publisher.publish`` sends them as they are.
+    encoded once per :meth:`configure` with :class:`CdrWriter`, as are the alignments that follow from them;
+    each block then costs a few ``struct.pack`` calls and one copy of the samples, against rclpy building a
+    message object and converting it field by field. The bytes are those ``rclpy.serialization.serialize_message``
+    gives (tested), and ``Publisher.publish`` sends them as they are. ``order`` ``">"`` encodes big-endian (what
+    rclpy never sends, but other serializers may: the readers take both).
     """
 
-    def __init__(self, frame_id: str, sample_rate: float, unit: str, range_min: float, range_max: float) -> None:
+    def __init__(self, frame_id: str, sample_rate: float, unit: str, range_min: float, range_max: float,
+                 order: str = "<") -> None:
+        self.order = order
         self.configure(frame_id, sample_rate, unit, range_min, range_max)
 
     def configure(self, frame_id: str, sample_rate: float, unit: str, range_min: float, range_max: float) -> None:
-        """Set the fields that stay the same from block to block."""
-        frame, end = _cdr_string(frame_id, 8)              # after stamp (sec, nanosec)
-        self._frame = frame
-        self._pad_index = b"\0" * (-end % 8)                # first_index is 8-aligned
-        self._index_offset = end + len(self._pad_index)
-        self._rate = struct.pack("<d", sample_rate)
-        self._unit, self._range = unit, struct.pack("<dd", range_min, range_max)
+        """Set the fields that stay the same from block to block (the layout's leading fields, written once)."""
+        head = CdrWriter(self.order).time(0, 0).string(frame_id)
+        head.parts = head.parts[2:]   # the stamp changes per block: written in encode
+        self._frame = head.body()
+        self._index_at = _aligned(head.pos, 8)      # first_index, then sample_rate, then the samples' count
+        self._pad_index = b"\0" * (self._index_at - head.pos)
+        p = _PRIMITIVES[self.order]
+        self._time, self._u64, self._u32 = _TIME[self.order], p["Q"], p["I"]
+        self._rate = p["d"].pack(sample_rate)
+        CdrWriter(self.order).string(unit)          # refuses a NUL now, not at the first block
+        self._unit, self._range = unit, (range_min, range_max)
 
     def encode(self, sec: int, nanosec: int, first_index: int, samples: np.ndarray, saturated_count: int) -> bytes:
         """The serialized message of one block (``samples``: float64, any byte order)."""
-        count = int(samples.size)
-        offset = self._index_offset + 16 + 4                # first_index, sample_rate, the samples' count
-        pad = b"\0" * (-offset % 8) if count else b""
-        offset += len(pad) + 8 * count
-        unit, offset = _cdr_string(self._unit, offset)
-        range_pad = b"\0" * (-offset % 8)
-        offset += len(range_pad) + 16
-        return b"".join((
-            b"\0\x01\0\0", struct.pack("<iI", sec, nanosec), self._frame, self._pad_index,
-            struct.pack("<Q", first_index), self._rate, struct.pack("<I", count), pad,
-            np.ascontiguousarray(samples, dtype="<f8").tobytes(), unit, range_pad, self._range,
-            struct.pack("<I", saturated_count)))   # uint32 right after the 8-aligned range: aligned
-
-
-class LossCounter:
-    """Counts, per topic, samples missing between consecutive blocks (gaps in ``first_index``).
-
-    The first block seen on a topic sets the start (a recorder started after the rig loses nothing). A block
-    that starts before the expected index (the rig was restarted, or replayed) restarts the count and is
-    counted in ``restarts``, not as loss.
-    """
-
-    def __init__(self) -> None:
-        self.expected: dict[str, int] = {}
-        self.first: dict[str, int] = {}
-        self.lost_samples: dict[str, int] = {}
-        self.lost_blocks: dict[str, int] = {}
-        self.restarts: dict[str, int] = {}
-
-    def observe(self, topic: str, first_index: int, count: int) -> int:
-        """Record one block; return the number of samples missing just before it."""
-        expected = self.expected.get(topic)
-        missing = 0
-        if expected is None:
-            self.first[topic] = first_index
-        elif first_index > expected:
-            missing = first_index - expected
-            self.lost_samples[topic] = self.lost_samples.get(topic, 0) + missing
-            self.lost_blocks[topic] = self.lost_blocks.get(topic, 0) + max(1, round(missing / max(count, 1)))
-        elif first_index < expected:
-            self.restarts[topic] = self.restarts.get(topic, 0) + 1
-        self.expected[topic] = first_index + count
-        return missing
+        tail = CdrWriter(self.order, at=self._index_at + 16)   # from the samples' count on
+        tail.f64_array(samples).string(self._unit).f64(self._range[0]).f64(self._range[1]).u32(saturated_count)
+        return b"".join((ENCAPSULATION[self.order], self._time.pack(sec, nanosec), self._frame, self._pad_index,
+                         self._u64.pack(first_index), self._rate, tail.body()))

@@ -72,9 +72,9 @@ def _search_prefixes() -> list[Path]:
     return prefixes
 
 
-def _find_file(pkg: str, name: str, suffix: str) -> Path | None:
+def _find_file(pkg: str, name: str, suffix: str, kind: str = "msg") -> Path | None:
     for prefix in _search_prefixes():
-        candidate = prefix / "share" / pkg / "msg" / f"{name}{suffix}"
+        candidate = prefix / "share" / pkg / kind / f"{name}{suffix}"
         if candidate.is_file():
             return candidate
     return None
@@ -122,7 +122,43 @@ def message_definition(type_name: str) -> MessageDefinition:
         MessageDefinitionError: The type or one of its dependencies is not installed.
     """
     pkg, name = normalize_type_name(type_name)
-    root = _msg_text(pkg, name)
+    return _full_definition(pkg, name, _msg_text(pkg, name), f"{pkg}/msg/{name}", _type_hash(pkg, name))
+
+
+_SRV_NAME = re.compile(r"^(?P<pkg>[A-Za-z][A-Za-z0-9_]*)/(?:srv/)?(?P<name>[A-Za-z][A-Za-z0-9_]*)$")
+
+
+@cache
+def service_definitions(type_name: str) -> tuple[MessageDefinition, MessageDefinition]:
+    """Return the full definitions of a service's request and response, as foxglove_bridge advertises them.
+
+    ``pkg/srv/Name`` gives ``pkg/srv/Name_Request`` and ``pkg/srv/Name_Response``: the two halves of
+    ``Name.srv`` (split at ``---``), each followed by the messages it depends on (rosbag2 layout). The type
+    hashes are left empty (a service's halves have no ``.json`` of their own).
+
+    Raises:
+        MessageDefinitionError: The service or a message it uses is not installed, or the name is not a
+            service type name.
+    """
+    match = _SRV_NAME.match(type_name.strip())
+    if match is None:
+        raise MessageDefinitionError(f"'{type_name}' is not a service type name (expected pkg/srv/Type)")
+    pkg, name = match["pkg"], match["name"]
+    path = _find_file(pkg, name, ".srv", kind="srv")
+    if path is None:
+        where = ", ".join(str(p / "share" / pkg / "srv") for p in _search_prefixes())
+        raise MessageDefinitionError(f"no definition of {pkg}/srv/{name} found (looked for {name}.srv in {where})")
+    halves = re.split(r"^---[ \t]*$", path.read_text(encoding="utf-8"), maxsplit=1, flags=re.MULTILINE)
+    if len(halves) != 2:
+        raise MessageDefinitionError(f"{path} has no '---' line between the request and the response")
+    request, response = (
+        _full_definition(pkg, f"{name}_{part}", text.strip("\n") + "\n", f"{pkg}/srv/{name}_{part}", "")
+        for part, text in zip(("Request", "Response"), halves, strict=True))
+    return request, response
+
+
+def _full_definition(pkg: str, name: str, root: str, full_name: str, type_hash: str) -> MessageDefinition:
+    """The definition ``root`` of ``pkg/name`` with every message it depends on appended, each once."""
     order: list[tuple[str, str]] = []
     pending = _field_dependencies(pkg, root)
     while pending:
@@ -134,7 +170,7 @@ def message_definition(type_name: str) -> MessageDefinition:
     parts = [root.rstrip("\n")]
     for dep_pkg, dep_name in order:
         parts.append(f"{SEPARATOR}\nMSG: {dep_pkg}/{dep_name}\n{_msg_text(dep_pkg, dep_name).rstrip(chr(10))}")
-    return MessageDefinition(f"{pkg}/msg/{name}", "\n".join(parts) + "\n", _type_hash(pkg, name))
+    return MessageDefinition(full_name, "\n".join(parts) + "\n", type_hash)
 
 
 def _type_hash(pkg: str, name: str) -> str:

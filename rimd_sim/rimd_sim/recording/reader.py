@@ -79,6 +79,9 @@ class FileReport:
     messages: int = 0
     bytes_read: int = 0
     error: str | None = None
+    #: Log times (ns) of the first and the last message read (None: no message).
+    start_ns: int | None = None
+    end_ns: int | None = None
 
     def describe(self) -> str:
         """One line for a person."""
@@ -107,6 +110,16 @@ class Recording:
     def message_count(self) -> int:
         """Messages that can be read."""
         return sum(r.messages for r in self.reports)
+
+    @property
+    def start_ns(self) -> int | None:
+        """Log time (ns) of the earliest message that can be read (None: none)."""
+        return min((r.start_ns for r in self.reports if r.start_ns is not None), default=None)
+
+    @property
+    def end_ns(self) -> int | None:
+        """Log time (ns) of the latest message that can be read (None: none)."""
+        return max((r.end_ns for r in self.reports if r.end_ns is not None), default=None)
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
         """Yield the readable messages in file order (log-time order for the recorder's files).
@@ -367,6 +380,11 @@ def _scan(path: Path, recording: Recording) -> FileReport:
         elif isinstance(record, Message):
             if record.channel_id in channels:
                 report.messages += 1
+                t = record.log_time
+                if report.start_ns is None or t < report.start_ns:
+                    report.start_ns = t
+                if report.end_ns is None or t > report.end_ns:
+                    report.end_ns = t
             else:
                 orphans += 1
         elif isinstance(record, Metadata):

@@ -11,15 +11,17 @@ import argparse
 import sys
 from pathlib import Path
 
+from rimd_sim.cli import nonnegative_float, positive_float
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd analyze``."""
     parser.add_argument("recording", type=Path, help="a recording directory or one .mcap file")
     parser.add_argument("--out", type=Path, default=Path("analysis"), help="output directory (default: analysis)")
-    parser.add_argument("--settle", type=float, default=2.0,
+    parser.add_argument("--settle", type=nonnegative_float("--settle", "s"), default=2.0,
                         help="seconds discarded at the start of each dwell step, after the motor reached its "
                              "setpoint (default 2.0)")
-    parser.add_argument("--threshold", type=float, default=2.0,
+    parser.add_argument("--threshold", type=positive_float("--threshold", "N"), default=2.0,
                         help="force threshold (N) above which a run of force samples is one impact (default 2.0)")
     parser.add_argument("--peak", choices=("onset-fit", "sample"), default="onset-fit",
                         help="peak of each sampled impact: 'onset-fit' fits the spring-dashpot contact pulse "

@@ -8,26 +8,30 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from rimd_sim.cli import CommandError
+from rimd_sim.cli import CommandError, count, positive_float
 
-from ._analysis_io import add_scheduler_argument, check_positive, check_range, class_runs, write_csv, write_summary
+from ._analysis_io import (
+    add_model_arguments,
+    add_scheduler_argument,
+    check_range,
+    class_runs,
+    write_csv,
+    write_summary,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd bifurcation``."""
-    parser.add_argument("--gap-mm", type=float, default=0.0, help="gap (mm), default 0")
-    parser.add_argument("--f-min", type=float, default=2.0, help="lowest motor frequency (Hz), default 2")
-    parser.add_argument("--f-max", type=float, default=9.5, help="highest motor frequency (Hz), default 9.5")
-    parser.add_argument("--f-step", type=float, default=0.05, help="frequency step (Hz), default 0.05")
+    add_model_arguments(parser, "out/bifurcation", gap=0.0, f_range=(2.0, 9.5), f_step=0.05)
     parser.add_argument("--direction", default="both", help="up, down or both (default; one process each)")
-    parser.add_argument("--transient-cycles", type=int, default=100, help="cycles before sampling, default 100")
-    parser.add_argument("--sample-cycles", type=int, default=48, help="cycles sampled per frequency, default 48")
-    parser.add_argument("--ramp-rate", type=float, default=2.0, help="motor ramp between steps (Hz/s), default 2")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=100,
+                        help="cycles before sampling, default 100")
+    parser.add_argument("--sample-cycles", type=count("--sample-cycles", 3), default=48,
+                        help="cycles sampled per frequency, default 48")
+    parser.add_argument("--ramp-rate", type=positive_float("--ramp-rate", "Hz/s"), default=2.0,
+                        help="motor ramp between steps (Hz/s), default 2")
     add_scheduler_argument(parser)
-    parser.add_argument("--out", type=Path, default=Path("out/bifurcation"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -41,11 +45,6 @@ def main(args: argparse.Namespace) -> int:
     if args.direction not in ("up", "down", "both"):
         raise CommandError(f"--direction {args.direction!r} refused: must be up, down or both")
     check_range("f", args.f_min, args.f_max)
-    check_positive("--f-step", args.f_step)
-    check_positive("--gap-mm", args.gap_mm, minimum=0.0, inclusive=True)
-    check_positive("--sample-cycles", args.sample_cycles, minimum=3, inclusive=True)
-    check_positive("--transient-cycles", args.transient_cycles, minimum=0, inclusive=True)
-    check_positive("--ramp-rate", args.ramp_rate)
     try:
         config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
         freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)

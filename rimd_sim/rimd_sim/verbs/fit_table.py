@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from rimd_sim.cli import count
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd fit-table``."""
@@ -21,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None, help="base parameter file (default config/rimd.yaml)")
     parser.add_argument("--parameters", nargs="+", default=["damping_ratio", "mass"],
                         help="parameters fitted (default: damping_ratio mass; the others are held at the base)")
-    parser.add_argument("--max-evaluations", type=int, default=20,
+    parser.add_argument("--max-evaluations", type=count("--max-evaluations"), default=20,
                         help="most parameter sets evaluated (default 20)")
 
 

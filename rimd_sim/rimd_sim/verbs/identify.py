@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from rimd_sim.cli import positive_float
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd identify``."""
@@ -25,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None,
                         help="base parameter file: the values not identified, and the file identified.yaml "
                              "is written from (default config/rimd.yaml)")
-    parser.add_argument("--threshold", type=float, default=2.0,
+    parser.add_argument("--threshold", type=positive_float("--threshold", "N"), default=2.0,
                         help="force (N) above which a run of force samples is an impact (default 2.0)")
     parser.add_argument("--settle", type=float, default=2.0,
                         help="seconds discarded after the motor reached each setpoint, for the validation's "

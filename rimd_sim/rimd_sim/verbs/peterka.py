@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from rimd_sim.cli import CommandError
+from rimd_sim.cli import CommandError, count, gap_mm
 
 from ._analysis_io import (
-    add_scheduler_argument,
-    check_positive,
+    add_map_arguments,
+    add_model_arguments,
     check_range,
     progress_printer,
     write_csv,
@@ -26,24 +25,17 @@ from ._analysis_io import (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd peterka``."""
-    parser.add_argument("--gap-min-mm", type=float, default=0.0, help="smallest gap (mm), default 0")
-    parser.add_argument("--gap-max-mm", type=float, default=3.0, help="largest gap (mm), default 3")
-    parser.add_argument("--gaps", type=int, default=31, help="gap values, default 31")
-    parser.add_argument("--f-min", type=float, default=1.82, help="lowest frequency (Hz), default 1.82")
-    parser.add_argument("--f-max", type=float, default=9.1, help="highest frequency (Hz), default 9.1")
-    parser.add_argument("--freqs", type=int, default=61, help="frequency values, default 61")
-    parser.add_argument("--transient-cycles", type=int, default=120,
-                        help="cycles dropped first at the cap, default 120 (a settled motion stops sooner)")
-    parser.add_argument("--measure-cycles", type=int, default=72, help="cycles classified at the cap, default 72")
-    parser.add_argument("--fixed-length", action="store_true",
-                        help="run every trajectory to the cap (no early stop)")
+    add_model_arguments(parser, "out/peterka", f_range=(1.82, 9.1))
+    parser.add_argument("--gap-min-mm", type=gap_mm("--gap-min-mm"), default=0.0,
+                        help="smallest gap (mm), default 0")
+    parser.add_argument("--gap-max-mm", type=gap_mm("--gap-max-mm"), default=3.0,
+                        help="largest gap (mm), default 3")
+    parser.add_argument("--gaps", type=count("--gaps"), default=31, help="gap values, default 31")
+    parser.add_argument("--freqs", type=count("--freqs"), default=61, help="frequency values, default 61")
+    add_map_arguments(parser, transient=120)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the cap) and list the differing cells in "
                              "summary.json, each with the class of a 10x longer run")
-    parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
-    add_scheduler_argument(parser)
-    parser.add_argument("--out", type=Path, default=Path("out/peterka"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -63,12 +55,6 @@ def main(args: argparse.Namespace) -> int:
 
     check_range("gap", args.gap_min_mm, args.gap_max_mm, allow_zero=True, unit="-mm")
     check_range("f", args.f_min, args.f_max)
-    check_positive("--gaps", args.gaps, minimum=1, inclusive=True)
-    check_positive("--freqs", args.freqs, minimum=1, inclusive=True)
-    check_positive("--transient-cycles", args.transient_cycles, inclusive=True)
-    check_positive("--measure-cycles", args.measure_cycles, minimum=6, inclusive=True)
-    if args.workers is not None:
-        check_positive("--workers", args.workers, minimum=1, inclusive=True)
     try:
         config = load_config(args.config)
         gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3

@@ -9,26 +9,29 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from rimd_sim.cli import CommandError
+from rimd_sim.cli import CommandError, count, number, positive_float
 
-from ._analysis_io import check_positive, write_csv, write_summary
+from ._analysis_io import add_model_arguments, check_positive, write_csv, write_summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd poincare``."""
-    parser.add_argument("--gap-mm", type=float, default=1.0, help="gap (mm), default 1.0 (paper Fig. 9)")
-    parser.add_argument("--frequency", type=float, default=None,
+    add_model_arguments(parser, "out/poincare", gap=1.0, gap_note=" (paper Fig. 9)")
+    parser.add_argument("--frequency", type=positive_float("--frequency", "Hz"), default=None,
                         help="motor frequency (Hz); default 1.5 x the natural frequency (paper Fig. 9)")
-    parser.add_argument("--ratio", type=float, default=None, help="frequency as Omega/omega_n instead of --frequency")
-    parser.add_argument("--theta0", type=float, default=0.0, help="initial angle (rad), default 0 (rest)")
-    parser.add_argument("--theta-dot0", type=float, default=0.0, help="initial rate (rad/s), default 0")
-    parser.add_argument("--transient-cycles", type=int, default=200, help="cycles dropped first, default 200")
-    parser.add_argument("--cycles", type=int, default=300, help="stroboscopic points (cycles), default 300")
-    parser.add_argument("--plot-cycles", type=int, default=10, help="cycles drawn as trajectory, default 10")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
-    parser.add_argument("--out", type=Path, default=Path("out/poincare"), help="output directory")
+    parser.add_argument("--ratio", type=positive_float("--ratio", ""), default=None,
+                        help="frequency as Omega/omega_n instead of --frequency")
+    parser.add_argument("--theta0", type=number("--theta0", "rad"), default=0.0,
+                        help="initial angle (rad), default 0 (rest)")
+    parser.add_argument("--theta-dot0", type=number("--theta-dot0", "rad/s"), default=0.0,
+                        help="initial rate (rad/s), default 0")
+    parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=200,
+                        help="cycles dropped first, default 200")
+    parser.add_argument("--cycles", type=count("--cycles", 6), default=300,
+                        help="stroboscopic points (cycles), default 300")
+    parser.add_argument("--plot-cycles", type=count("--plot-cycles"), default=10,
+                        help="cycles drawn as trajectory, default 10")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -39,15 +42,10 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.plots import plot_poincare
     from rimd_sim.core import RimdError, load_config
-    from rimd_sim.core.model import TRUTH_FIELDS
-    from rimd_sim.core.structural import make_model
+    from rimd_sim.core.model import TRUTH_FIELDS, RigModel
 
     if args.frequency is not None and args.ratio is not None:
         raise CommandError("give --frequency or --ratio, not both")
-    check_positive("--gap-mm", args.gap_mm, inclusive=True)
-    check_positive("--transient-cycles", args.transient_cycles, inclusive=True)
-    check_positive("--cycles", args.cycles, minimum=6, inclusive=True)
-    check_positive("--plot-cycles", args.plot_cycles, minimum=1, inclusive=True)
     try:
         base = load_config(args.config, {"gap": args.gap_mm * 1e-3})
         rig = base.rig
@@ -59,7 +57,7 @@ def main(args: argparse.Namespace) -> int:
         cfg = constant_frequency(base, f, args.theta0, args.theta_dot0).with_parameters(
             {"truth.sample_rate": max(1000.0, 200.0 * f)})
         print(f"rimd poincare: gap {args.gap_mm:g} mm, {f:.4g} Hz: simulating...", file=sys.stderr, flush=True)
-        model = make_model(cfg, channels=False, truth=True, strobe=True)
+        model = RigModel(cfg, channels=False, truth=True, strobe=True)
         n0 = args.transient_cycles
         model.advance(n0 / f)
         shown = model.advance((n0 + args.plot_cycles) / f)

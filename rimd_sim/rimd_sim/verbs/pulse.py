@@ -8,19 +8,19 @@ more). With ``config/structural.yaml`` the pulse shows the structural model's do
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
-from rimd_sim.cli import CommandError
+from rimd_sim.cli import CommandError, number
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd pulse``."""
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
-    parser.add_argument("--velocity", type=float, required=True,
+    parser.add_argument("--velocity", type=number("--velocity", "m/s", gt=0, le=10), required=True,
                         help="impact velocity (m/s, > 0, <= 10); the structural preset's at 3.75 Hz, gap 0: 0.066")
-    parser.add_argument("--rate", type=float, default=1e6, help="sample rate (Hz), default 1e6 (1 MHz)")
+    parser.add_argument("--rate", type=number("--rate", "Hz", ge=1e3, le=1e6), default=1e6,
+                        help="sample rate (Hz), default 1e6 (1 MHz)")
     parser.add_argument("--out", type=Path, default=Path("out/pulse"), help="output directory")
 
 
@@ -33,10 +33,6 @@ def main(args: argparse.Namespace) -> int:
 
     from ._analysis_io import write_summary
 
-    if not math.isfinite(args.velocity) or not 0.0 < args.velocity <= 10.0:
-        raise CommandError(f"--velocity {args.velocity!r} refused: must be > 0 and <= 10 m/s")
-    if not math.isfinite(args.rate) or not 1e3 <= args.rate <= 1e6:
-        raise CommandError(f"--rate {args.rate!r} refused: must be >= 1000 and <= 1e+06 Hz")
     try:
         result = pulse(load_config(args.config), args.velocity, rate=args.rate)
     except RimdError as exc:

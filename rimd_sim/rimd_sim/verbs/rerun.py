@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from rimd_sim.cli import CommandError
+from rimd_sim.cli import CommandError, positive_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     target.add_argument("--connect", default=None, metavar="URL",
                         help="send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     parser.add_argument("--namespace", default="/rig", help="namespace of the rig topics (default /rig)")
-    parser.add_argument("--natural-frequency", type=float, default=1.82,
+    parser.add_argument("--natural-frequency", type=positive_float("--natural-frequency", "Hz"), default=1.82,
                         help="Hz, scales the phase plane's velocity axis (default 1.82)")
     parser.add_argument("--analytics", action="store_true",
                         help="let Rerun report usage per your Rerun configuration (default: off)")

@@ -1,0 +1,144 @@
+"""How fast the rig runs in lockstep with its recorder and Rerun bridge, against the open-loop rig, in one run.
+
+Two rigs, one after the other, each the product's own bring-up (``rimd_sim.bringup``, as ``rimd rig`` starts
+it) with the default configuration, the recorder (into a temporary directory) and the Rerun bridge (sink
+``save``, an .rrd in the same directory), on a ROS domain of its own:
+
+* **lockstep**: ``--lockstep --real-time-factor 0``: the simulator waits for the recorder and the bridge;
+* **free**: ``--real-time-factor 0`` without lockstep: the simulator as fast as it can (open loop).
+
+For each, after --warmup s of wall time, --seconds of wall time are measured: simulated seconds per wall second
+(from the rig's /clock), CPU of each process in % of one core (utime + stime from /proc over the window), and
+then, from the recording, whether anything was lost (every channel's first_index contiguous from sample 0).
+
+Goals (issue 23): lockstep >= 20x real time on this 2-core machine, and within 15 % of the free-running rate
+when the consumers keep up (the ratio is taken in this one run). Run on an otherwise idle machine:
+    python benchmarks/bench_lockstep.py [--seconds 30] [--warmup 8] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+CHANNELS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
+            "/rig/truth")
+TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    """Utime + stime of a process (s), 0 when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
+def loss(recording: Path) -> dict[str, str]:
+    """Per channel: 'complete from 0' or what is missing."""
+    from rimd_sim.recording.cdr import block_span
+    from rimd_sim.recording.reader import open_recording
+
+    out = {}
+    rec = open_recording(recording)
+    for topic in CHANNELS:
+        spans = [block_span(m.data) for m in rec.messages([topic])]
+        holes = [(a[0] + a[1], b[0], i) for i, (a, b) in enumerate(zip(spans, spans[1:], strict=False))
+                 if b[0] != a[0] + a[1]]
+        start = spans[0][0] if spans else None
+        out[topic] = ("complete from sample 0" if start == 0 and not holes else
+                      f"{len(holes)} holes (expected, got, block) {holes[:3]}, first index {start}, "
+                      f"{len(spans)} blocks")
+    return out
+
+
+def run(mode: str, seconds: float, warmup: float, base: Path, window: float | None = None) -> dict:
+    from rimd_sim.bringup import Rig, plan_rig
+    from rimd_sim.rigclient import RigClient
+    from rimd_sim.testing import lease_domain_id, ros_environment
+
+    run_dir = Path(tempfile.mkdtemp(prefix=f"{mode}_{window}_", dir=base))   # a recording of its own
+    sim = {} if window is None or mode != "lockstep" else {"lockstep.window": window}
+    with lease_domain_id() as lease:
+        plan = plan_rig(None, output_dir=run_dir / "recording", lockstep=mode == "lockstep", real_time_factor=0.0,
+                        parameters={"rimd_rerun": {"sink": "save", "save_path": str(run_dir / "rig.rrd")},
+                                    "rimd_simulator": sim},
+                        run_dir=run_dir)
+        rig = Rig(plan, env=ros_environment(lease.domain_id, run_dir / "ros_log"), log_dir=run_dir / "logs")
+        rig.start()
+        try:
+            from rclpy.qos import QoSProfile, ReliabilityPolicy
+            from rosgraph_msgs.msg import Clock
+
+            with RigClient(domain_id=lease.domain_id, name="bench_lockstep") as client:
+                clock = [0]
+                client.node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(
+                    0, m.clock.sec * 1_000_000_000 + m.clock.nanosec), QoSProfile(
+                    depth=10, reliability=ReliabilityPolicy.RELIABLE))
+                if not plan.lockstep_consumers:   # open loop: resumed once the consumers subscribe
+                    rig.resume_when_connected()
+                if not client.spin_until(lambda: clock[0] > 0, 60):
+                    logs = "\n".join(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-6:])
+                                     for f in sorted((run_dir / "logs").glob("*.log")))
+                    raise RuntimeError(f"the {mode} rig did not start (domain {lease.domain_id}):\n{logs}")
+                client.spin_until(lambda: False, warmup)
+                pids = {name: proc.pid for name, proc in rig.processes.items()}
+                t0, s0, c0 = time.monotonic(), clock[0], {n: cpu_seconds(p) for n, p in pids.items()}
+                client.spin_until(lambda: False, seconds)
+                t1, s1, c1 = time.monotonic(), clock[0], {n: cpu_seconds(p) for n, p in pids.items()}
+        finally:
+            status = rig.stop()
+    wall = t1 - t0
+    return {"mode": mode, "speed": (s1 - s0) / 1e9 / wall, "wall_s": wall, "simulated_s": (s1 - s0) / 1e9,
+            "cpu_percent": {n: 100 * (c1[n] - c0[n]) / wall for n in pids}, "exit_status": status,
+            "loss": loss(plan.recording_dir)}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--warmup", type=float, default=8.0)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--window", type=float, default=None,
+                        help="lockstep.window of the lockstep rig (s of simulation time; default: the rig's)")
+    parser.add_argument("--compare-windows", type=float, nargs="+", default=None, metavar="W",
+                        help="instead: only lockstep rigs, one per window, one after the other (their speeds)")
+    args = parser.parse_args()
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    if args.compare_windows:
+        with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
+            for w in args.compare_windows:
+                r = run("lockstep", args.seconds, args.warmup, Path(tmp), w)
+                cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
+                lost = {t: v for t, v in r["loss"].items() if v != "complete from sample 0"}
+                print(f"window {w:g} s: {r['speed']:.1f}x real time; CPU {cpu}; "
+                      + (f"LOSS {lost}" if lost else "nothing lost"), flush=True)
+        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+        return 0
+    with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
+        results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window) for mode in ("lockstep", "free")]
+    lock, free = results
+    for r in results:
+        cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
+        print(f"{r['mode']:>9}: {r['speed']:6.1f}x real time ({r['simulated_s']:.1f} s simulated in "
+              f"{r['wall_s']:.1f} s); CPU {cpu}; exit {r['exit_status']}")
+        for topic, verdict in r["loss"].items():
+            print(f"{'':>11}{topic}: {verdict}")
+    ratio = lock["speed"] / free["speed"] if free["speed"] else float("nan")
+    print(f"lockstep / free: {ratio:.3f}")
+    print(f"goal lockstep >= 20x real time: {'met' if lock['speed'] >= 20 else 'NOT met'} ({lock['speed']:.1f}x)")
+    print(f"goal lockstep within 15 % of free running: {'met' if ratio >= 0.85 else 'NOT met'} ({ratio:.3f})")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps({"results": results, "ratio": ratio}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,133 @@
+"""The one driver built per model (issue 25): its contract, the registry, and numba's cache across processes.
+
+Each test says its hypothesis. The cache tests run the compiled functions in fresh interpreters on a numba cache
+directory of their own (``NUMBA_CACHE_DIR``), so they see what a user sees from the second run on.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+import types
+from pathlib import Path
+
+import pytest
+
+import rimd_sim
+from rimd_sim.core import kernel, rigid
+from rimd_sim.core.config import STRUCTURE_MODELS
+from rimd_sim.core.model import MODELS
+
+SRC = Path(rimd_sim.__file__).resolve().parent.parent
+
+#: Runs ``track_contact_extremes`` of the models named on the command line (a small compiled function that calls
+#: two more of the driver's) and prints what it finds, with numba's cache statistics.
+PROBE = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    from rimd_sim.core import kernel as k, load_config
+    from rimd_sim.core.config import find_config_file
+    from rimd_sim.core.model import MODELS
+    cfg = load_config(find_config_file("structural.yaml"))
+    out = {}
+    for name in sys.argv[1:]:
+        spec = MODELS[name]
+        p = spec.params(cfg.with_parameters({"structure.model": name}))
+        fs = np.zeros(k.N_FSTATE)
+        fs[k.F_MW0] = 3.75
+        fs[k.F_VIMP] = 0.1
+        n = spec.n_state
+        ya = np.array([1e-6, 0.5, 0.0, 1e-7, 0.01, 2e-8, -0.02][:n])
+        q = np.arange(4 * n, dtype=float).reshape(n, 4) * 1e-3
+        spec.driver.track_contact_extremes(fs, p, ya, q, 1e-5)
+        stats = spec.driver.track_contact_extremes.stats
+        out[name] = {"peak": fs[k.F_RPEAK], "penetration": fs[k.F_RPEN], "hits": sum(stats.cache_hits.values()),
+                     "misses": sum(stats.cache_misses.values())}
+    print(json.dumps(out))
+""")
+
+
+def probe(src: Path, cache: Path, *models: str) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(src), "NUMBA_CACHE_DIR": str(cache)}
+    env.pop("RIMD_NO_JIT", None)
+    proc = subprocess.run([sys.executable, "-c", PROBE, *models], capture_output=True, text=True, timeout=240,
+                          env=env, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout)
+
+
+@pytest.mark.process
+def test_two_models_loaded_from_the_cache_keep_their_own_code(tmp_path):
+    """Compiled in two processes (each caches its model's functions), then both loaded from the cache into a third:
+    each model computes what it computed when compiled. (Before the fix, the functions of the two models shared
+    their compiled symbols' names, and the two-mass model ran the rigid model's code without an error.) The third
+    process compiles nothing."""
+    rigid_alone = probe(SRC, tmp_path, "rigid")["rigid"]
+    two_alone = probe(SRC, tmp_path, "two_mass")["two_mass"]
+    assert rigid_alone["misses"] == two_alone["misses"] == 1  # each compiled its model's function once
+    both = probe(SRC, tmp_path, "rigid", "two_mass")
+    for name, alone in (("rigid", rigid_alone), ("two_mass", two_alone)):
+        assert (both[name]["peak"], both[name]["penetration"]) == (alone["peak"], alone["penetration"]), name
+        assert both[name]["hits"] == 1 and both[name]["misses"] == 0, name
+    assert two_alone["peak"] != rigid_alone["peak"]
+
+
+@pytest.mark.process
+def test_an_edit_of_the_physics_is_not_served_from_the_cache(tmp_path):
+    """The cache key holds the digest of the physics sources: after an edit of the rigid model's physics (the
+    sensor reads twice the law's force), a process with the same cache directory does not load the old entry: it
+    recompiles and computes the new physics (a copy of the package is edited, with its own cache)."""
+    copy = tmp_path / "src"
+    shutil.copytree(SRC / "rimd_sim", copy / "rimd_sim", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(SRC.parent / "config", copy / "config")  # find_config_file looks in the parents' config/
+    cache = tmp_path / "cache"
+    before = probe(copy, cache, "rigid")["rigid"]
+    physics = copy / "rimd_sim" / "core" / "rigid.py"
+    text = physics.read_text()
+    line = '    """The sensor is rigid: it reads the law\'s force."""\n    return force\n'
+    assert text.count(line) == 1
+    physics.write_text(text.replace(line, line.replace("return force", "return 2.0 * force")))
+    after = probe(copy, cache, "rigid")["rigid"]
+    assert after["misses"] == 1 and after["hits"] == 0
+    assert after["peak"] == 2.0 * before["peak"]
+
+
+def test_a_physics_module_is_checked_against_the_contract():
+    """A physics module that lacks part of the contract is refused, naming what it lacks; a ringing one must
+    also give the ring hooks."""
+    lacking = types.ModuleType("lacking")
+    for attr in kernel.CONTRACT:
+        setattr(lacking, attr, getattr(rigid, attr))
+    del lacking.sample
+    with pytest.raises(TypeError, match=r"lacking is not a physics module .* it lacks sample$"):
+        kernel.build_driver(lacking, "lacking")
+    lacking.sample = rigid.sample
+    lacking.RINGS = True
+    with pytest.raises(TypeError, match=r"it lacks ring_amplitude, ring_period, settle$"):
+        kernel.build_driver(lacking, "lacking")
+    kernel.check_physics(rigid)
+
+
+def test_the_registry_holds_every_structure_model():
+    """MODELS is the one place that picks a model: one entry per value ``structure.model`` accepts, each with its
+    physics module and state size."""
+    assert tuple(MODELS) == STRUCTURE_MODELS
+    assert [MODELS[m].n_state for m in MODELS] == [3, 7]
+
+
+def test_a_running_model_keeps_its_model_and_its_modes_count():
+    """RigModel refuses to be reconfigured to another model (its state would not fit), and a start whose modes do
+    not fit the model, each with a message naming what was wrong."""
+    from rimd_sim.core import CommandError, ConfigError, RigModel, SimConfig
+
+    model = RigModel(SimConfig(), channels=False, truth=False)
+    with pytest.raises(CommandError, match=r"structure.model cannot change while the model runs \(rigid to two_mass\)"):
+        model.reconfigure(SimConfig().with_parameters({"structure.model": "two_mass"}))
+    with pytest.raises(ConfigError, match=r"'initial_modes' = \(0.0,\) refused: the rigid model has 0 modes"):
+        RigModel(SimConfig(), initial_modes=(0.0,))
+    two = RigModel(SimConfig().with_parameters({"structure.model": "two_mass"}), initial_modes=(1e-9, 0, 0, 0))
+    assert two._ya[3:].tolist() == [1e-9, 0.0, 0.0, 0.0]

@@ -1,0 +1,114 @@
+"""The reference DAQ client (rimd_sim.examples.daq_client) and the pytest plugin users test their DAQ with.
+
+Hypotheses:
+
+- continuity with a reorder window: a block that comes after a later one is reordered, not lost; a hole
+  that later data has passed by more than the window is lost, counted once with its samples;
+- impacts are measured from the running baseline: after an offset fault's step the impacts keep their height
+  and the step itself is no impact (a fixed threshold would have seen one long "impact" and then peaks 40 N
+  too high: the trap docs/daq-client.md names);
+- the documented fixture example (docs/testing.md, copied here verbatim) passes: against a rig in lockstep with
+  a dropout and an offset on the force channel, the client loses no block it was sent, names the dropout and
+  the offset where /rig/faults says they started, and its impact heights match the rig's impact events;
+- two rigs of one test do not hear each other (each its own domain).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rimd_sim.examples.daq_client import Continuity, PeakDetector
+
+pytestmark = pytest.mark.ros
+
+
+def test_a_reordered_block_is_not_a_lost_block():
+    c = Continuity(reorder_window=0.05)     # 2 kHz blocks of 20 samples: 10 ms each
+    assert c.add(0, 20, 2000.0) == []
+    assert c.add(40, 20, 2000.0) == []      # block 20 is late, not lost yet
+    assert c.add(20, 20, 2000.0) == []      # here it is
+    assert (c.reordered, c.lost_blocks, c.next_index) == (1, 0, 60)
+    lost = {first: c.add(first, 20, 2000.0) for first in (80, 100, 120, 140, 160)}
+    # Block 60 never comes: lost once 50 ms of later data have passed it (at block 140, ending at 160).
+    assert lost == {80: [], 100: [], 120: [], 140: [(60, 20)], 160: []}
+    assert (c.lost_blocks, c.lost_samples, c.next_index) == (1, 20, 180)
+    assert c.add(60, 20, 2000.0) == [] and c.duplicates == 1   # too late: counted, not taken twice
+
+
+def test_impacts_are_measured_from_the_baseline_through_an_offset_step():
+    rate, t = 20_000.0, np.arange(40_000) / 20_000.0
+    force = np.zeros_like(t)
+    impacts = [0.25, 0.52, 0.79, 1.31, 1.58, 1.85]
+    for at in impacts:                       # half-sine pulses of 0.4 ms and 80 N
+        pulse = (t >= at) & (t < at + 4e-4)
+        force[pulse] += 80.0 * np.sin(np.pi * (t[pulse] - at) / 4e-4)
+    force[t >= 1.0] += 40.0                  # an offset fault from 1 s
+    detector = PeakDetector(threshold=10.0)
+    for start in range(0, t.size, 200):      # 10 ms blocks, as the rig sends them
+        detector.add(start / rate, rate, force[start:start + 200])
+    assert [round(at, 3) for at, _ in detector.peaks] == [round(at + 2e-4, 3) for at in impacts]
+    assert all(h == pytest.approx(80.0, rel=0.02) for _, h in detector.peaks)
+    assert len(detector.steps) == 1 and detector.steps[0][0] == pytest.approx(1.0, abs=1e-3)
+    assert detector.steps[0][1] == pytest.approx(40.0, abs=0.5)
+
+
+# ---- the documented example (docs/testing.md), verbatim -----------------------------------------------------
+def test_my_daq_names_the_faults_and_loses_nothing(rimd_rig, tmp_path):
+    rig = rimd_rig(consumers=["daq"], seed=3, parameters={"motor.initial_frequency": 3.75}, faults=[
+        {"channel": "impact_force", "kind": "dropout", "start": 2.0, "duration": 0.3},
+        {"channel": "impact_force", "kind": "offset", "start": 3.0, "duration": 1.0, "magnitude": 40.0}])
+    report_file = tmp_path / "report.json"
+    subprocess.run([sys.executable, "-m", "rimd_sim.examples.daq_client", "--lockstep", "daq", "--until", "5",
+                    "--json", str(report_file)], env=rig.env, check=True, timeout=180)
+    report = json.loads(report_file.read_text())
+    force = report["channels"]["impact_force"]
+    assert force["lost_samples"] == 0.3 * 20_000 and force["lost_blocks"] == 1   # the dropout, nothing else
+    assert all(c["lost_blocks"] == 0 for name, c in report["channels"].items() if name != "impact_force")
+    detected = {(f["kind"], round(f["at"], 2)) for f in report["faults_detected"]}
+    assert detected == {("dropout", 2.0), ("offset", 3.0)}
+# ---- end of the documented example --------------------------------------------------------------------------
+
+    # Beyond the example: the client's impacts are the rig's own impact events (ground truth): each one outside
+    # the dropout found once where it happened, none found that did not happen (the offset's step is no
+    # impact), and the offset changes no height.
+    from rclpy.serialization import deserialize_message
+
+    from rimd_msgs.msg import ImpactEvent
+    from rimd_sim.recording.cdr import read_block
+    from rimd_sim.recording.reader import open_recording
+
+    assert rig.stop() == 0
+    recording = open_recording(rig.recording)
+    events = [deserialize_message(m.data, ImpactEvent) for m in recording.messages(["/rig/impact/events"])]
+    truth = [e.header.stamp.sec + e.header.stamp.nanosec * 1e-9 for e in events if e.peak_force > 15.0]
+    blocks = [read_block(m.data) for m in recording.messages(["/rig/impact/force"])]
+    first = blocks[0].first_index
+    force = np.full(blocks[-1].first_index + len(blocks[-1].samples) - first, np.nan)
+    for b in blocks:
+        force[b.first_index - first:b.first_index - first + len(b.samples)] = b.samples
+    peaks = [(p["at"], p["height_n"]) for p in report["peaks"]]
+    for at, height in peaks:   # each found impact happened
+        assert any(abs(at - t) < 1e-3 for t in truth), (at, height)
+    for t in truth:            # each impact the client was sent was found, measured from the baseline before it
+        if 2.0 <= t < 2.3 or t > 4.99:
+            continue
+        (found,) = [h for at, h in peaks if abs(at - t) < 1e-3]
+        n = round(t * 20_000) - first
+        recorded = np.nanmax(force[n - 5:n + 30]) - np.nanmedian(force[n - 400:n - 40])
+        assert found == pytest.approx(recorded, abs=0.5), (t, found, recorded)
+
+
+def test_two_rigs_in_one_test_do_not_hear_each_other(rimd_rig):
+    a = rimd_rig(consumers=["nobody"], seed=1, record=False)   # held before its first block: cheap
+    b = rimd_rig(consumers=["nobody"], seed=2, record=False)
+    assert a.domain_id != b.domain_id and a.env["ROS_DOMAIN_ID"] != b.env["ROS_DOMAIN_ID"]
+    session_a, session_b = a.session(), b.session()
+    assert session_a.run_id != session_b.run_id and (session_a.seed, session_b.seed) == (1, 2)
+    assert a.motor(5.0).success
+    node = a.client().node
+    assert node.count_publishers("/rig/session") == 1   # rig b is not in rig a's domain

@@ -1,0 +1,215 @@
+"""Lockstep end to end (issue 23): the rig runs exactly as fast as its slowest consumer and loses nothing.
+
+Each rig here is the product's own bring-up in lockstep, through the pytest plugin users get
+(``rimd_sim.testing``, fixture ``rimd_rig``), with its consumers in other processes over DDS.
+
+Hypotheses:
+
+1. with the recorder, the Rerun bridge (save sink) and a DAQ client that takes 5 ms per block, every block of
+   every channel from sample 0 is recorded and seen by the client, with no gap in ``first_index``, and the run
+   goes as fast as the client (the client was busy at least 90 % of the run's wall time);
+2. a scripted run (motor steps, a perturbation, three faults, all at stated simulation times) recorded once with
+   the machine as it is and once with one core kept busy and the client slowed at random gives bit-identical
+   samples, events and fault records;
+3. a replay in lockstep delivers every message to a slow subscriber, in order, none lost;
+4. a consumer killed with SIGKILL: the rig holds and names it within 1 s in its log and in /diagnostics; with
+   the drop policy it goes on after the timeout, the recorder's file is complete to the end, and the consumer
+   restarted under the same name joins again and gets every block from there on.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rimd_sim.recording.cdr import block_span
+from rimd_sim.recording.reader import open_recording
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(240)]
+
+DAQ = str(Path(__file__).parent / "harness" / "daq_client.py")
+CHANNELS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force")
+#: Topics whose content is the rig's data (not its run identity, diagnostics or progress).
+DATA_TOPICS = (*CHANNELS, "/rig/truth", "/rig/motor/state", "/rig/impact/events", "/rig/faults", "/clock")
+
+
+def daq(rig, out: Path, until: float, *extra: str) -> subprocess.CompletedProcess:  # noqa: ANN001
+    """Run the harness DAQ client against ``rig`` (a lockstep consumer named ``daq``) until ``until`` s."""
+    return subprocess.run([sys.executable, DAQ, str(out), "--until", str(until), "--lockstep", "daq", *extra],
+                          env=rig.env, capture_output=True, text=True, timeout=200)
+
+
+def contiguous_from_zero(spans: list[tuple[int, int]], rate: float, until: float) -> None:
+    """The blocks start at sample 0, follow each other without a gap, and reach ``until`` s."""
+    assert spans and spans[0][0] == 0, spans[:2]
+    for (a, n), (b, _) in zip(spans, spans[1:], strict=False):
+        assert b == a + n, f"gap: {a}+{n} then {b}"
+    assert (spans[-1][0] + spans[-1][1]) / rate >= until
+
+
+def recorded_spans(recording: Path, topic: str) -> list[tuple[int, int]]:
+    return [block_span(m.data) for m in open_recording(recording).messages([topic])]
+
+
+def test_nothing_is_lost_and_the_rig_goes_as_fast_as_the_slowest_consumer(rimd_rig, tmp_path):
+    rig = rimd_rig(consumers=["daq"], rerun=True, seed=1)
+    out = tmp_path / "daq.pkl"
+    result = daq(rig, out, 2.0, "--work-ms", "5", "--extra")
+    assert result.returncode == 0, result.stdout + result.stderr
+    timing = json.loads(Path(f"{out}.timing").read_text())
+    # The rig went as fast as the client allowed: the client was (nearly) always busy, never waiting for data.
+    assert timing["busy_s"] / timing["wall_s"] >= 0.9, timing
+    assert timing["busy_s"] / timing["blocks"] >= 0.005
+    stored = pickle.loads(out.read_bytes())
+    assert rig.stop() == 0
+    for topic in CHANNELS:
+        rate = 2000.0 if "displacement" in topic else 20000.0
+        contiguous_from_zero([block_span(data) for data, _, _ in stored[topic]], rate, 2.0)   # the client
+        contiguous_from_zero(recorded_spans(rig.recording, topic), rate, 2.0)                # the recorder
+    bridge = rig.log("rimd_rerun")
+    assert "rimd_rerun: closed" in bridge and ", 0 gaps" in bridge, bridge[-500:]       # the bridge
+
+
+def _scripted_run(rimd_rig, tmp_path: Path, name: str, *, busy: bool, seed: int) -> Path:
+    """Motor steps, a perturbation and three faults at stated times, scheduled before the first block."""
+    rig = rimd_rig(consumers=["daq"], seed=5, parameters={"motor.initial_frequency": 3.75})
+    for response in (rig.motor(5.0, ramp_rate=4.0, at=1.0), rig.motor(7.25, ramp_rate=4.0, at=2.0),
+                     rig.perturb(0.1, at=1.5),
+                     rig.inject("impact_force", "dropout", start=0.6, duration=0.2),
+                     rig.inject("rimd_acceleration", "delay", start=1.2, duration=0.5, magnitude=0.03),
+                     rig.inject("cart_displacement", "offset", start=2.2, duration=0.3, magnitude=1e-3)):
+        assert response.success, response.message
+    load = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None
+    try:
+        result = daq(rig, tmp_path / f"{name}.pkl", 2.6, "--work-ms", "1", "--jitter-ms", "4", "--seed", str(seed))
+    finally:
+        if load is not None:
+            load.kill()
+            load.wait()
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert rig.stop() == 0
+    return rig.recording
+
+
+def test_a_scripted_run_is_bit_identical_whatever_the_load(rimd_rig, tmp_path):
+    quiet = _scripted_run(rimd_rig, tmp_path, "quiet", busy=False, seed=1)
+    loaded = _scripted_run(rimd_rig, tmp_path, "loaded", busy=True, seed=2)
+    end = 2_600_000_000   # what both runs covered for sure (the client stops at 2.6 s; the rig stops soon after)
+    from rimd_sim.recording.cdr import header_stamp
+
+    def content(path: Path) -> dict[str, list[bytes]]:
+        out: dict[str, list[bytes]] = {}
+        for m in open_recording(path).messages(DATA_TOPICS):
+            if header_stamp(m.data) <= end:
+                out.setdefault(m.topic, []).append(m.data)
+        return out
+
+    a, b = content(quiet), content(loaded)
+    assert set(a) == set(DATA_TOPICS), sorted(a)
+    for topic in DATA_TOPICS:
+        assert a[topic] == b[topic], f"{topic}: {len(a[topic])} and {len(b[topic])} messages, not bit-identical"
+    assert len(a["/rig/faults"]) == 6 and a["/rig/impact/events"]
+
+
+def test_a_replay_in_lockstep_gives_a_slow_subscriber_every_message(ros_processes, ros_env, tmp_path):
+    from harness.rig_mcap import write_rig_mcap
+
+    path = tmp_path / "rig.mcap"
+    write_rig_mcap(path, seconds=2.0)
+    replay = ros_processes.start_node(
+        "rimd_replay", "--ros-args", "-p", f"file:={path}", "-p", "rate:=100.0", "-p", "lockstep.enabled:=true",
+        "-p", "lockstep.consumers:=[daq]", "-p", "lockstep.window:=0.05")
+    replay.wait_for_output(r"replaying \d+ topics", timeout=30)
+    out = tmp_path / "replayed.pkl"
+    # The recording ends at 2 s: nothing comes past it (no --margin of simulation time to wait for).
+    result = subprocess.run([sys.executable, DAQ, str(out), "--until", "1.99", "--margin", "0", "--lockstep", "daq",
+                             "--work-ms", "3",
+                             "--extra", "/rig/motor/state", "/rig/impact/events"], env=ros_env,
+                            capture_output=True, text=True, timeout=200)
+    assert result.returncode == 0, result.stdout + result.stderr + replay.tail()
+    stored = pickle.loads(out.read_bytes())
+    recording = open_recording(path)
+    for topic in (*CHANNELS, "/rig/motor/state", "/rig/impact/events"):
+        sent = [m.data for m in recording.messages([topic])]
+        got = [data for data, _, _ in stored[topic]]
+        assert got == sent[:len(got)] and len(got) >= len(sent) - 2, f"{topic}: {len(got)} of {len(sent)}"
+
+
+def _wait_for(condition, timeout: float) -> float | None:  # noqa: ANN001
+    """Seconds until ``condition()`` held (polled every 10 ms), or None after ``timeout``."""
+    start = time.monotonic()
+    while time.monotonic() - start < timeout:
+        if condition():
+            return time.monotonic() - start
+        time.sleep(0.01)
+    return None
+
+
+def test_a_killed_consumer_is_named_then_dropped_and_joins_again(rimd_rig, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    rig = rimd_rig(consumers=["daq"], timeout=4.0, on_timeout="drop")
+    holding: list[float] = []
+    node = rig.client().node
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "daq" in values.get("lockstep_waiting_for", ""):
+                holding.append(time.monotonic())
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    first = subprocess.Popen([sys.executable, DAQ, str(tmp_path / "first.pkl"), "--until", "1000", "--lockstep",
+                              "daq"], env=rig.env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    try:
+        rig.wait_until_simulated(1.5)   # the client has finished with at least 0.5 s: it is there
+    finally:
+        first.send_signal(signal.SIGKILL)
+        first.wait()
+    killed = time.monotonic()
+    assert "dropped" not in rig.log(), rig.log()[-1500:]
+    # Named within 1 s, in the log and in /diagnostics.
+    log_after = _wait_for(lambda: "waiting for daq" in rig.log(), 5.0)
+    assert log_after is not None and log_after <= 1.0, f"named in the log after {log_after} s"
+    assert rig.client().spin_until(lambda: holding, 5.0) and holding[0] - killed <= 1.0, holding[:1]
+    # The drop policy: after the timeout (4 s) the rig goes on without it.
+    assert _wait_for(lambda: "consumer 'daq' dropped" in rig.log(), 10.0) is not None, rig.log()[-2000:]
+    rig.wait_until_simulated(3.0, timeout=60)
+    # The consumer comes back under the same name: it joins where the run stands and loses nothing from there.
+    # The rig is paused meanwhile (running without it, it would pass any --until before the client has started).
+    assert rig.pause().success
+    again = tmp_path / "again.pkl"
+    until = rig.simulated() + 3.0
+    client = subprocess.Popen([sys.executable, DAQ, str(again), "--until", str(until), "--lockstep", "daq",
+                               "--timeout", "60"], env=rig.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True)
+    try:
+        assert _wait_for(lambda: "returned after being dropped" in rig.log(), 60.0) is not None, rig.log()[-2000:]
+        assert rig.resume().success
+        output, _ = client.communicate(timeout=120)
+    finally:
+        client.kill()
+    assert client.returncode == 0, output
+    joined = re.search(r"consumer 'daq' returned after being dropped at (\S+) s", rig.log())
+    assert joined, rig.log()[-2000:]
+    # From where it joined on, every block (a subscriber may also be handed an older block still in the writer's
+    # history when it matches: that one is not part of what lockstep promises).
+    stored = pickle.loads(again.read_bytes())
+    for topic in CHANNELS:
+        rate = 2000.0 if "displacement" in topic else 20000.0
+        spans = [span for span in (block_span(data) for data, _, _ in stored[topic])
+                 if span[0] / rate >= float(joined.group(1))]
+        assert spans and all(b[0] == a[0] + a[1] for a, b in zip(spans, spans[1:], strict=False)), (topic, spans[:3])
+        assert (spans[-1][0] + spans[-1][1]) / rate >= until
+    assert rig.stop() == 0
+    for topic in CHANNELS:   # the recorder was never dropped: its file has everything, from sample 0
+        contiguous_from_zero(recorded_spans(rig.recording, topic), 2000.0 if "displacement" in topic else 20000.0,
+                             until)

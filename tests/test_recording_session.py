@@ -1,0 +1,179 @@
+"""The recorder's session (rimd_sim.recording.session) without ROS, without root, without a real full disk.
+
+Hypotheses: messages are written in the order they came and read back bit for bit by an independent reader;
+gaps in ``first_index`` are counted as lost samples; a full queue drops and counts; how far each topic is
+written is told after each batch; a full disk stops the writing once (logged once, reminded every
+``reminder`` seconds on the session's clock), keeps a clean prefix, counts every message not written, and
+``split`` retries into a new file once space is back; the summary says all of it. The disk is a fake that
+fills up: the bag writes through it (``BagWriter(opener=...)``) and it answers with ENOSPC as a disk does,
+after writing what fits.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import threading
+from pathlib import Path
+
+from rclpy.serialization import serialize_message
+
+from rimd_msgs.msg import SampleBlock
+from rimd_sim.recording.bag import BagWriter, qos_profile_dict
+from rimd_sim.recording.reader import open_recording
+from rimd_sim.recording.session import RecordingSession
+
+TOPIC = "/rig/cart/displacement"
+BLOCK = "rimd_msgs/msg/SampleBlock"
+
+
+class FakeDisk:
+    """A disk of ``capacity`` bytes shared by every file opened through it (``opener``)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.used = 0
+
+    def opener(self, path: Path) -> FakeFile:
+        return FakeFile(self, path)
+
+
+class FakeFile:
+    """A real file whose writes stop with ENOSPC once the disk is full (after writing what fits)."""
+
+    def __init__(self, disk: FakeDisk, path: Path) -> None:
+        self.disk, self.path = disk, path
+        self._fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self.size = 0
+
+    def write(self, data) -> int:  # noqa: ANN001
+        room = self.disk.capacity - self.disk.used
+        view = memoryview(data)
+        chunk = view[:max(0, room)]
+        os.write(self._fd, chunk)
+        self.size += len(chunk)
+        self.disk.used += len(chunk)
+        if len(chunk) < len(view):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+        return len(data)
+
+    def tell(self) -> int:
+        return self.size
+
+    def flush(self) -> None:
+        pass
+
+    def truncate(self, size: int) -> None:
+        os.ftruncate(self._fd, size)
+        self.disk.used -= self.size - size
+        self.size = size
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def block(index: int, n: int = 100) -> bytes:
+    # Samples that compress poorly, so that the disk fills after a known, modest number of messages.
+    return serialize_message(SampleBlock(first_index=index * n, sample_rate=2000.0, unit="m",
+                                         samples=[((index * 7919 + k * 104729) % 100003) / 100003.0
+                                                  for k in range(n)]))
+
+
+def session(tmp_path: Path, disk: FakeDisk | None = None, **kwargs):  # noqa: ANN201
+    log: list[tuple[str, str]] = []
+    written: list[dict[str, int]] = []
+    bag = BagWriter(tmp_path / "rec", chunk_size=8192, opener=disk.opener if disk else None)
+    s = RecordingSession(bag, log=lambda level, line: log.append((level, line)), on_written=written.append,
+                         clock=FakeClock(), **kwargs)
+    s.add_topic(TOPIC, BLOCK, [qos_profile_dict(depth=100)])
+    return s, log, written
+
+
+def test_messages_are_written_in_order_and_gaps_counted(tmp_path):
+    s, log, written = session(tmp_path)
+    sent = [block(i) for i in range(50) if i != 20]          # block 20 lost upstream: 100 samples missing
+    for i, data in enumerate(sent):
+        assert s.put(TOPIC, data, 10**18 + i, stamp=1000 + i)
+    s.process()
+    assert written == [{TOPIC: 1000 + len(sent) - 1}]       # how far the topic is written, after the batch
+    s.close()
+    assert [m.data for m in open_recording(tmp_path / "rec").messages()] == sent
+    report = s.loss_report()[TOPIC]
+    assert (report.received, report.written, report.lost_samples, report.lost_blocks) == (49, 49, 100, 1)
+    assert ("warning", f"{TOPIC}: 100 samples missing before index 2100") in log
+    assert any("LOSS: 100 samples missing" in line for line in s.summary())
+
+
+def test_a_full_queue_drops_the_newest_and_counts_it(tmp_path):
+    s, _, _ = session(tmp_path, queue_size=4)                 # the topic declaration takes one place
+    results = [s.put(TOPIC, block(i), 10**18 + i) for i in range(6)]
+    assert results == [True, True, True, False, False, False]
+    s.close()
+    report = s.loss_report()[TOPIC]
+    assert (report.received, report.written, report.queue_dropped) == (6, 3, 3)
+    assert any("3 messages dropped (queue full)" in line for line in s.summary())
+
+
+def test_a_full_disk_stops_the_writing_once_and_split_retries(tmp_path):
+    disk = FakeDisk(capacity=120_000)
+    s, log, _ = session(tmp_path, disk, reminder=30.0)
+    given = [block(i) for i in range(400)]                    # ~340 kB: far more than the disk
+    for i, data in enumerate(given):
+        s.put(TOPIC, data, 10**18 + i * 50_000_000)
+    s.process()
+    errors = [line for level, line in log if level == "error"]
+    assert len(errors) == 1, errors
+    assert "disk full: " in errors[0] and "No space left on device (errno 28, ENOSPC)" in errors[0]
+    assert "recording stopped, the node keeps running" in errors[0] and "~/split" in errors[0]
+    failure = s.bag.failure
+    n_ok = s.bag.written[TOPIC]
+    assert 0 < n_ok < 400 and n_ok + s.bag.not_written[TOPIC] == 400
+
+    # Still full: more messages are counted, not written, and the error is not repeated ...
+    s.put(TOPIC, block(400), 2 * 10**18)
+    s.process()
+    assert s.bag.not_written[TOPIC] == 401 - n_ok and len([x for x in log if x[0] == "error"]) == 1
+    # ... until the reminder is due on the session's clock.
+    s._clock.now += 31.0
+    s.put(TOPIC, block(401), 2 * 10**18 + 1)
+    s.process()
+    assert [line for level, line in log if level == "error"][-1].startswith("still not recording (disk full")
+
+    # Space comes back: split clears the error, the next message opens a new file.
+    disk.capacity = 10**9
+    assert s.split() is None and s.bag.failure is None
+    assert ("info", "the disk full error is cleared: the next message recorded opens a new file") in log
+    for i, data in enumerate(given[:100]):
+        s.put(TOPIC, data, 3 * 10**18 + i)
+    s.process()
+    assert any(line.startswith("writing again after the disk full: recording into ") for _, line in log)
+    s.close()
+    recording = open_recording(tmp_path / "rec")
+    assert [r.complete for r in recording.reports] == [False, True]
+    assert [m.data for m in recording.messages()] == given[:n_ok] + given[:100]
+    summary = "\n".join(s.summary())
+    assert f"{failure.file.path.name}: {n_ok} messages" in summary and "INCOMPLETE: disk full" in summary
+    assert "WRITE FAILED: disk full" in summary and f"{402 - n_ok} messages not written (disk full)" in summary
+
+
+def test_the_writer_thread_runs_calls_after_the_messages_before_them(tmp_path):
+    s, _, written = session(tmp_path)
+    s.start()
+    for i in range(20):
+        s.put(TOPIC, block(i), 10**18 + i, stamp=i)
+    assert s.run_on_writer(lambda: s.bag.written[TOPIC], timeout=10) == 20
+    assert threading.current_thread().name != "rimd_recorder_writer"
+    info = s.split()
+    assert info is not None and info.message_count == 20 and info.finished
+    s.close(timeout=10)
+    assert written and written[-1][TOPIC] == 19
