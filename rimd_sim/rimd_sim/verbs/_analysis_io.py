@@ -10,6 +10,7 @@ import math
 import os
 import sys
 import time
+from pathlib import Path
 from typing import TextIO
 
 from rimd_sim.analysis.files import jsonable, write_csv, write_json, write_summary  # noqa: F401 - re-exported
