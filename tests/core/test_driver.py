@@ -131,3 +131,31 @@ def test_a_running_model_keeps_its_model_and_its_modes_count():
         RigModel(SimConfig(), initial_modes=(0.0,))
     two = RigModel(SimConfig().with_parameters({"structure.model": "two_mass"}), initial_modes=(1e-9, 0, 0, 0))
     assert two._ya[3:].tolist() == [1e-9, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("name", STRUCTURE_MODELS)
+def test_a_copied_model_continues_exactly_as_the_original_and_alone(name):
+    """``copy.deepcopy`` of a running model (the experiment design's trial runs) shares the physics module and
+    driver, not the state: the copy, driven like the original, gives the same impacts and samples bit for bit, and
+    driving it leaves the original where it was."""
+    import copy
+    from fractions import Fraction
+
+    import numpy as np
+
+    from rimd_sim.core import RigModel, SimConfig
+
+    config = SimConfig().with_parameters({"structure.model": name})
+    original = RigModel(config)
+    original.advance(Fraction(1))
+    trial = copy.deepcopy(original)
+    assert trial.time == original.time == 1 and trial.physics_model is original.physics_model
+    trial.set_motor_frequency(5.5, 2.0)
+    ahead = trial.advance(Fraction(2))
+    assert original.time == 1   # the trial left the original alone
+    original.set_motor_frequency(5.5, 2.0)
+    again = original.advance(Fraction(2))
+    assert [i.t_start for i in ahead.impacts] == [i.t_start for i in again.impacts] and ahead.impacts
+    assert list(ahead.channels) == list(again.channels)
+    for name, (first, values) in ahead.channels.items():
+        assert first == again.channels[name][0] and np.array_equal(values, again.channels[name][1]), name

@@ -2,8 +2,8 @@
 
 * :func:`draw_rigs`: seeded rigs drawn across the documented ranges of :data:`RANGES`.
 * :func:`record_through_rig`: the rig as a user runs it: the simulator node started paused from rest with the
-  hidden rig's parameter file, ``rimd experiment`` recording the stepped schedule, then the rig resumed. The one
-  place the tests and the battery record through the rig (switch it here to the lockstep mode when it lands).
+  hidden rig's parameters, in lockstep with ``rimd experiment``'s recorder, which records the stepped schedule;
+  then the rig resumed. The one place the tests and the battery record through the rig.
 * :func:`write_core_recording`: the same schedule run by the physics core in this process and written as the
   recorder writes it (rosbag2 MCAP through :class:`rimd_sim.recording.bag.McapFile`, the simulator node's
   messages: the channels' blocks after the block-level faults, impact events, motor states, ``/rig/faults``,
@@ -187,75 +187,42 @@ def write_core_recording(path: Path, params: Mapping[str, float], schedule: Sche
     return out
 
 
-def _nest(flat: Mapping[str, object]) -> dict:
-    tree: dict = {}
-    for key, value in flat.items():
-        node = tree
-        *parents, leaf = key.split(".")
-        for p in parents:
-            node = node.setdefault(p, {})
-        node[leaf] = value
-    return tree
-
-
-def record_through_rig(processes, out: Path, params: Mapping[str, float], schedule: Schedule, *,  # noqa: ANN001
-                       real_time_factor: float = 8.0, timeout: float = 240.0) -> Path:
+def record_through_rig(rigs, out: Path, params: Mapping[str, float], schedule: Schedule, *,  # noqa: ANN001
+                       timeout: float = 240.0) -> Path:
     """Record ``schedule`` on the running rig ``params`` as a user would; return the recording directory.
 
-    ``processes``: a :class:`harness.processes.ProcessManager` (the tests' ``ros_processes``) on this process's
-    ROS domain. The simulator node starts paused from rest with the hidden rig's parameter file; ``rimd
-    experiment --start`` schedules the steps (its recorder subscribes before the rig runs); the kicks go through
-    ``/rig/perturb`` on their stamps; then ``/rig/resume``. Faults ride in the parameter file's ``faults`` list;
-    captures through ``capture.enabled``.
+    ``rigs``: a :class:`rimd_sim.testing.RigFactory` (the tests' ``rimd_rig`` fixture). The simulator node starts
+    paused from rest with the hidden rig's parameters, in lockstep with ``rimd experiment``'s recorder (as fast as
+    it records, nothing lost however loaded the machine); ``rimd experiment --start`` schedules the steps (its
+    recorder joins before the rig runs); the kicks go through ``/rig/perturb`` on their stamps; then
+    ``/rig/resume``. Faults ride in the rig's ``faults`` list; captures through ``capture.enabled``.
     """
-    import rclpy
-    import yaml
-    from builtin_interfaces.msg import Time
-    from rclpy.executors import SingleThreadedExecutor
-    from std_srvs.srv import Trigger
-
-    from harness.ros import call_service
-    from rimd_msgs.srv import Perturb
+    from harness.processes import ProcessManager
+    from rimd_sim.experiment import RECORDER_NODE
 
     f0 = schedule.frequencies[0]
-    node_params = {**_nest(params), "real_time_factor": float(real_time_factor), "start_paused": True,
-                   "seed": schedule.seed, "motor": {**_nest(params).get("motor", {}), "initial_frequency": f0,
-                                                    "initial_setpoint": f0}}
+    parameters = {**params, "start_paused": True, "motor.initial_frequency": f0, "motor.initial_setpoint": f0}
     if schedule.capture:
-        node_params["capture"] = {"enabled": True}
-    if schedule.faults:
-        node_params["faults"] = [" ".join(f"{k}={v}" for k, v in fault.items()) for fault in schedule.faults]
+        parameters["capture.enabled"] = True
+    rig = rigs(consumers=[RECORDER_NODE], record=False, seed=schedule.seed, parameters=parameters,
+               faults=list(schedule.faults))
     out.mkdir(parents=True, exist_ok=True)
-    rig_file = out / "hidden_rig.yaml"
-    rig_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": node_params}}))
-    sim = processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(rig_file))
-    sim.wait_for_output(r"rig ready", timeout=60)
     exp_dir = out / "exp"
     rimd = shutil.which("rimd")
     assert rimd is not None, "rimd is not on PATH: source env.sh"
-    experiment = processes.start([rimd, "experiment", "--frequencies", *map(str, schedule.frequencies),
-                                  "--dwell", str(schedule.dwell), "--settle", "2", "--ramp-rate",
-                                  str(schedule.ramp_rate), "--out", str(exp_dir), "--start", str(schedule.start)],
-                                 name="experiment")
-    experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
-    context = rclpy.Context()
-    rclpy.init(context=context)
+    processes = ProcessManager(rig.env, out / "processes")
     try:
-        executor = SingleThreadedExecutor(context=context)
-        node = rclpy.create_node("battery_driver", context=context)
-        executor.add_node(node)
+        experiment = processes.start([rimd, "experiment", "--frequencies", *map(str, schedule.frequencies),
+                                      "--dwell", str(schedule.dwell), "--settle", "2", "--ramp-rate",
+                                      str(schedule.ramp_rate), "--out", str(exp_dir), "--start", str(schedule.start)],
+                                     name="experiment")
+        experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
         for at, v in schedule.kicks:
-            ns = round(at * 1e9)
-            client = node.create_client(Perturb, "/rig/perturb")
-            request = Perturb.Request(velocity=float(v), start_stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9))
-            response = call_service(executor, node, client, request, 10)
+            response = rig.perturb(float(v), at=at)
             assert response.success, response.message
-        resume = node.create_client(Trigger, "/rig/resume")
-        assert call_service(executor, node, resume, Trigger.Request(), 10).success
+        assert rig.resume().success
         assert experiment.wait(timeout) == 0, experiment.tail()
-        executor.shutdown()
-        node.destroy_node()
     finally:
-        context.try_shutdown()
-    sim.stop()
+        processes.stop_all()
+        rig.stop()
     return exp_dir / "recording"

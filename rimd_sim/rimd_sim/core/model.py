@@ -286,6 +286,20 @@ class RigModel:
         self._seg_prev: tuple[np.ndarray, int] | None = None
         self._init_state()
 
+    def __deepcopy__(self, memo: dict) -> RigModel:
+        """An independent copy that continues exactly as this model would (a trial run from the same state).
+
+        The physics (its module and compiled driver) is shared: it holds no state of a run.
+        """
+        import copy
+
+        clone = object.__new__(type(self))
+        memo[id(self)] = clone
+        for key, value in self.__dict__.items():
+            shared = isinstance(value, ModuleType | PhysicsModel | SimConfig)
+            setattr(clone, key, value if shared else copy.deepcopy(value, memo))
+        return clone
+
     # ---- state -----------------------------------------------------------------------------------
 
     def _init_state(self) -> None:

@@ -34,10 +34,6 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.report import ReportError, analyze, format_report
     from rimd_sim.cli import CommandError
     from rimd_sim.recording.reader import RecordingError
-    from rimd_sim.verbs._analysis_io import check_positive
-
-    check_positive("--settle", args.settle, inclusive=True)
-    check_positive("--threshold", args.threshold)
     try:
         summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold, peak=args.peak,
                           log=lambda text: print(f"rimd analyze: {text}", file=sys.stderr, flush=True))

@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from rimd_sim.cli import positive_float
+from rimd_sim.cli import nonnegative_float, positive_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "is written from (default config/rimd.yaml)")
     parser.add_argument("--threshold", type=positive_float("--threshold", "N"), default=2.0,
                         help="force (N) above which a run of force samples is an impact (default 2.0)")
-    parser.add_argument("--settle", type=float, default=2.0,
+    parser.add_argument("--settle", type=nonnegative_float("--settle", "s"), default=2.0,
                         help="seconds discarded after the motor reached each setpoint, for the validation's "
                              "steady windows (default 2.0, as rimd analyze)")
 
