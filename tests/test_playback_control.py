@@ -3,9 +3,10 @@ rimd_sim.viz.playback over the replay's real player (rimd_sim.recording.player) 
 
 Hypotheses:
 
-- a request maps onto rosbag2's player calls: a seek time -> seek, a speed other than the rate -> set_rate (the
-  32-bit float the protocol carries read as the number meant: 0.1, not 0.10000000149), Play while paused ->
-  resume, Pause while playing -> pause, nothing when the replay is already so; Play at the end -> from the start;
+- a request maps onto rosbag2's player calls: Pause while playing -> pause, first (nothing leaves from the seek's
+  time before it), a seek time -> seek, a speed other than the rate -> set_rate (the 32-bit float the protocol
+  carries read as the number meant: 0.1, not 0.10000000149), Play while paused -> resume, last; nothing when the
+  replay is already so; Play at the end -> from the start;
 - carried out on the player, the answer is the player's state read back: Playing/Paused/Ended, the position, the
   rate, ``did_seek`` only when a seek was done; after a seek the next message is the first recorded at or after
   the time (rosbag2's seek);
@@ -124,9 +125,11 @@ def test_a_request_maps_onto_the_players_calls():
     assert plan(PlaybackRequest(play=False, speed=1.0), state(paused=False)) == [("pause", None)]
     assert plan(PlaybackRequest(play=True, speed=1.0), state(paused=False)) == []        # already playing
     assert plan(PlaybackRequest(play=False, speed=1.0), state()) == []                   # already paused
-    # Seek first (the rate then counts from where it landed), then the rate, then play.
+    # Pause first, then seek, then the rate (it counts from where the seek landed), then play.
     assert plan(PlaybackRequest(play=True, speed=f32(0.1), seek_ns=5 * S), state()) == \
         [("seek", 5 * S), ("set_rate", 0.1), ("resume", None)]
+    assert plan(PlaybackRequest(play=False, speed=2.0, seek_ns=5 * S), state(paused=False)) == \
+        [("pause", None), ("seek", 5 * S), ("set_rate", 2.0)]
     assert f32(0.1) != 0.1 and requested_speed(f32(0.1)) == 0.1 and requested_speed(f32(2.5)) == 2.5
     assert plan(PlaybackRequest(play=True, speed=f32(0.1)), state(rate=0.1)) == [("resume", None)]
     # At the end: Play plays again from the start; Pause pauses there.

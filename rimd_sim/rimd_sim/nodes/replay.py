@@ -11,8 +11,8 @@ which answer a message where rosbag2's answer nothing; ``rimd_msgs/srv`` IsPause
 PlayNext, Burst for the others, with rosbag2_interfaces' fields, since that package is not installable here):
 ``~/pause``, ``~/resume``, ``~/toggle_paused``, ``~/is_paused``, ``~/get_rate``, ``~/set_rate``, ``~/seek``,
 ``~/play_next``, ``~/burst``; and ``~/get_state`` (``rimd_msgs/srv/GetReplayState``: the part played, the
-position, paused, ended, rate, passes and seeks in one snapshot, for a client that shows a timeline). With
-``keep_alive`` the node stays up at the end, where ``~/seek`` plays again. Parameters:
+position, paused, ended, rate, passes, seeks and messages published in one snapshot, for a client that shows a
+timeline). With ``keep_alive`` the node stays up at the end, where ``~/seek`` plays again. Parameters:
 :class:`rimd_sim.recording.player.ReplaySettings` (one declaration each); in lockstep (``lockstep.*``) the
 replay waits for its consumers like the simulator, publishes ``/clock`` and names each pass on ``/rig/session``
 (reason ``replay``).
@@ -384,7 +384,7 @@ class ReplayNode(Node):
                              (response.position, state.position_ns)):
             stamp.sec, stamp.nanosec = divmod(value, 1_000_000_000)
         response.paused, response.ended, response.rate = state.paused, state.ended, state.rate
-        response.passes, response.seeks = state.passes, state.seeks
+        response.passes, response.seeks, response.published = state.passes, state.seeks, state.published
         return response
 
     def _on_play_next(self, request, response):  # noqa: ARG002

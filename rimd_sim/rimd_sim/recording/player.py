@@ -105,6 +105,7 @@ class PlayerState:
         ended: Every message of the part has gone out (and no loop): only a seek plays again.
         rate: The playback rate.
         passes: Passes started (1 at start, one more per loop); seeks: seeks done. A change of either is a jump.
+        published: Messages handed out for publishing since the start.
     """
 
     start_ns: int
@@ -115,6 +116,7 @@ class PlayerState:
     rate: float
     passes: int
     seeks: int
+    published: int = 0
 
     @property
     def status(self) -> str:
@@ -312,7 +314,8 @@ class Player:
         """Where the playback stands (see :class:`PlayerState`), every field from the same moment."""
         with self._lock:
             return PlayerState(self.start_ns, min(self.end_ns, self.last_ns), self._position, self._paused,
-                               not self.settings.loop and self._ended(), float(self.rate), self.passes, self.seeks)
+                               not self.settings.loop and self._ended(), float(self.rate), self.passes, self.seeks,
+                               self.published)
 
     def pause(self) -> bool:
         """Pause; False when already paused."""

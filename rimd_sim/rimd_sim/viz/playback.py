@@ -9,11 +9,13 @@ broadcasts the state whenever it changes for another reason.
 :class:`PlaybackControl` does this over a replay's controls (:class:`ReplayControls`; the bridge node gives the
 replay's rosbag2-named services, a test can give a :class:`~rimd_sim.recording.player.Player`):
 
-* a request becomes the replay's calls (:func:`plan`): a seek time -> ``seek``; a speed other than the replay's
-  rate -> ``set_rate``; Play while paused -> ``resume``; Pause while playing -> ``pause``; Play at the end
-  plays again from the start (a seek to it first), as a media player does. The answer is the replay's state
-  read back after the calls, with ``did_seek`` when a seek was done. A seek or a rate the replay refuses comes
-  back as an error naming the replay with the replay's own message (the other calls of the request are made);
+* a request becomes the replay's calls (:func:`plan`): Pause while playing -> ``pause`` (first: nothing is
+  published from a seek's time before the pause); a seek time -> ``seek``; a speed other than the replay's rate
+  -> ``set_rate``; Play while paused -> ``resume`` (last: the replay plays from the seek's time at the new
+  rate); Play at the end plays again from the start (a seek to it first), as a media player does. The answer is
+  the replay's state read back after the calls, with ``did_seek`` when a seek was done. A seek or a rate the
+  replay refuses comes back as an error naming the replay with the replay's own message (the other calls of the
+  request are made);
 * :meth:`PlaybackControl.poll` reads the replay's state; when what the clients were last told changes (status,
   speed, or a jump: a seek by someone else, a new pass of a loop) it returns the state to broadcast. A replay
   that stops answering (it exits at the end unless ``keep_alive``) is reported Ended, once;
@@ -104,9 +106,11 @@ def requested_speed(speed: float) -> float:
 def plan(request: PlaybackRequest, state: PlayerState) -> list[tuple[str, Any]]:
     """The replay's calls for a request, in order (see the module docstring).
 
-    Each is ``("seek", t_ns)``, ``("set_rate", rate)``, ``("resume", None)`` or ``("pause", None)``.
+    Each is ``("pause", None)``, ``("seek", t_ns)``, ``("set_rate", rate)`` or ``("resume", None)``.
     """
     calls: list[tuple[str, Any]] = []
+    if not request.play and not state.paused:
+        calls.append(("pause", None))
     seek = request.seek_ns
     if seek is None and request.play and state.ended:
         seek = state.start_ns   # Play at the end: from the start again
@@ -117,8 +121,6 @@ def plan(request: PlaybackRequest, state: PlayerState) -> list[tuple[str, Any]]:
         calls.append(("set_rate", speed))
     if request.play and state.paused:
         calls.append(("resume", None))
-    elif not request.play and not state.paused:
-        calls.append(("pause", None))
     return calls
 
 
