@@ -276,3 +276,29 @@ def test_foxglove_s_timeline_drives_a_replay(ros_processes, ros_executor, tmp_pa
         assert all(first <= t <= last for t, _ in client.received.messages[subscription])
     assert bridge.stop() == 0, bridge.tail()
     assert replay.stop() == 0, replay.tail()
+
+
+def test_rimd_replay_plans_the_replay_and_the_bridge_pointed_at_it(tmp_path, capsys):
+    from rimd_sim import cli
+    from rimd_sim.bringup import plan_replay
+
+    path = tmp_path / "rig.mcap"
+    path.write_bytes(b"")   # the plan only checks that the recording is there; the replay node reads it
+    (replay,) = plan_replay(path, parameters={"rate": 2.0}).nodes
+    assert replay.args == ("--ros-args", "-p", f"file:={path.resolve()}", "-p", "rate:=2.0")
+    replay, bridge = plan_replay(path, foxglove=True, port=0).nodes
+    assert replay.args == ("--ros-args", "-p", "start_paused:=true", "-p", "keep_alive:=true",
+                           "-p", f"file:={path.resolve()}")
+    assert (bridge.name, bridge.fqn) == ("rimd_rerun", "/rig/rimd_rerun")
+    assert bridge.args == ("--ros-args", "-p", "rerun:=false", "-p", "foxglove.enabled:=true",
+                           "-p", "foxglove.host:=127.0.0.1", "-p", "foxglove.port:=0",
+                           "-p", "foxglove.playback_node:=/rimd_replay",
+                           "-p", "foxglove.parameter_nodes:=['/rimd_replay']")
+    # Refused in one line before anything starts, naming what was wrong as typed.
+    for argv, refusal in ((["replay", str(tmp_path / "none.mcap")], f"{tmp_path / 'none.mcap'} does not exist"),
+                          (["replay", str(path), "--topics", "/rig/.*", "("], "--topics /rig/.* ( refused: must be a "
+                                                                                "list of regular expressions"),
+                          (["replay", str(path), "--port", "9000"], "--port is for --foxglove")):
+        assert cli.main(argv) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"rimd replay: {refusal}") and err.count("\n") == 1, err
