@@ -7,9 +7,9 @@ Hypotheses:
   time before it), a seek time -> seek, a speed other than the rate -> set_rate (the 32-bit float the protocol
   carries read as the number meant: 0.1, not 0.10000000149), Play while paused -> resume, last; nothing when the
   replay is already so; Play at the end -> from the start;
-- carried out on the player, the answer is the player's state read back: Playing/Paused/Ended, the position, the
-  rate, ``did_seek`` only when a seek was done; after a seek the next message is the first recorded at or after
-  the time (rosbag2's seek);
+- carried out on the player (planned on its state at that moment), the answer is the player's state read back:
+  Playing/Paused/Ended, the position, the rate, ``did_seek`` only when a seek was done; after a seek the next
+  message is the first recorded at or after the time (rosbag2's seek);
 - a seek or a rate the replay refuses comes back as one error line naming the replay and the call, with the
   replay's own message, and the state unchanged;
 - a change made by someone else (pause, rate, seek, a new loop pass, the end) is reported once, a seek as a jump;
@@ -151,6 +151,9 @@ def test_requests_carried_out_on_the_player_answer_with_its_state(recording):
     assert not player.paused
     report, errors = control.handle(PlaybackRequest(play=True, speed=f32(2.0)))
     assert (report.status, report.speed, errors, player.rate) == ("playing", 2.0, [], 2.0)
+    player.pause()   # by someone else, not read yet: a Play is planned on the state now, so it resumes
+    report, errors = control.handle(PlaybackRequest(play=True, speed=2.0))
+    assert (report.status, errors, player.paused) == ("playing", [], False)
 
     # Seek between two recorded log times while paused: the next message is the first at or after it.
     logs = sorted({m.log_time for m in recording.messages()})

@@ -223,13 +223,13 @@ class PlaybackControl:
         """
         errors: list[str] = []
         with self._busy:
-            state = self._state
-            if state is None:
-                try:
-                    state = self._controls.state()
-                except ReplayUnavailable as exc:
-                    return None, [f"playback: the replay {self.name} is not answering ({exc})"]
+            try:   # the calls are planned on the state now, not as last read (someone may have acted since)
+                state = self._controls.state()
                 self._observe(state)
+            except ReplayUnavailable as exc:
+                state = self._state
+                if state is None:
+                    return None, [f"playback: the replay {self.name} is not answering ({exc})"]
             did_seek = False
             for call, argument in plan(request, state):
                 try:
