@@ -9,13 +9,13 @@ broadcasts the state whenever it changes for another reason.
 :class:`PlaybackControl` does this over a replay's controls (:class:`ReplayControls`; the bridge node gives the
 replay's rosbag2-named services, a test can give a :class:`~rimd_sim.recording.player.Player`):
 
-* a request becomes the replay's calls (:func:`plan`): Pause while playing -> ``pause`` (first: nothing is
-  published from a seek's time before the pause); a seek time -> ``seek``; a speed other than the replay's rate
-  -> ``set_rate``; Play while paused -> ``resume`` (last: the replay plays from the seek's time at the new
-  rate); Play at the end plays again from the start (a seek to it first), as a media player does. The answer is
-  the replay's state read back after the calls, with ``did_seek`` when a seek was done. A seek or a rate the
-  replay refuses comes back as an error naming the replay with the replay's own message (the other calls of the
-  request are made);
+* a request becomes the replay's calls (:func:`plan`, on the replay's state read when it arrives): Pause while
+  playing -> ``pause`` (first: nothing is published from a seek's time before the pause); a seek time ->
+  ``seek``; a speed other than the replay's rate -> ``set_rate``; Play while paused -> ``resume`` (last: the
+  replay plays from the seek's time at the new rate); Play at the end plays again from the start (a seek to it
+  first), as a media player does. The answer is the replay's state read back after the calls, with ``did_seek``
+  when a seek was done. A seek or a rate the replay refuses comes back as an error naming the replay with the
+  replay's own message (the other calls of the request are made);
 * :meth:`PlaybackControl.poll` reads the replay's state; when what the clients were last told changes (status,
   speed, or a jump: a seek by someone else, a new pass of a loop) it returns the state to broadcast. A replay
   that stops answering (it exits at the end unless ``keep_alive``) is reported Ended, once;
