@@ -10,14 +10,15 @@ export VENV
 
 PYTEST_ARGS ?=
 
-.PHONY: help setup run test lint clean
+.PHONY: help setup run test test-fast lint clean
 
 help:
-	@echo "make run    set up, build and run the rig (rimd rig)"
-	@echo "make test   set up, build and run the whole test suite (pytest tests)"
-	@echo "make setup  only create/refresh the venv ($(VENV)) and build ros_ws"
-	@echo "make lint   ruff check"
-	@echo "make clean  remove ros_ws build/install/log and the set-up stamps (keeps the venv)"
+	@echo "make run        set up, build and run the rig (rimd rig)"
+	@echo "make test       set up, build and run the whole test suite (pytest tests, on every core)"
+	@echo "make test-fast  the tests that start no process (core, recording, analyses, config): under a minute"
+	@echo "make setup      only create/refresh the venv ($(VENV)) and build ros_ws"
+	@echo "make lint       ruff check"
+	@echo "make clean      remove ros_ws build/install/log and the set-up stamps (keeps the venv)"
 
 setup:
 	@bash scripts/setup.sh
@@ -28,6 +29,11 @@ run: setup
 # scripts/run_tests.sh turns pytest's exit 5 (no test collected) into a failure.
 test: setup
 	@bash scripts/run_tests.sh $(PYTEST_ARGS)
+
+# The inner loop: every test that starts no process (no node, CLI or worker); one that does fails here, naming
+# the marker it lacks (tests/conftest.py).
+test-fast: setup
+	@RIMD_TEST_FAST=1 bash scripts/run_tests.sh -m "not process" $(PYTEST_ARGS)
 
 lint: setup
 	@source ./env.sh && ruff check .

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 from fractions import Fraction
 from pathlib import Path
 
+from _nodes import cpu_median  # benchmarks/_nodes.py
 from bench_simulator_node import start, stop  # the node as the simulator bench runs it
 
 FAULTS = ["channel=impact_force kind=offset start=0 duration=0 magnitude=0.5",
@@ -58,22 +58,12 @@ def core(seconds: float) -> dict[str, float]:
 
 
 def real_time(node, args: list[str], seconds: float) -> float:  # noqa: ANN001
-    import psutil
     import rclpy
 
     proc = start(*args)
     try:
         time.sleep(4.0)  # start-up (JIT cache load, discovery)
-        ps = psutil.Process(proc.pid)
-        ps.cpu_percent(None)
-        samples = []
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            t = time.monotonic()
-            while time.monotonic() - t < 1.0:
-                rclpy.spin_once(node, timeout_sec=0.05)
-            samples.append(ps.cpu_percent(None))
-        return statistics.median(samples)
+        return cpu_median(proc, seconds, lambda: rclpy.spin_once(node, timeout_sec=0.05))
     finally:
         stop(proc)
 

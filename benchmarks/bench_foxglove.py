@@ -21,36 +21,17 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import psutil
+from _nodes import start, stop  # benchmarks/_nodes.py
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "tests"))
 GOAL_POINTS = 5.0
-
-
-def start(exe_name: str, *ros_args: str, log: Path, env: dict) -> subprocess.Popen:
-    exe = shutil.which(exe_name)
-    if exe is None:
-        raise SystemExit(f"{exe_name} not on PATH: run `source env.sh` first")
-    return subprocess.Popen([exe, "--ros-args", *ros_args], stdout=open(log, "wb"), stderr=subprocess.STDOUT,
-                            start_new_session=True, env=env)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
 
 
 def wait_for(log: Path, pattern: str, timeout: float) -> re.Match:

@@ -49,22 +49,26 @@ def loss(recording: Path) -> dict[str, str]:
     rec = open_recording(recording)
     for topic in CHANNELS:
         spans = [block_span(m.data) for m in rec.messages([topic])]
-        holes = sum(1 for a, b in zip(spans, spans[1:], strict=False) if b[0] != a[0] + a[1])
+        holes = [(a[0] + a[1], b[0], i) for i, (a, b) in enumerate(zip(spans, spans[1:], strict=False))
+                 if b[0] != a[0] + a[1]]
         start = spans[0][0] if spans else None
         out[topic] = ("complete from sample 0" if start == 0 and not holes else
-                      f"{holes} holes, first index {start}, {len(spans)} blocks")
+                      f"{len(holes)} holes (expected, got, block) {holes[:3]}, first index {start}, "
+                      f"{len(spans)} blocks")
     return out
 
 
-def run(mode: str, seconds: float, warmup: float, base: Path) -> dict:
+def run(mode: str, seconds: float, warmup: float, base: Path, window: float | None = None) -> dict:
     from rimd_sim.bringup import Rig, plan_rig
     from rimd_sim.rigclient import RigClient
     from rimd_sim.testing import lease_domain_id, ros_environment
 
-    run_dir = base / mode
+    run_dir = Path(tempfile.mkdtemp(prefix=f"{mode}_{window}_", dir=base))   # a recording of its own
+    sim = {} if window is None or mode != "lockstep" else {"lockstep.window": window}
     with lease_domain_id() as lease:
         plan = plan_rig(None, output_dir=run_dir / "recording", lockstep=mode == "lockstep", real_time_factor=0.0,
-                        parameters={"rimd_rerun": {"sink": "save", "save_path": str(run_dir / "rig.rrd")}},
+                        parameters={"rimd_rerun": {"sink": "save", "save_path": str(run_dir / "rig.rrd")},
+                                    "rimd_simulator": sim},
                         run_dir=run_dir)
         rig = Rig(plan, env=ros_environment(lease.domain_id, run_dir / "ros_log"), log_dir=run_dir / "logs")
         rig.start()
@@ -101,10 +105,24 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--warmup", type=float, default=8.0)
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--window", type=float, default=None,
+                        help="lockstep.window of the lockstep rig (s of simulation time; default: the rig's)")
+    parser.add_argument("--compare-windows", type=float, nargs="+", default=None, metavar="W",
+                        help="instead: only lockstep rigs, one per window, one after the other (their speeds)")
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    if args.compare_windows:
+        with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
+            for w in args.compare_windows:
+                r = run("lockstep", args.seconds, args.warmup, Path(tmp), w)
+                cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
+                lost = {t: v for t, v in r["loss"].items() if v != "complete from sample 0"}
+                print(f"window {w:g} s: {r['speed']:.1f}x real time; CPU {cpu}; "
+                      + (f"LOSS {lost}" if lost else "nothing lost"), flush=True)
+        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+        return 0
     with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
-        results = [run(mode, args.seconds, args.warmup, Path(tmp)) for mode in ("lockstep", "free")]
+        results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window) for mode in ("lockstep", "free")]
     lock, free = results
     for r in results:
         cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())

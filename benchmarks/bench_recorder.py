@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import signal
 import statistics
 import subprocess
 import tempfile
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import psutil
 import rclpy
+from _nodes import start, stop  # benchmarks/_nodes.py
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
@@ -33,24 +33,6 @@ from rimd_sim.recording.reader import open_recording
 
 BLOCK_TOPICS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
                 "/rig/truth")
-
-
-def start(exe: str, *ros_args: str, log: Path | None = None) -> subprocess.Popen:
-    path = shutil.which(exe)
-    if path is None:
-        raise SystemExit(f"{exe} not on PATH: run `source env.sh` first")
-    out = log.open("w") if log else subprocess.DEVNULL
-    return subprocess.Popen([path, "--ros-args", *ros_args], stdout=out, stderr=subprocess.STDOUT,
-                            start_new_session=True)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-    try:
-        proc.wait(60)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
 
 
 def call(node: Node, service: str) -> None:

@@ -13,14 +13,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
-import signal
-import statistics
 import subprocess
 import time
 
-import psutil
+import _nodes as nodes  # benchmarks/_nodes.py: start and stop a node
 import rclpy
+from _nodes import stop
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -30,19 +28,8 @@ from rimd_msgs.msg import SampleBlock
 
 
 def start(*ros_args: str) -> subprocess.Popen:
-    exe = shutil.which("rimd_simulator")
-    if exe is None:
-        raise SystemExit("rimd_simulator not on PATH: run `source env.sh` first")
-    return subprocess.Popen([exe, "--ros-args", *ros_args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    os.killpg(proc.pid, signal.SIGINT)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
+    """The simulator node (the fault bench starts it this way too)."""
+    return nodes.start("rimd_simulator", *ros_args)
 
 
 def real_time(node: Node, seconds: float) -> None:
@@ -52,16 +39,8 @@ def real_time(node: Node, seconds: float) -> None:
                              lambda m: diag.update({kv.key: kv.value for kv in m.status[0].values}), 10)
     try:
         time.sleep(3.0)  # start-up (JIT cache load, discovery)
-        ps = psutil.Process(proc.pid)
-        ps.cpu_percent(None)
-        samples = []
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            t = time.monotonic()
-            while time.monotonic() - t < 1.0:
-                rclpy.spin_once(node, timeout_sec=0.05)
-            samples.append(ps.cpu_percent(None))
-        print(f"real time, default rates: simulator CPU median {statistics.median(samples):.1f} % of one core "
+        cpu = nodes.cpu_median(proc, seconds, lambda: rclpy.spin_once(node, timeout_sec=0.05))
+        print(f"real time, default rates: simulator CPU median {cpu:.1f} % of one core "
               f"(target <= 15 %), lateness p50 {diag.get('lateness_p50_ms')} ms, "
               f"p99 {diag.get('lateness_p99_ms')} ms "
               f"(target <= 5 ms), overruns {diag.get('overruns')}, "

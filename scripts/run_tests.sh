@@ -8,7 +8,14 @@ cd "$ROOT" || exit 1
 # shellcheck disable=SC1091
 source "$ROOT/env.sh" || { echo "run_tests: could not source env.sh; run 'make setup' first" >&2; exit 1; }
 # No path given: pytest runs its testpaths (pyproject.toml: tests), i.e. `pytest tests`.
-python -m pytest "$@"
+# In parallel on every core (pytest-xdist; RIMD_TEST_WORKERS=0 runs serially): a test file stays on one worker
+# (its module fixtures are made once), and the ROS tests never hear each other (each leases its own domain).
+WORKERS="${RIMD_TEST_WORKERS:-auto}"
+if [ "$WORKERS" = "0" ]; then
+    python -m pytest "$@"
+else
+    python -m pytest -n "$WORKERS" --dist loadfile "$@"
+fi
 rc=$?
 if [ "$rc" -eq 5 ]; then
     echo "run_tests: pytest collected no test (exit status 5): counted as a failure" >&2

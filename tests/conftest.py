@@ -50,6 +50,35 @@ def _test_failed(request: pytest.FixtureRequest) -> bool:
     )
 
 
+#: Set by ``make test-fast``: the quick target runs only tests that start no process, and holds them to it.
+FAST = os.environ.get("RIMD_TEST_FAST") == "1"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """A ROS test starts processes (DDS participants, nodes): it is a ``process`` test too."""
+    for item in items:
+        if item.get_closest_marker("ros") is not None and item.get_closest_marker("process") is None:
+            item.add_marker(pytest.mark.process)
+
+
+@pytest.fixture(autouse=True)
+def _the_quick_target_starts_no_process(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Under ``make test-fast`` a test that starts a process (a CLI, a node, a pool or cluster of workers) fails,
+    naming the marker it lacks: the quick target's promise cannot rot."""
+    if not FAST or request.node.get_closest_marker("process") is not None:
+        return
+    import multiprocessing.process
+    import subprocess
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise RuntimeError(f"{request.node.nodeid} starts a process: mark it @pytest.mark.process "
+                           "(make test-fast runs only tests that start none)")
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", refuse)
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", refuse)
+    monkeypatch.setattr(os, "fork", refuse)
+
+
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     """The repository root."""

@@ -22,6 +22,7 @@ def _files(out, *names):
     return read_json(out / "summary.json")
 
 
+@pytest.mark.process
 def test_bifurcation_gap0_shows_the_doubling_window_up_and_down(tmp_path, capsys):
     """Default preset, gap 0: 1/1 below 4.95 Hz and the period-doubled 2/2 motion at 5.0 Hz in both sweeps.
 

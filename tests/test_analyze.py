@@ -19,6 +19,7 @@ def _rimd(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([executable, *args], capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
 
 
+@pytest.mark.process
 def test_garbage_file_is_refused_in_one_line(tmp_path):
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(b"this is not a recording\n" * 100)
@@ -29,6 +30,7 @@ def test_garbage_file_is_refused_in_one_line(tmp_path):
     assert not (tmp_path / "out" / "summary.json").exists()
 
 
+@pytest.mark.process
 def test_missing_recording_is_refused_in_one_line(tmp_path):
     result = _rimd("analyze", str(tmp_path / "nothing"), "--out", str(tmp_path / "out"))
     assert result.returncode == 1 and result.stderr.strip() == f"rimd analyze: {tmp_path / 'nothing'} does not exist"

@@ -26,11 +26,13 @@ def _rimd(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
                           stdin=subprocess.DEVNULL)
 
 
+@pytest.mark.process
 def test_rimd_on_path_is_the_ros2_run_executable():
     executable = Path(shutil.which("rimd") or "")
     assert executable.parent.parts[-2:] == ("lib", "rimd_sim"), executable
 
 
+@pytest.mark.process
 def test_help_lists_every_subcommand():
     result = _rimd("--help")
     assert result.returncode == 0, result.stderr
@@ -58,6 +60,7 @@ def test_not_implemented_verb_says_so_and_exits_2(monkeypatch, capsys):
     assert captured.err.strip() == "rimd teleport: not implemented yet (issue 99: Teleport)"
 
 
+@pytest.mark.process
 def test_a_failing_verb_is_one_line_and_status_1_through_the_console_script(tmp_path):
     missing = tmp_path / "missing.mcap"
     result = _rimd("rerun", str(missing), "--save", str(tmp_path / "out.rrd"))
@@ -77,6 +80,7 @@ def test_unknown_subcommand_is_a_usage_error():
     assert exit_info.value.code == 2
 
 
+@pytest.mark.process
 def test_info_reports_version_and_source_tree(repo_root):
     result = _rimd("info", "--json")
     assert result.returncode == 0, result.stderr
@@ -88,6 +92,7 @@ def test_info_reports_version_and_source_tree(repo_root):
     assert facts["rimd_msgs_location"] is not None
 
 
+@pytest.mark.process
 def test_info_plain_text():
     result = _rimd("info")
     assert result.returncode == 0, result.stderr

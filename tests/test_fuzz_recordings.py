@@ -516,6 +516,7 @@ def test_verbs_on_a_foreign_type(sources, work):
             assert ", 0 impacts," in stdout
 
 
+@pytest.mark.process
 def test_verbs_as_processes(sources, work):
     """The console script itself, on a few damaged files: exit status, stderr, no traceback."""
     source = sources["rig"]

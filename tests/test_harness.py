@@ -14,6 +14,8 @@ import pytest
 from harness.domains import DOMAIN_ID_MAX, DOMAIN_ID_MIN, lease_domain_id
 from harness.processes import ProcessFailure, ProcessManager
 
+pytestmark = pytest.mark.process  # every test here starts a process
+
 
 def test_leases_are_exclusive_and_in_range():
     leases = [lease_domain_id() for _ in range(5)]

@@ -129,7 +129,9 @@ def test_a_replay_in_lockstep_gives_a_slow_subscriber_every_message(ros_processe
         "-p", "lockstep.consumers:=[daq]", "-p", "lockstep.window:=0.05")
     replay.wait_for_output(r"replaying \d+ topics", timeout=30)
     out = tmp_path / "replayed.pkl"
-    result = subprocess.run([sys.executable, DAQ, str(out), "--until", "1.99", "--lockstep", "daq", "--work-ms", "3",
+    # The recording ends at 2 s: nothing comes past it (no --margin of simulation time to wait for).
+    result = subprocess.run([sys.executable, DAQ, str(out), "--until", "1.99", "--margin", "0", "--lockstep", "daq",
+                             "--work-ms", "3",
                              "--extra", "/rig/motor/state", "/rig/impact/events"], env=ros_env,
                             capture_output=True, text=True, timeout=200)
     assert result.returncode == 0, result.stdout + result.stderr + replay.tail()

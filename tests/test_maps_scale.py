@@ -69,6 +69,7 @@ def test_early_stop_stops_settled_motions_early_and_runs_chaos_to_the_cap():
     assert rule.min_cycles <= res.cycles[0] <= 40 and res.cycles[1] == rule.max_cycles + 1
 
 
+@pytest.mark.process
 def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     """Every third gap row of the default map: >= 99 % of the cells (class from rest) as the fixed-length run
     with twice the former 96 cycles; every differing cell listed in the summary with both classes and the class
@@ -168,6 +169,7 @@ PETERKA = ["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "6",
            "--freqs", "12", "--transient-cycles", "60", "--measure-cycles", "36"]
 
 
+@pytest.mark.process
 def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path):
     """``peterka.csv`` through the cluster equals the local one byte for byte; then again with one of the two
     workers killed (SIGKILL) after the first row came back: Dask resubmits its tasks, the map is identical."""
@@ -198,6 +200,7 @@ def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path
     assert peterka_table(result) == peterka_table(reference)
 
 
+@pytest.mark.process
 def test_dask_sweep_bifurcation_basins_equal_local(cluster, tmp_path):
     """The other three verbs accept --scheduler and write the same CSV as locally."""
     cases = [

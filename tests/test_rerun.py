@@ -140,6 +140,7 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
     assert abs(data["poincare/points"].times.size - 3.75 * span) <= 1.5
 
 
+@pytest.mark.process
 def test_offline_recording_gives_the_same_entities_and_its_counts(tmp_path, repo_root):
     rec = write_rig_mcap(tmp_path / "rec.mcap", seconds=3.0)
     out = tmp_path / "offline.rrd"
@@ -201,6 +202,7 @@ def test_a_recording_of_rimd_recorder_gives_the_same_view(ros_processes, ros_exe
 
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
+@pytest.mark.process
 def test_offline_to_a_viewer_at_a_url(ros_processes, tmp_path):
     """Sink connect: the data reach what listens at the URL (here ``rerun --save``, a Rerun endpoint that
     writes what it receives); a URL where nothing listens is refused at once."""
@@ -249,6 +251,7 @@ def test_offline_to_a_viewer_at_a_url(ros_processes, tmp_path):
 
 
 @pytest.mark.parametrize("case", ["missing", "garbage", "no_rig_topics", "save_is_directory", "save_under_file"])
+@pytest.mark.process
 def test_offline_bad_input_is_one_clear_line(tmp_path, case):
     mcap = tmp_path / "rec.mcap"
     save = tmp_path / "out.rrd"
@@ -326,6 +329,7 @@ def test_sample_times_are_the_simulators_stamps_exactly():
             assert np.max(np.abs(got - np.array(want, dtype=np.int64))) <= tolerance, (rate, first)
 
 
+@pytest.mark.process
 def test_mapping_and_offline_path_import_without_ros():
     code = ("import sys; sys.modules['rclpy'] = None; sys.modules['rimd_msgs'] = None\n"
             "import rimd_sim.viz.rerun_map, rimd_sim.viz.sinks, rimd_sim.viz.mcap_source, rimd_sim.viz.rrd_data\n"

@@ -119,6 +119,7 @@ def test_blocks_arrive_on_time_however_the_rig_starts_and_each_run_is_named(ros_
 
     # 3. Started paused, then resumed (as `rimd rig` does with a recorder): sample 0 at the resume.
     sessions.clear()
+    PolledSubscriptions.take(arrivals.sub, lambda d, i: None)   # the stopped rig's blocks still in the reader's cache
     arrivals.first_indices.clear()
     rig = ros_processes.start_node("rimd_simulator", "--ros-args", "-p", "start_paused:=true")
     rig.wait_for_output(r"rig ready", timeout=60)

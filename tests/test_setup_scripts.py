@@ -18,6 +18,8 @@ import pytest
 # External commands the preflight step itself needs besides the tools it checks.
 SHELL_TOOLS = ("dirname", "date", "awk", "sed", "sort", "head", "cat", "tr", "sha256sum", "cut")
 
+pytestmark = pytest.mark.process  # every test here starts a process
+
 
 def _base_python() -> str:
     """The real interpreter behind the venv (pyenv shims need pyenv on PATH)."""

@@ -14,6 +14,7 @@ from rimd_sim.analysis.sweep import sweep
 from rimd_sim.core import SimConfig
 
 
+@pytest.mark.process
 def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
     """`rimd sweep` from rest at gap 0, 3.5-4 Hz: band A at 3.75 Hz (paper Table 1) with the steady peak force of
     the independent solve_ivp integration of the paper's model (tests/core/reference.py, from rest at 3.75 Hz,

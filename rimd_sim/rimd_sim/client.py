@@ -43,6 +43,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
+from rimd_sim.recording.cdr import CdrWriter
 
 __all__ = ["PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter"]
 
@@ -64,10 +65,19 @@ def stamp_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def _time(ns: int) -> Any:
-    from builtin_interfaces.msg import Time
+def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str, int] | None = None,
+                    leaving: bool = False, node: str = "") -> bytes:
+    """A serialized ``rimd_msgs/msg/ConsumerProgress`` (what ``serialize_message`` gives, tested), for a raw publish.
 
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    A consumer reports up to a few hundred times a second; rclpy's conversion of the message object (its arrays
+    of Time above all) cost the Rerun bridge half a millisecond a report.
+    """
+    names = sorted(topics) if topics else []
+    stamps = [divmod(topics[t], 1_000_000_000) for t in names] if topics else []
+    done = divmod(min(topics.values()) if topics else done_ns, 1_000_000_000)
+    w = CdrWriter().string(consumer).time(*done).strings(names).times(stamps).string(instance).boolean(leaving)
+    w.string(node)
+    return w.message()
 
 
 class ProgressReporter:
@@ -140,19 +150,18 @@ class ProgressReporter:
         if due:
             self.flush()
 
-    def flush(self) -> None:
-        """Send the current progress now (after the join; no-op before)."""
+    def flush(self, *, join: bool = False) -> None:
+        """Send the current progress now (after the join; no-op before).
+
+        The join report names the topics taken, each done through zero (nothing taken yet), so that the publisher
+        waits until its writers have matched this node's readers of them before it goes on.
+        """
         with self._lock:
             if not self._joined:
                 return
-            msg = ConsumerProgress(consumer=self.name, instance=self.instance)
-            if self._done:
-                topics = sorted(self._done)
-                msg.topics = topics
-                msg.topics_done_through = [_time(self._done[t]) for t in topics]
-                msg.done_through = _time(min(self._done.values()))
-            else:
-                msg.done_through = _time(self._overall or 0)
+            done = {sub.topic_name: 0 for sub in self._subscriptions} if join else dict(self._done)
+            msg = encode_progress(self.name, self._overall or 0, self.instance, done,
+                                  node=self._node.get_fully_qualified_name())
             self._dirty = False
             self._last_sent = time.monotonic()
             self.reports += 1
@@ -173,7 +182,7 @@ class ProgressReporter:
             self.flush()
         with self._lock:
             self._joined, self._left = False, True   # no report after the leave (it would join again)
-            msg = ConsumerProgress(consumer=self.name, instance=self.instance, leaving=True)
+            msg = encode_progress(self.name, 0, self.instance, leaving=True)
         self._pub.publish(msg)
         try:
             return bool(self._pub.wait_for_all_acked(Duration(nanoseconds=round(timeout * 1e9))))
@@ -196,7 +205,7 @@ class ProgressReporter:
                     self._joined = True
                     self._done.clear()
                     self._overall = None
-                self.flush()   # done_through zero: joined, nothing taken yet
+                self.flush(join=True)
             return
         if self._dirty or time.monotonic() - self._last_sent > 1.0:
             self.flush()       # the last report of a burst, or a heartbeat (which is no progress for the rig)

@@ -60,6 +60,7 @@ def probe(src: Path, cache: Path, *models: str) -> dict:
     return json.loads(proc.stdout)
 
 
+@pytest.mark.process
 def test_two_models_loaded_from_the_cache_keep_their_own_code(tmp_path):
     """Compiled in two processes (each caches its model's functions), then both loaded from the cache into a third:
     each model computes what it computed when compiled. (Before the fix, the functions of the two models shared
@@ -75,6 +76,7 @@ def test_two_models_loaded_from_the_cache_keep_their_own_code(tmp_path):
     assert two_alone["peak"] != rigid_alone["peak"]
 
 
+@pytest.mark.process
 def test_an_edit_of_the_physics_is_not_served_from_the_cache(tmp_path):
     """The cache key holds the digest of the physics sources: after an edit of the rigid model's physics (the
     sensor reads twice the law's force), a process with the same cache directory does not load the old entry: it

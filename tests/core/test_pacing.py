@@ -148,6 +148,20 @@ def test_a_consumer_may_switch_from_one_report_to_reports_per_topic():
     assert pacer.next(blocks(30)) == Go(4)         # /b at 20 ms: up to 70 ms
 
 
+def test_each_report_is_the_whole_state_a_topic_left_out_holds_nothing():
+    """The reporter joins naming every topic it subscribes to (so the publisher matches its readers of each), done
+    through zero, then reports only the topics it keeps progress on: a topic named at the join and never again
+    (a client's extra subscription) must not hold the run at the join time for ever."""
+    pacer = Pacer(0.0, lockstep("daq"), topics=["/a", "/extra"], clock=FakeClock())
+    assert pacer.lockstep.progress("daq", 0, topics={"/a": 0, "/extra": 0}).joined
+    for end in blocks(0, 3):
+        pacer.published(end, "/a")
+        pacer.published(end, "/extra")
+    assert pacer.lockstep.progress("daq", 0, topics={"/a": 30 * MS}).accepted
+    assert pacer.lockstep.consumers["daq"].done == {"/a": 30 * MS}
+    assert pacer.next(blocks(30)) == Go(5)         # /a at 30 ms plus the 50 ms window: up to 80 ms
+
+
 def test_a_restarted_consumer_joins_where_the_run_stands():
     pacer = Pacer(0.0, lockstep("daq"), clock=FakeClock())
     pacer.lockstep.progress("daq", 0, instance="first")

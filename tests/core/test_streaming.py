@@ -199,6 +199,7 @@ def _run_python(code: str, **env) -> subprocess.CompletedProcess:
                           timeout=240, env=environment, check=False)
 
 
+@pytest.mark.process
 def test_core_never_imports_rclpy():
     """The core runs with rclpy made unimportable (STYLE rule 1)."""
     proc = _run_python("""
@@ -218,6 +219,7 @@ def test_core_never_imports_rclpy():
     assert proc.stdout.split() == ["ok", "2000"]
 
 
+@pytest.mark.process
 def test_pure_python_kernel_agrees_with_compiled():
     """RIMD_NO_JIT=1 runs the same kernel source as plain Python: same impacts to 1e-12 relative."""
     code = """

@@ -98,6 +98,7 @@ def test_stiff_link_and_mount_tend_to_the_paper_model():
     assert stiff["duration_s"] == pytest.approx(rigid["duration_s"], rel=0.02)
 
 
+@pytest.mark.process
 def test_pure_python_driver_agrees_with_compiled():
     """RIMD_NO_JIT=1 runs the same driver and two-mass physics as plain Python (STYLE rule 2: both behind one
     interface): a pulse of the preset, its two contacts and the rear mass's ringing, gives the same summary and

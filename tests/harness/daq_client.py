@@ -155,7 +155,7 @@ def main() -> int:
     while time.monotonic() < deadline and (min(reached.values()) < args.until + args.margin
                                            or (reporter is not None and not reporter.joined)):
         rclpy.spin_once(node, timeout_sec=0.05)
-    if min(reached.values()) < args.until or (reporter is not None and not reporter.joined):
+    if min(reached.values()) < args.until + args.margin or (reporter is not None and not reporter.joined):
         print(f"daq timeout: reached {reached}"
               + ("" if reporter is None else f"; lockstep joined: {reporter.joined}, {reporter.reports} reports"),
               flush=True)

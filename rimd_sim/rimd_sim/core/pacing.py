@@ -350,10 +350,7 @@ class Lockstep:
                                           f"{', '.join(back)} (from {c.done_ns / 1e9:.9f} s; a restart must report a "
                                           "new instance)", "back")
         advanced = any(v > c.done.get(t, -1) for t, v in report.items())
-        if (ALL_TOPICS in report) != (ALL_TOPICS in c.done):
-            c.done = dict(report)   # from one report for all topics to reports per topic, or back
-        else:
-            c.done.update(report)
+        c.done = dict(report)   # a report is the consumer's whole state: a topic it no longer names does not hold
         returned = c.timed_out and advanced
         if advanced:   # a report that repeats itself (a heartbeat) is no progress: the timeout runs on
             c.last_heard, c.timed_out = now, False

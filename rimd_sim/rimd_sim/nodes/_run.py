@@ -41,6 +41,21 @@ EXECUTOR_ENV = "RIMD_EXECUTOR"
 EXECUTORS = ("events", "single")
 
 
+def log_at(node: Node, level: str, line: str) -> None:
+    """Log ``line`` at ``level`` (``error``, ``warning``, else info) on ``node``'s logger.
+
+    One call site per severity: rclpy's logger refuses a call site that changes severity between calls, so a
+    level chosen at run time cannot go through one call.
+    """
+    logger = node.get_logger()
+    if level == "error":
+        logger.error(line)
+    elif level == "warning":
+        logger.warning(line)
+    else:
+        logger.info(line)
+
+
 def executor_kind() -> str:
     """The executor chosen by ``RIMD_EXECUTOR``: ``events`` or ``single``.
 

@@ -57,7 +57,7 @@ from rimd_sim import __version__
 from rimd_sim.client import PROGRESS_TOPIC, ProgressReporter
 from rimd_sim.core.params import build
 from rimd_sim.nodes._params import declare, refuse_unnamed
-from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, run_node
+from rimd_sim.nodes._run import PolledSubscriptions, PollingNode, log_at, run_node
 from rimd_sim.recording.bag import BagWriter
 from rimd_sim.recording.cdr import HEADER_FIRST_TYPES, header_stamp
 from rimd_sim.recording.session import RecordingSession
@@ -78,9 +78,9 @@ STAMPED_TYPES = HEADER_FIRST_TYPES
 
 NODE_NAME = "rimd_recorder"
 #: Period of the takes from the subscriptions (s): the messages of one period are taken at once.
-POLL_PERIOD_S = 0.02
+POLL_PERIOD_S = 0.01
 #: The writer thread sleeps this long after the first message of a batch, then writes all that came (s).
-WRITER_BATCH_S = 0.02
+WRITER_BATCH_S = 0.01
 #: While the writing is stopped by a write error, the log reminds of it this often (s).
 FAILURE_REMINDER_S = 30.0
 
@@ -167,14 +167,7 @@ class RecorderNode(PollingNode):
                                + (" (paused: call ~/resume to start)" if self._paused else ""))
 
     def _log(self, level: str, line: str) -> None:
-        # One call site per severity: rclpy's logger refuses a call site that changes severity between calls.
-        logger = self.get_logger()
-        if level == "error":
-            logger.error(line)
-        elif level == "warning":
-            logger.warning(line)
-        else:
-            logger.info(line)
+        log_at(self, level, line)
 
     # -- discovery and subscriptions --------------------------------------------------------------------------
     def _wanted(self, topic: str) -> bool:

@@ -38,7 +38,7 @@ __all__ = ["RerunBridgeNode", "main"]
 
 NODE_NAME = "rimd_rerun"
 #: Period of the takes from the block subscriptions (s); their history (500 blocks) holds seconds of it.
-POLL_PERIOD_S = 0.02
+POLL_PERIOD_S = 0.01
 SAMPLE_BLOCK, RIG_STATE = "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 DEFAULT_NAMESPACE = "rig"
 
@@ -84,7 +84,7 @@ class RerunBridgeNode(PollingNode):
                     self.foxglove.close()
                 raise
             self.mapper = RigMapper(self.stream.rec, natural_frequency=float(p["natural_frequency"]),
-                                    batch=int(p["batch_blocks"]))
+                                    batch=int(p["batch_blocks"]), min_interval=float(p["batch_interval"]))
             self.mapper.log_static()
         self._lags: deque[float] = deque(maxlen=10_000)
         self._received = 0

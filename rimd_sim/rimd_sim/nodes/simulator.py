@@ -60,7 +60,7 @@ from rimd_sim.core.pacing import Go, Hold, Pacer, Wait
 from rimd_sim.core.params import build
 from rimd_sim.core.simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.nodes._params import declare, refuse_unnamed
-from rimd_sim.nodes._run import run_node, spin_until_stopped
+from rimd_sim.nodes._run import log_at, run_node, spin_until_stopped
 from rimd_sim.recording.cdr import SampleBlockEncoder
 
 __all__ = ["SimulatorNode", "main"]
@@ -162,6 +162,7 @@ class SimulatorNode(Node):
         self._run_id = ""
         self._hold_reported = 0.0  # wall time of the last hold report (0: not reported in this hold)
         self._match_pending = False  # a lockstep consumer joined: wait for DDS to match its subscriptions
+        self._joining: dict[str, list[str]] = {}   # node -> its topics, of consumers that just joined
 
         # History of each publisher: one second of blocks at real time; faster than real time, 20 s of simulation
         # time (at 20x that is still one second of wall time for a reliable subscriber, such as the recorder, to
@@ -344,14 +345,7 @@ class SimulatorNode(Node):
                                         f"{traceback.format_exc()}")
 
     def _log(self, level: str, line: str) -> None:
-        # One call site per severity: rclpy's logger refuses a call site that changes severity between calls.
-        logger = self.get_logger()
-        if level == "error":
-            logger.error(line)
-        elif level == "warning":
-            logger.warning(line)
-        else:
-            logger.info(line)
+        log_at(self, level, line)
 
     def _on_hold(self, hold: Hold) -> None:
         """Say which consumers hold the run and since when: once it has lasted HOLD_REPORT_S, then every REPEAT s."""
@@ -379,20 +373,35 @@ class SimulatorNode(Node):
 
         A volatile topic reaches only the readers its writer has matched, and the graph can show a new
         subscriber some milliseconds before the match: without this wait a reader the caller saw (`rimd rig`, a
-        lockstep consumer that just joined) could miss the first blocks.
+        lockstep consumer that just joined) could miss the first blocks. This node's own view of the graph can
+        lag the consumer's too (under load, by more than the match): a joining consumer names its node and
+        topics, and the wait lasts until the graph here shows that node's readers of them, and they are matched.
         """
         deadline = time.monotonic() + MATCH_TIMEOUT_S
-        while (unmatched := self._unmatched()) and time.monotonic() < deadline and not self._stop.is_set():
+        joining = dict(self._joining)   # a join that comes meanwhile sets _match_pending again
+        self._match_pending = False
+        while (unmatched := self._unmatched(joining)) and time.monotonic() < deadline and not self._stop.is_set():
             time.sleep(0.005)
         if unmatched:
             self.get_logger().warning(f"publishing although readers of {', '.join(unmatched)} are not matched after "
                                       f"{MATCH_TIMEOUT_S:g} s: they may miss blocks")
-        self._match_pending = False
+        for node in joining:
+            self._joining.pop(node, None)
 
-    def _unmatched(self) -> list[str]:
-        """Topics with a subscription in the ROS graph that its publisher has not matched yet (DDS discovery)."""
-        return [p.topic_name for p in self._all_publishers()
-                if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
+    def _unmatched(self, joining: dict[str, list[str]] | None = None) -> list[str]:
+        """Topics whose publisher has not matched every subscription the graph shows yet (DDS discovery).
+
+        Also the topics of a joining consumer whose reader this node's graph does not show yet.
+        """
+        out = [p.topic_name for p in self._all_publishers()
+               if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
+        for node, topics in (joining or {}).items():
+            for topic in topics:
+                readers = {(i.node_namespace.rstrip("/") + "/" + i.node_name)
+                           for i in self.get_subscriptions_info_by_topic(topic)}
+                if node not in readers:
+                    out.append(f"{topic} (by {node})")
+        return out
 
     def _on_progress(self, msg: ConsumerProgress) -> None:
         topics = None
@@ -405,8 +414,11 @@ class SimulatorNode(Node):
         with self._pace_lock:
             verdict = self._pacer.lockstep.progress(msg.consumer, from_time(msg.done_through), msg.instance, topics,
                                                     leaving=msg.leaving)
-        if verdict.joined:
-            self._match_pending = True   # its subscriptions may be newer than its report: let DDS match them
+        if verdict.joined:   # its subscriptions may be newer than its report: let DDS match them first
+            if msg.node:
+                published = set(self._topic.values())
+                self._joining[msg.node] = [t for t in (msg.topics or published) if t in published]
+            self._match_pending = True
         if verdict.log and verdict.accepted and verdict.reason != "topics":
             self.get_logger().info(f"lockstep: {verdict.log}")
         elif verdict.log:   # ignored, or topics of other publishers left out: said once per consumer and reason

@@ -187,6 +187,24 @@ class CdrWriter:
         self.pos += len(raw)
         return self
 
+    def boolean(self, value: bool) -> CdrWriter:
+        """``bool`` (one byte)."""
+        return self._primitive("B", 1 if value else 0)
+
+    def strings(self, texts: Sequence[str]) -> CdrWriter:
+        """``string[]``."""
+        self.u32(len(texts))
+        for text in texts:
+            self.string(text)
+        return self
+
+    def times(self, stamps: Sequence[tuple[int, int]]) -> CdrWriter:
+        """``builtin_interfaces/Time[]`` from ``(sec, nanosec)`` pairs."""
+        self.u32(len(stamps))
+        for sec, nanosec in stamps:
+            self.time(sec, nanosec)
+        return self
+
     def f64_array(self, values: np.ndarray | Sequence[float]) -> CdrWriter:
         """``float64[]``."""
         values = np.ascontiguousarray(values, dtype=_F8[self.order])

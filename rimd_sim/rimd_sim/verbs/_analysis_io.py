@@ -14,6 +14,45 @@ from typing import TextIO
 from rimd_sim.cli import CommandError
 
 
+def add_model_arguments(parser, out: str, *, gap: float | None = None, f_range: tuple[float, float] | None = None,
+                        f_step: float | None = None, gap_note: str = "") -> None:
+    """The options every simulation verb shares, each defined once.
+
+    ``--gap-mm`` (when ``gap`` is given), ``--f-min``/``--f-max`` (``f_range``), ``--f-step``, ``--config`` and
+    ``--out`` (default ``out``).
+    """
+    from rimd_sim.cli import gap_mm, positive_float
+
+    if gap is not None:
+        parser.add_argument("--gap-mm", type=gap_mm(), default=gap, help=f"gap (mm), default {gap:g}{gap_note}")
+    if f_range is not None:
+        parser.add_argument("--f-min", type=positive_float("--f-min", "Hz"), default=f_range[0],
+                            help=f"lowest motor frequency (Hz), default {f_range[0]:g}")
+        parser.add_argument("--f-max", type=positive_float("--f-max", "Hz"), default=f_range[1],
+                            help=f"highest motor frequency (Hz), default {f_range[1]:g}")
+    if f_step is not None:
+        parser.add_argument("--f-step", type=positive_float("--f-step", "Hz"), default=f_step,
+                            help=f"frequency step (Hz), default {f_step:g}")
+    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    parser.add_argument("--out", type=Path, default=Path(out), help="output directory")
+
+
+def add_map_arguments(parser, transient: int) -> None:
+    """The options of the maps that classify each trajectory (``rimd peterka``, ``rimd basins``).
+
+    The cycles up to the cap, the early stop, the worker processes and the Dask scheduler.
+    """
+    from rimd_sim.cli import count
+
+    parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=transient,
+                        help=f"cycles dropped first at the cap, default {transient} (a settled motion stops sooner)")
+    parser.add_argument("--measure-cycles", type=count("--measure-cycles", 6), default=72,
+                        help="cycles classified at the cap, default 72")
+    parser.add_argument("--fixed-length", action="store_true", help="run every trajectory to the cap (no early stop)")
+    parser.add_argument("--workers", type=count("--workers"), default=None, help="processes (default: all cores)")
+    add_scheduler_argument(parser)
+
+
 def add_scheduler_argument(parser) -> None:
     """``--scheduler tcp://HOST:PORT``: run the tasks on a Dask cluster (docs/analyses.md)."""
     parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",

@@ -6,38 +6,29 @@ Writes ``DIR/basins.png``, ``DIR/basins.csv`` and ``DIR/summary.json`` (initial 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from rimd_sim.cli import CommandError, count, gap_mm, number, positive_float
+from rimd_sim.cli import CommandError, count, number, positive_float
 
-from ._analysis_io import add_scheduler_argument, progress_printer, write_csv, write_summary
+from ._analysis_io import (
+    add_map_arguments,
+    add_model_arguments,
+    progress_printer,
+    write_csv,
+    write_summary,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd basins``."""
-    parser.add_argument("--gap-mm", type=gap_mm(), default=2.4,
-                        help="gap (mm), default 2.4")
+    add_model_arguments(parser, "out/basins", gap=2.4)
     parser.add_argument("--frequency", type=positive_float("--frequency", "Hz"), default=4.0,
                         help="motor frequency (Hz), default 4.0")
     parser.add_argument("--size", type=count("--size", 2), default=40, help="grid points per axis, default 40")
-    parser.add_argument("--theta-min", type=number("--theta-min", "rad"), default=None,
-                        help="smallest initial angle (rad)")
-    parser.add_argument("--theta-max", type=number("--theta-max", "rad"), default=None,
-                        help="largest initial angle (rad)")
-    parser.add_argument("--theta-dot-min", type=number("--theta-dot-min", "rad/s"), default=None,
-                        help="smallest initial rate (rad/s)")
-    parser.add_argument("--theta-dot-max", type=number("--theta-dot-max", "rad/s"), default=None,
-                        help="largest initial rate (rad/s)")
-    parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=160,
-                        help="cycles dropped first at the cap, default 160 (a settled motion stops sooner)")
-    parser.add_argument("--measure-cycles", type=count("--measure-cycles", 6), default=72,
-                        help="cycles classified at the cap, default 72")
-    parser.add_argument("--fixed-length", action="store_true",
-                        help="run every trajectory to the cap (no early stop)")
-    parser.add_argument("--workers", type=count("--workers"), default=None, help="processes (default: all cores)")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
-    add_scheduler_argument(parser)
-    parser.add_argument("--out", type=Path, default=Path("out/basins"), help="output directory")
+    for name, what, unit in (("theta", "initial angle", "rad"), ("theta-dot", "initial rate", "rad/s")):
+        for end, word in (("min", "smallest"), ("max", "largest")):
+            parser.add_argument(f"--{name}-{end}", type=number(f"--{name}-{end}", unit), default=None,
+                                help=f"{word} {what} ({unit})")
+    add_map_arguments(parser, transient=160)
 
 
 def main(args: argparse.Namespace) -> int:

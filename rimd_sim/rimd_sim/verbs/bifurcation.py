@@ -8,23 +8,22 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from rimd_sim.cli import CommandError, count, gap_mm, positive_float
+from rimd_sim.cli import CommandError, count, positive_float
 
-from ._analysis_io import add_scheduler_argument, check_range, class_runs, write_csv, write_summary
+from ._analysis_io import (
+    add_model_arguments,
+    add_scheduler_argument,
+    check_range,
+    class_runs,
+    write_csv,
+    write_summary,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd bifurcation``."""
-    parser.add_argument("--gap-mm", type=gap_mm(), default=0.0,
-                        help="gap (mm), default 0")
-    parser.add_argument("--f-min", type=positive_float("--f-min", "Hz"), default=2.0,
-                        help="lowest motor frequency (Hz), default 2")
-    parser.add_argument("--f-max", type=positive_float("--f-max", "Hz"), default=9.5,
-                        help="highest motor frequency (Hz), default 9.5")
-    parser.add_argument("--f-step", type=positive_float("--f-step", "Hz"), default=0.05,
-                        help="frequency step (Hz), default 0.05")
+    add_model_arguments(parser, "out/bifurcation", gap=0.0, f_range=(2.0, 9.5), f_step=0.05)
     parser.add_argument("--direction", default="both", help="up, down or both (default; one process each)")
     parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=100,
                         help="cycles before sampling, default 100")
@@ -32,9 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="cycles sampled per frequency, default 48")
     parser.add_argument("--ramp-rate", type=positive_float("--ramp-rate", "Hz/s"), default=2.0,
                         help="motor ramp between steps (Hz/s), default 2")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
     add_scheduler_argument(parser)
-    parser.add_argument("--out", type=Path, default=Path("out/bifurcation"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:

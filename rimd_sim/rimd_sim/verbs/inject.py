@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from rimd_sim.cli import nonnegative_float, number
-from rimd_sim.verbs._oneshot import add_timeout, answer
+from rimd_sim.verbs._oneshot import add_timeout, call
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,8 +30,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Send the fault; print the rig's answer."""
-    from rimd_sim.rigclient import RigClient
-
-    with RigClient(timeout=args.timeout) as rig:
-        return answer(rig.inject(args.channel, args.kind, start=args.start, after=args.after,
-                                 duration=args.duration, magnitude=args.magnitude), f"{args.kind} on {args.channel}")
+    return call(args, lambda rig: rig.inject(args.channel, args.kind, start=args.start, after=args.after,
+                                             duration=args.duration, magnitude=args.magnitude),
+                f"{args.kind} on {args.channel}")

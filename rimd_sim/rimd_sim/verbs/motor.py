@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from rimd_sim.cli import nonnegative_float, number
-from rimd_sim.verbs._oneshot import add_timeout, answer
+from rimd_sim.verbs._oneshot import add_timeout, call
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -14,14 +14,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the new setpoint (Hz, at most the rig's motor.max_frequency)")
     parser.add_argument("--ramp", type=number("--ramp", "Hz/s", ge=0, le=1e4), default=0.0,
                         help="ramp rate to it (Hz/s; 0 = the rig's motor.ramp_rate)")
-    parser.add_argument("--at", type=nonnegative_float("--at", "s"), default=None, metavar="STAMP",
-                        help="when: a stamp in the rig's time base (s; default: the next block boundary)")
-    add_timeout(parser)
+    add_timeout(parser, at=True)
 
 
 def main(args: argparse.Namespace) -> int:
     """Send the setpoint; print the rig's answer."""
-    from rimd_sim.rigclient import RigClient
-
-    with RigClient(timeout=args.timeout) as rig:
-        return answer(rig.motor(args.frequency, args.ramp, args.at), f"setpoint {args.frequency:g} Hz")
+    return call(args, lambda rig: rig.motor(args.frequency, args.ramp, args.at), f"setpoint {args.frequency:g} Hz")

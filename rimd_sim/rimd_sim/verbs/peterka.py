@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from rimd_sim.cli import CommandError, count, gap_mm, positive_float
+from rimd_sim.cli import CommandError, count, gap_mm
 
 from ._analysis_io import (
-    add_scheduler_argument,
+    add_map_arguments,
+    add_model_arguments,
     check_range,
     progress_printer,
     write_csv,
@@ -25,29 +25,17 @@ from ._analysis_io import (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd peterka``."""
+    add_model_arguments(parser, "out/peterka", f_range=(1.82, 9.1))
     parser.add_argument("--gap-min-mm", type=gap_mm("--gap-min-mm"), default=0.0,
                         help="smallest gap (mm), default 0")
     parser.add_argument("--gap-max-mm", type=gap_mm("--gap-max-mm"), default=3.0,
                         help="largest gap (mm), default 3")
     parser.add_argument("--gaps", type=count("--gaps"), default=31, help="gap values, default 31")
-    parser.add_argument("--f-min", type=positive_float("--f-min", "Hz"), default=1.82,
-                        help="lowest frequency (Hz), default 1.82")
-    parser.add_argument("--f-max", type=positive_float("--f-max", "Hz"), default=9.1,
-                        help="highest frequency (Hz), default 9.1")
     parser.add_argument("--freqs", type=count("--freqs"), default=61, help="frequency values, default 61")
-    parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=120,
-                        help="cycles dropped first at the cap, default 120 (a settled motion stops sooner)")
-    parser.add_argument("--measure-cycles", type=count("--measure-cycles", 6), default=72,
-                        help="cycles classified at the cap, default 72")
-    parser.add_argument("--fixed-length", action="store_true",
-                        help="run every trajectory to the cap (no early stop)")
+    add_map_arguments(parser, transient=120)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the cap) and list the differing cells in "
                              "summary.json, each with the class of a 10x longer run")
-    parser.add_argument("--workers", type=count("--workers"), default=None, help="processes (default: all cores)")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
-    add_scheduler_argument(parser)
-    parser.add_argument("--out", type=Path, default=Path("out/peterka"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:

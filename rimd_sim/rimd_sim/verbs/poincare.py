@@ -9,17 +9,15 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from rimd_sim.cli import CommandError, count, gap_mm, number, positive_float
+from rimd_sim.cli import CommandError, count, number, positive_float
 
-from ._analysis_io import check_positive, write_csv, write_summary
+from ._analysis_io import add_model_arguments, check_positive, write_csv, write_summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd poincare``."""
-    parser.add_argument("--gap-mm", type=gap_mm(), default=1.0,
-                        help="gap (mm), default 1.0 (paper Fig. 9)")
+    add_model_arguments(parser, "out/poincare", gap=1.0, gap_note=" (paper Fig. 9)")
     parser.add_argument("--frequency", type=positive_float("--frequency", "Hz"), default=None,
                         help="motor frequency (Hz); default 1.5 x the natural frequency (paper Fig. 9)")
     parser.add_argument("--ratio", type=positive_float("--ratio", ""), default=None,
@@ -34,8 +32,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stroboscopic points (cycles), default 300")
     parser.add_argument("--plot-cycles", type=count("--plot-cycles"), default=10,
                         help="cycles drawn as trajectory, default 10")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
-    parser.add_argument("--out", type=Path, default=Path("out/poincare"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:

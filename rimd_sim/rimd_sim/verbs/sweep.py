@@ -8,37 +8,33 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from rimd_sim.cli import CommandError, count, gap_mm, positive_float
+from rimd_sim.cli import CommandError, count
 from rimd_sim.core import ConfigError, load_config
 
-from ._analysis_io import add_scheduler_argument, check_range, progress_printer, write_summary
+from ._analysis_io import (
+    add_model_arguments,
+    add_scheduler_argument,
+    check_range,
+    progress_printer,
+    write_summary,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd sweep``."""
-    parser.add_argument("--gap-mm", type=gap_mm(), default=0.0,
-                        help="gap (mm), default 0")
-    parser.add_argument("--f-min", type=positive_float("--f-min", "Hz"), default=2.0,
-                        help="lowest motor frequency (Hz), default 2")
-    parser.add_argument("--f-max", type=positive_float("--f-max", "Hz"), default=9.5,
-                        help="highest motor frequency (Hz), default 9.5")
-    parser.add_argument("--f-step", type=positive_float("--f-step", "Hz"), default=0.25,
-                        help="frequency step (Hz), default 0.25")
+    add_model_arguments(parser, "out/sweep", gap=0.0, f_range=(2.0, 9.5), f_step=0.25)
     parser.add_argument("--direction", choices=("up", "down", "rest"), default="rest",
                         help="rest: each frequency from rest (Table 1); up/down: continue from the previous state")
     parser.add_argument("--cycles", type=count("--cycles", 2), default=150,
                         help="excitation cycles per frequency, default 150")
     parser.add_argument("--measure-cycles", type=count("--measure-cycles"), default=50,
                         help="last cycles read as steady state")
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
     parser.add_argument("--workers", type=count("--workers"), default=None,
                         help="processes for rest sweeps (default: all cores)")
     add_scheduler_argument(parser)
-    parser.add_argument("--out", type=Path, default=Path("out/sweep"), help="output directory")
 
 
 def main(args: argparse.Namespace) -> int:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from rimd_sim.verbs._oneshot import add_timeout, answer
+from rimd_sim.verbs._oneshot import add_timeout, call
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -14,8 +14,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Call ``/rig/<verb>``; print the rig's answer (a refusal, such as resuming a running rig, exits 1)."""
-    from rimd_sim.rigclient import RigClient
-
     service = args.verb.replace("-", "_")
-    with RigClient(timeout=args.timeout) as rig:
-        return answer(rig.trigger(service), service.replace("_", " "))
+    return call(args, lambda rig: rig.trigger(service), service.replace("_", " "))

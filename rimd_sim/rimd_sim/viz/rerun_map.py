@@ -26,6 +26,7 @@ Entities:
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -93,12 +94,24 @@ def sample_times_ns(first_index: int, count: int, rate: float) -> np.ndarray:
     For an integer rate the arithmetic is exact (``n = q R + r``: ``q s + round(r / R s)``, half up, as the
     simulator stamps its blocks) and never overflows; other rates fall back to float64.
     """
-    index = np.int64(first_index) + np.arange(count, dtype=np.int64)
+    index = np.int64(first_index) + _arange(count)
     if float(rate).is_integer() and rate > 0:
         r_hz = int(rate)
         q, r = np.divmod(index, r_hz)
         return q * NS_PER_S + (2 * r * NS_PER_S + r_hz) // (2 * r_hz)
     return np.rint(index.astype(np.float64) * (NS_PER_S / float(rate))).astype(np.int64)
+
+
+_ARANGE = np.arange(0, dtype=np.int64)
+
+
+def _arange(count: int) -> np.ndarray:
+    """``np.arange(count)`` as int64, from one cached array (a block's sample offsets: called per block)."""
+    global _ARANGE
+    if count > _ARANGE.size:
+        _ARANGE = np.arange(max(count, 2 * _ARANGE.size), dtype=np.int64)
+        _ARANGE.flags.writeable = False
+    return _ARANGE[:count]
 
 
 def _array(values: Any) -> np.ndarray:
@@ -145,8 +158,14 @@ class RigMapper:
             that both axes are lengths (mm) and a free oscillation is a circle.
     """
 
-    def __init__(self, recording: Any, *, natural_frequency: float = 1.82, batch: int = 1) -> None:
-        """Bind to ``recording``; nothing is logged until :meth:`log_static` or a message."""
+    def __init__(self, recording: Any, *, natural_frequency: float = 1.82, batch: int = 1,
+                 min_interval: float = 0.0) -> None:
+        """Bind to ``recording``; nothing is logged until :meth:`log_static` or a message.
+
+        A channel's pending blocks are sent once there are ``batch`` of them and ``min_interval`` s of wall time
+        have passed since its last send: faster than real time (lockstep, a fast replay), one send carries more
+        blocks instead of sending more often.
+        """
         import rerun as rr
 
         if batch < 1:
@@ -154,6 +173,8 @@ class RigMapper:
         self._rr = rr
         self.rec = recording
         self.batch = batch
+        self.min_interval = min_interval
+        self._last_send: dict[str, float] = {}
         self._blocks: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]] = []
         self.omega_n = 2.0 * math.pi * natural_frequency
@@ -229,8 +250,18 @@ class RigMapper:
         pending.append((sample_times_ns(first, samples.size, rate), samples))
         self.stats.samples[channel.name] = self.stats.samples.get(channel.name, 0) + samples.size
         self.stats.blocks[channel.name] = self.stats.blocks.get(channel.name, 0) + 1
-        if len(pending) >= self.batch:
+        if len(pending) >= self.batch and self._due(channel.name):
             self._send_channel(channel)
+
+    def _due(self, name: str) -> bool:
+        """Whether ``min_interval`` has passed since ``name`` was last sent (then it counts as sent now)."""
+        if self.min_interval <= 0:
+            return True
+        now = time.monotonic()
+        if now - self._last_send.get(name, -math.inf) < self.min_interval:
+            return False
+        self._last_send[name] = now
+        return True
 
     def _send_channel(self, channel: Channel) -> None:
         pending = self._blocks.pop(channel.name, None)
@@ -287,7 +318,7 @@ class RigMapper:
         times = sample_times_ns(first, n, rate)
         self._truth.append((times, x_mm, y_mm, _array(msg.motor_phase), float(msg.motor_frequency[-1])))
         self.stats.truth_blocks += 1
-        if len(self._truth) >= self.batch:
+        if len(self._truth) >= self.batch and self._due(TRUTH_TOPIC):
             self._send_truth()
 
     def _send_truth(self) -> None:
