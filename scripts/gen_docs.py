@@ -64,6 +64,7 @@ VERB_PAGES = {
     "info": "docs/development.md",
     "faults": "docs/faults.md",
     "crop": "docs/recording.md",
+    "replay": "docs/recording.md",
     **{verb: "docs/rig.md" for verb in ("motor", "perturb", "inject", "pause", "resume", "reset", "clear-faults",
                                          "status")},
 }

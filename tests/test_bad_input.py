@@ -680,7 +680,8 @@ def test_replay_refuses_bad_input_and_keeps_replaying(ros_processes, ros_executo
         assert motor.wait_more(), "the replay stopped publishing"
 
     check_services(ros_executor, node, "rimd_replay", "/", {f"/rimd_replay/{name}" for name in (
-        "pause", "resume", "toggle_paused", "is_paused", "get_rate", "set_rate", "seek", "play_next", "burst")})
+        "pause", "resume", "toggle_paused", "is_paused", "get_rate", "set_rate", "seek", "play_next", "burst",
+        "get_state")})   # get_state takes nothing: no bad input to send it
     api = ParameterApi(ros_executor, node, "/rimd_replay")
     names = check_bad_parameters(api, "replay", specs=PARAMETERS, fixed=lambda name, d: d.read_only, alive=alive,
                                  examples=2)

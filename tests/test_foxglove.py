@@ -174,3 +174,131 @@ def test_rig_foxglove_starts_the_bridge_with_foxglove_only_when_asked(repo_root,
     assert plan(foxglove=True, rerun=False)["rimd_rerun"] == ["-p", "foxglove.enabled:=true", "-p", "rerun:=false"]
     assert "rimd_rerun" not in plan(rerun=False)
 
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(150)
+def test_foxglove_s_timeline_drives_a_replay(ros_processes, ros_executor, tmp_path):
+    """The replay and the bridge in their own processes; the test is Foxglove (the protocol client), a subscriber of
+    the replayed topics and a `ros2 service call`-like client of the replay: the replay obeys each request, and
+    its state, whoever changed it, comes back to Foxglove."""
+    from builtin_interfaces.msg import Time
+    from mcap.reader import make_reader
+
+    from harness.rig import RawCollector
+    from harness.rig_mcap import write_rig_mcap
+    from harness.ros import call_service, spin_until
+    from rimd_msgs.srv import GetRate, GetReplayState, IsPaused, PlayNext, Seek, SetRate
+    from rimd_sim.recording.reader import open_recording
+
+    path = tmp_path / "rig.mcap"
+    write_rig_mcap(path, seconds=2.0)
+    with path.open("rb") as f:   # the range, by an independent reader: the recording's first and last log times
+        stats = make_reader(f).get_summary().statistics
+    first, last = stats.message_start_time, stats.message_end_time
+    messages = list(open_recording(path).messages())
+    collector = RawCollector(ros_executor)
+    node = collector.node
+
+    def replay_call(srv, name, request=None):  # noqa: ANN001, ANN202 - as `ros2 service call /rimd_replay/NAME`
+        return call_service(ros_executor, node, node.create_client(srv, f"/rimd_replay/{name}"),
+                            request or srv.Request(), timeout=10)
+
+    # Every replayed topic matched by the bridge and the collector before anything plays (nothing lost in transit).
+    replay = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={path}", "-p", "start_paused:=true",
+                                      "-p", "keep_alive:=true", "-p", "wait_for_subscribers:=2",
+                                      "-p", "wait_topics:=['/rig/.*']")
+    bridge = ros_processes.start_node("rimd_rerun", "--ros-args", "-p", "foxglove.enabled:=true", "-p", "rerun:=false",
+                                      "-p", "foxglove.port:=0", "-p", "foxglove.playback_node:=/rimd_replay",
+                                      "-p", "foxglove.parameter_nodes:=['/rimd_replay']")
+    url = bridge.wait_for_output(r"playback control of /rimd_replay over .* \((ws://\S+)\)", timeout=60).group(1)
+    replay.wait_for_output(r"subscribers matched on /rig/", timeout=30)
+    with FoxgloveClient(url) as client:
+        info = client.wait_for(lambda r: r.server_info, 10, "serverInfo")
+        assert "playbackControl" in info["capabilities"], info
+        assert (info["dataStartTime"], info["dataEndTime"]) == (
+            {"sec": first // 10**9, "nsec": first % 10**9}, {"sec": last // 10**9, "nsec": last % 10**9})
+        assert {f"/rimd_replay/{n}" for n in ("play_next", "burst", "seek", "get_state")} <= set(
+            client.wait_for(lambda r: len(r.services) >= 10 and r.services, 10, "the replay's services"))
+        force = client.wait_for(lambda r: client.channel("/rig/impact/force"), 20, "the force channel")
+        subscription = client.subscribe(force["id"])
+
+        def request(play: bool, speed: float, seek_ns: int | None, rid: str):  # noqa: ANN202
+            client.playback_control(play, speed, seek_ns, rid)
+            return client.wait_for(client.playback_reply(rid), 15, f"the answer to {rid}")
+
+        # Play at 2x: the replay resumes at that rate and publishes.
+        reply = request(True, 2.0, None, "play")
+        assert (reply.status, reply.speed) == ("playing", 2.0), reply
+        assert not replay_call(IsPaused, "is_paused").paused and replay_call(GetRate, "get_rate").rate == 2.0
+        assert spin_until(ros_executor, lambda: len(collector.messages["/rig/impact/force"]) >= 5, 20)
+        client.wait_for(lambda r: r.messages.get(subscription), 10, "force blocks through Foxglove")
+        # Pause, seeking between two recorded log times: paused there; the next message is the first at or after.
+        logs = sorted({m.log_time for m in messages})
+        target = (logs[-60] + logs[-59]) // 2
+        reply = request(False, 2.0, target, "seek")
+        assert (reply.status, reply.did_seek, reply.current_ns) == ("paused", True, target), reply
+        assert replay_call(IsPaused, "is_paused").paused
+        published = replay_call(GetReplayState, "get_state").published
+
+        def received() -> int:
+            return sum(map(len, collector.messages.values()))
+
+        assert spin_until(ros_executor, lambda: received() == published, 10), (received(), published)
+        before = {t: len(v) for t, v in collector.messages.items()}
+        call = client.call_service("/rimd_replay/play_next", bytes(serialize_message(PlayNext.Request())))
+        answer = deserialize_message(client.wait_for(lambda r: r.responses.get(call), 10, "play_next")[1],
+                                     PlayNext.Response)
+        assert answer.success
+        assert spin_until(ros_executor, lambda: received() == published + 1, 10), (received(), published)
+        landed = next(m for m in messages if m.log_time >= target)
+        (topic,) = [t for t, v in collector.messages.items() if len(v) > before[t]]
+        assert (topic, collector.messages[topic][-1]) == (landed.topic, landed.data)
+        # A change by someone else (a ROS client of the replay): broadcast to Foxglove, no request id.
+        assert replay_call(SetRate, "set_rate", SetRate.Request(rate=8.0)).success
+        told = client.wait_for(lambda r: [s for s in r.playback if not s.request_id and s.speed == 8.0], 10,
+                               "the rate set by another client")
+        assert told[0].status == "paused"
+        # A refusal: the replay's own message, as an error status.
+        beyond = last + 5 * 10**9
+        own = replay_call(Seek, "seek", Seek.Request(time=Time(sec=beyond // 10**9, nanosec=beyond % 10**9))).message
+        reply = request(False, 8.0, beyond, "refused")
+        assert (reply.status, reply.did_seek) == ("paused", False)
+        status = client.wait_for(lambda r: [s for s in r.statuses if "~/seek refused" in s["message"]], 10, "refusal")
+        assert status[0]["level"] == 2 and status[0]["message"] == f"playback: /rimd_replay ~/seek refused: {own}"
+        # Played to the end at 8x: Ended (the replay stays up: keep_alive).
+        request(True, 8.0, None, "to the end")
+        ended = client.wait_for(lambda r: [s for s in r.playback if s.status == "ended"], 20, "Ended")
+        assert ended[0].current_ns == last and replay.is_running()
+        # The time Foxglove gets is the playback time (log times of the recording), and so are the log times of
+        # the messages forwarded, never the wall clock.
+        assert client.received.times and all(first <= t <= last for t in client.received.times)
+        assert all(first <= t <= last for t, _ in client.received.messages[subscription])
+    assert bridge.stop() == 0, bridge.tail()
+    assert replay.stop() == 0, replay.tail()
+
+
+def test_rimd_replay_plans_the_replay_and_the_bridge_pointed_at_it(tmp_path, capsys):
+    from rimd_sim import cli
+    from rimd_sim.bringup import plan_replay
+
+    path = tmp_path / "rig.mcap"
+    path.write_bytes(b"")   # the plan only checks that the recording is there; the replay node reads it
+    (replay,) = plan_replay(path, parameters={"rate": 2.0}).nodes
+    assert replay.args == ("--ros-args", "-p", f"file:={path.resolve()}", "-p", "rate:=2.0")
+    replay, bridge = plan_replay(path, foxglove=True, port=0).nodes
+    assert replay.args == ("--ros-args", "-p", "start_paused:=true", "-p", "keep_alive:=true",
+                           "-p", f"file:={path.resolve()}")
+    assert (bridge.name, bridge.fqn) == ("rimd_rerun", "/rig/rimd_rerun")
+    assert bridge.args == ("--ros-args", "-p", "rerun:=false", "-p", "foxglove.enabled:=true",
+                           "-p", "foxglove.host:=127.0.0.1", "-p", "foxglove.port:=0",
+                           "-p", "foxglove.playback_node:=/rimd_replay",
+                           "-p", "foxglove.parameter_nodes:=['/rimd_replay']")
+    # Refused in one line before anything starts, naming what was wrong as typed.
+    for argv, refusal in ((["replay", str(tmp_path / "none.mcap")], f"{tmp_path / 'none.mcap'} does not exist"),
+                          (["replay", str(path), "--topics", "/rig/.*", "("], "--topics /rig/.* ( refused: must be a "
+                                                                                "list of regular expressions"),
+                          (["replay", str(path), "--port", "9000"], "--port is for --foxglove")):
+        assert cli.main(argv) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"rimd replay: {refusal}") and err.count("\n") == 1, err

@@ -1,4 +1,4 @@
-"""Bringing up the rig from a configuration, like a launch file: the library behind ``rimd rig`` and the pytest plugin.
+"""Bringing up the rig from a configuration, like a launch file: behind ``rimd rig``, ``rimd replay``, the plugin.
 
 :func:`plan_rig` reads and checks a configuration and decides what to start: the recorder, the Rerun bridge
 (Rerun and/or Foxglove) and the simulator, each a separate process run with ``--ros-args --params-file
@@ -14,6 +14,9 @@ Two ways to make the consumers see sample 0:
 * lockstep (``lockstep=True``): the simulator waits for its consumers by itself (``lockstep.consumers``: the
   recorder and the bridge under their node names, plus the names given), and never runs ahead of the slowest
   (docs/rig.md, "Pacing: lockstep").
+
+:func:`plan_replay` plans a replay of a recording the same way (``rimd replay``): the replay node and, to drive it
+from Foxglove's timeline, the bridge serving Foxglove only, pointed at it (``foxglove.playback_node``).
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from rimd_sim.core.config import (
 from rimd_sim.core.errors import ConfigError, InputError
 from rimd_sim.core.files import read_yaml, resolve_config
 
-__all__ = ["PlannedNode", "Rig", "RigPlan", "plan_rig"]
+__all__ = ["PlannedNode", "Rig", "RigPlan", "plan_replay", "plan_rig"]
 
 #: Topics every open-loop consumer subscribes to before the simulator is resumed.
 RIG_TOPICS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
@@ -73,10 +76,10 @@ class PlannedNode:
 
 @dataclass(frozen=True)
 class RigPlan:
-    """What :class:`Rig` starts, decided from a configuration (see :func:`plan_rig`)."""
+    """What :class:`Rig` starts, decided from a configuration (see :func:`plan_rig`; a replay has none)."""
 
-    config_path: Path
-    config: SimConfig
+    config_path: Path | None
+    config: SimConfig | None
     nodes: tuple[PlannedNode, ...]
     recording_dir: Path | None = None
     foxglove_address: str | None = None
@@ -190,6 +193,67 @@ def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None 
         nodes.append(PlannedNode(node.name, node.entry, tuple(args), node.consumer, node.namespace))
     return RigPlan(config_path, sim_config, tuple(nodes), recording_dir, foxglove_address, lockstep_consumers,
                    sim_settings.lockstep.window, overrides_path)
+
+
+#: The replay's node name, as the bridge must name it (``foxglove.playback_node``).
+REPLAY_NODE = "/rimd_replay"
+
+
+def plan_replay(recording: str | Path, *, parameters: Mapping[str, Any] | None = None, foxglove: bool = False,
+                host: str | None = None, port: int | None = None) -> RigPlan:
+    """Plan a replay of ``recording``: the replay node, and with ``foxglove`` the bridge driving it from Foxglove.
+
+    With ``foxglove`` the replay starts paused (Foxglove's timeline plays it) and stays up at the end
+    (``keep_alive``), the bridge serves Foxglove only (``rerun: false``) on ``host:port`` (default
+    ws://127.0.0.1:8765) with the replay's services and parameters.
+
+    Args:
+        recording: One .mcap file or a recording directory.
+        parameters: More parameters of the replay (``{"rate": 2.0}``), checked against their declarations.
+        foxglove: Add the bridge, pointed at the replay.
+        host: Where the Foxglove server listens (an IP address; default 127.0.0.1).
+        port: Its TCP port (default 8765; 0 = a free port, logged by the bridge).
+
+    Raises:
+        InputError: The recording is not there, or a parameter is refused (nothing was started).
+    """
+    from rimd_sim.core.params import build
+    from rimd_sim.recording.player import ReplaySettings
+    from rimd_sim.recording.reader import RecordingError, recording_files
+    from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT, FoxgloveError, check_address, websocket_url
+
+    try:
+        recording_files(recording)
+    except RecordingError as exc:
+        raise InputError(str(exc)) from None
+    values = {"file": str(Path(recording).resolve()), **(parameters or {})}
+    if foxglove:
+        values = {"start_paused": True, "keep_alive": True, **values}
+    build(ReplaySettings, values)   # ConfigError (an InputError's parent) names the parameter and its rule
+    args = ["--ros-args", *(a for name, value in values.items() for a in ("-p", f"{name}:={_ros_value(value)}"))]
+    nodes = [PlannedNode("rimd_replay", "replay", tuple(args))]
+    address = None
+    if foxglove:
+        host, port = host or DEFAULT_HOST, DEFAULT_PORT if port is None else port
+        try:
+            check_address(host, port)
+        except FoxgloveError as exc:
+            raise InputError(str(exc)) from None
+        address = websocket_url(host, port) if port else "the ws:// address the bridge logs (port 0: a free port)"
+        nodes.append(PlannedNode("rimd_rerun", "rerun", (
+            "--ros-args", "-p", "rerun:=false", "-p", "foxglove.enabled:=true", "-p", f"foxglove.host:={host}",
+            "-p", f"foxglove.port:={port}", "-p", f"foxglove.playback_node:={REPLAY_NODE}",
+            "-p", f"foxglove.parameter_nodes:=['{REPLAY_NODE}']"), namespace="/rig"))
+    return RigPlan(None, None, tuple(nodes), foxglove_address=address)
+
+
+def _ros_value(value: Any) -> str:
+    """A value as ``-p name:=value`` takes it (YAML)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(f"'{v}'" for v in value) + "]"
+    return str(value)
 
 
 def _checked(config_path: Path, name: str, check: Any, section: dict) -> Any:

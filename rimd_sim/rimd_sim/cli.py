@@ -167,6 +167,8 @@ VERBS: tuple[Verb, ...] = (
     Verb("status", "a live view of the running rig: rates, indices, gaps, lateness, motor, faults, impacts",
          "rimd_sim.verbs.status"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.verbs.rerun"),
+    Verb("replay", "replay a recording (REC) on its topics, alone or driven from Foxglove's timeline (--foxglove)",
+         "rimd_sim.verbs.replay"),
     Verb("crop", "a time window of a recording (REC) as a new rosbag2 MCAP recording, like ros2 bag convert",
          "rimd_sim.verbs.crop"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.verbs.node"),

@@ -4,8 +4,15 @@ Written from the protocol's specification (github.com/foxglove/ws-protocol, docs
 the server under test: JSON text frames for control (``serverInfo``, ``advertise``, ``advertiseServices``,
 ``status``, ``parameterValues``, ``serviceCallFailure``; ``subscribe``, ``getParameters``, ``setParameters``),
 binary frames for data. Server binary opcodes: 1 message data (u32 subscription id, u64 log time, payload),
-2 time (u64), 3 service call response (u32 service id, u32 call id, u32 encoding length, encoding, payload).
-Client binary opcode 2: service call request (same layout as the response). All integers little-endian.
+2 time (u64), 3 service call response (u32 service id, u32 call id, u32 encoding length, encoding, payload),
+5 playback state (u8 status 0 Playing / 1 Paused / 2 Buffering / 3 Ended, u64 current time, f32 speed, u8 did
+seek, u32 request id length, request id). Client binary opcodes: 2 service call request (same layout as the
+response), 3 playback control request (u8 command 0 Play / 1 Pause, f32 speed, u8 had seek, u64 seek time, u32
+request id length, request id). All integers little-endian. Playback control (capability ``playbackControl``,
+``dataStartTime``/``dataEndTime`` as ``{sec, nsec}`` in serverInfo) is not in the version of ws-protocol's
+docs/spec.md read here (011a183); its layouts are those of the SDK's own sources (foxglove/foxglove-sdk,
+rust/foxglove/src/protocol/common/client/playback_control_request.rs and server/playback_state.rs), checked
+against the installed server (foxglove-sdk 0.30.3).
 
 A reader thread files every frame by kind; the test waits on them with bounded deadlines
 (:meth:`FoxgloveClient.wait_for`).
@@ -43,6 +50,22 @@ class Received:
     times: list[int] = field(default_factory=list)
     responses: dict[int, tuple[str, bytes]] = field(default_factory=dict)       # call id -> (encoding, payload)
     failures: dict[int, str] = field(default_factory=dict)                      # call id -> message
+    playback: list[PlaybackState] = field(default_factory=list)
+
+
+#: Playback statuses by their code in the protocol.
+PLAYBACK_STATUSES = ("playing", "paused", "buffering", "ended")
+
+
+@dataclass(frozen=True)
+class PlaybackState:
+    """A playback state the server sent (binary opcode 5)."""
+
+    status: str
+    current_ns: int
+    speed: float
+    did_seek: bool
+    request_id: str
 
 
 class FoxgloveClient:
@@ -108,6 +131,10 @@ class FoxgloveClient:
             _service, call, length = struct.unpack_from("<III", frame, 1)
             encoding = frame[13:13 + length].decode()
             r.responses[call] = (encoding, bytes(frame[13 + length:]))
+        elif opcode == 5:
+            status, current, speed, did_seek, length = struct.unpack_from("<BQfBI", frame, 1)
+            r.playback.append(PlaybackState(PLAYBACK_STATUSES[status], current, speed, bool(did_seek),
+                                            frame[19:19 + length].decode()))
 
     def wait_for(self, condition: Callable[[Received], Any], timeout: float, what: str = "") -> Any:
         """Wait until ``condition(received)`` is truthy and return it; AssertionError after ``timeout`` s."""
@@ -163,6 +190,16 @@ class FoxgloveClient:
             return None
 
         return condition
+
+    def playback_control(self, play: bool, speed: float, seek_ns: int | None, request_id: str) -> None:
+        """Send a playback control request: Play (else Pause) at ``speed``, seeking to ``seek_ns`` when given."""
+        rid = request_id.encode()
+        self._ws.send(b"\x03" + struct.pack("<BfBQI", 0 if play else 1, speed, seek_ns is not None, seek_ns or 0,
+                                            len(rid)) + rid)
+
+    def playback_reply(self, request_id: str) -> Callable[[Received], PlaybackState | None]:
+        """A condition for :meth:`wait_for`: the playback state answering ``request_id``."""
+        return lambda r: next((s for s in r.playback if s.request_id == request_id), None)
 
     def close(self) -> None:
         self._stack.close()

@@ -18,6 +18,12 @@ feeds it from the node it belongs to (the Rerun bridge ``rimd_rerun``):
   ``<node>.<parameter>`` as foxglove_bridge does, read and set through each node's own parameter services
   (``list_parameters``, ``get_parameters``, ``set_parameters``), so the node validates and refuses with its
   own reason; changes made elsewhere reach the clients from ``/parameter_events``.
+* **A replay** (``foxglove.playback_node``, e.g. ``/rimd_replay``). Foxglove's timeline drives it:
+  :class:`rimd_sim.viz.playback.PlaybackControl` over the replay's services (``~/get_state``, ``~/seek``,
+  ``~/set_rate``, ``~/pause``, ``~/resume``), read every ``PLAYBACK_POLL_S`` in a thread of the relay (a change
+  made by anyone is broadcast); the server offers playback control once the replay has answered with its range
+  (and again, restarted, when the range changes). The clock is then the playback time, and the services offered
+  are the replay's (:data:`REPLAY_SERVICES`), not the rig's.
 """
 
 from __future__ import annotations
@@ -30,21 +36,28 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterEvent, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from std_srvs.srv import Trigger
 
+from rimd_msgs.srv import GetReplayState, Seek, SetRate
+from rimd_sim.recording.player import PlayerState
 from rimd_sim.viz.foxglove_sink import (
     ForwardedService,
+    FoxgloveError,
     FoxgloveSink,
     ParameterEntry,
     ServiceCallError,
 )
+from rimd_sim.viz.playback import PlaybackControl, ReplayUnavailable
 
-__all__ = ["DISCOVERY_PERIOD_S", "FoxgloveRelay", "RIG_SERVICES", "TIME_PERIOD_S"]
+__all__ = ["DISCOVERY_PERIOD_S", "FoxgloveRelay", "PLAYBACK_POLL_S", "REPLAY_SERVICES", "RIG_SERVICES",
+           "TIME_PERIOD_S"]
 
 #: The rig's services offered to Foxglove clients: name relative to the node's namespace, type.
 RIG_SERVICES: tuple[tuple[str, str], ...] = (
@@ -56,7 +69,22 @@ RIG_SERVICES: tuple[tuple[str, str], ...] = (
     ("resume", "std_srvs/srv/Trigger"),
     ("reset", "std_srvs/srv/Trigger"),
 )
+#: A replay's services offered to Foxglove clients instead (foxglove.playback_node): name under the node, type.
+REPLAY_SERVICES: tuple[tuple[str, str], ...] = (
+    ("pause", "std_srvs/srv/Trigger"),
+    ("resume", "std_srvs/srv/Trigger"),
+    ("toggle_paused", "std_srvs/srv/Trigger"),
+    ("is_paused", "rimd_msgs/srv/IsPaused"),
+    ("get_rate", "rimd_msgs/srv/GetRate"),
+    ("set_rate", "rimd_msgs/srv/SetRate"),
+    ("seek", "rimd_msgs/srv/Seek"),
+    ("play_next", "rimd_msgs/srv/PlayNext"),
+    ("burst", "rimd_msgs/srv/Burst"),
+    ("get_state", "rimd_msgs/srv/GetReplayState"),
+)
 DISCOVERY_PERIOD_S = 1.0
+#: Period of the reading of a replay's state (s): a change made by another client shows within it.
+PLAYBACK_POLL_S = 0.2
 TIME_PERIOD_S = 0.05
 CLOCK_TOPIC = "/clock"
 _TIME = struct.Struct("<iI")
@@ -76,11 +104,21 @@ def _interface(type_name: str) -> Any:
     return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
 
 
-def _wait(future: Any, timeout: float) -> bool:
-    """Wait (in a thread that is not the executor's) until ``future`` is done; False after ``timeout`` s."""
+def _wait(future: Any, timeout: float, stop: threading.Event | None = None) -> bool:
+    """Wait (in a thread that is not the executor's) until ``future`` is done; False after ``timeout`` s or a stop."""
     done = threading.Event()
     future.add_done_callback(lambda _f: done.set())
-    return done.wait(timeout)
+    if stop is None:
+        return done.wait(timeout)
+    deadline = time.monotonic() + timeout
+    while not done.wait(0.05):
+        if stop.is_set() or time.monotonic() > deadline:
+            return False
+    return True
+
+
+def _ns(stamp: Any) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def value_to_entry(name: str, value: ParameterValue) -> ParameterEntry:
@@ -120,8 +158,9 @@ def entry_to_value(entry: ParameterEntry, current: int | None = None) -> Paramet
 class _ServiceForwarder:
     """Forwards a Foxglove call to the ROS service (the sink's ServiceBackend)."""
 
-    def __init__(self, node: Node, services: Sequence[ForwardedService], timeout: float) -> None:
+    def __init__(self, node: Node, services: Sequence[ForwardedService], timeout: float, server: str) -> None:
         self._timeout = timeout
+        self._server = server
         self._clients = {s.name: (node.create_client(_interface(s.type_name), s.name), _interface(s.type_name))
                          for s in services}
 
@@ -133,11 +172,54 @@ class _ServiceForwarder:
             raise ServiceCallError(f"{service.name}: the request is not a CDR {service.type_name} request ({exc})") \
                 from None
         if not client.wait_for_service(timeout_sec=min(self._timeout, 1.0)):
-            raise ServiceCallError(f"{service.name}: no such service is running (is the simulator up?)")
+            raise ServiceCallError(f"{service.name}: no such service is running (is {self._server} up?)")
         future = client.call_async(message)
         if not _wait(future, self._timeout) or future.result() is None:
             raise ServiceCallError(f"{service.name}: no answer within {self._timeout:g} s")
         return serialize_message(future.result())
+
+
+class _ReplayControls:
+    """A replay's services as :class:`rimd_sim.viz.playback.ReplayControls` (blocking: never the executor's thread)."""
+
+    def __init__(self, node: Node, replay: str, timeout: float, stop: threading.Event) -> None:
+        self._replay, self._timeout, self._stop = replay, timeout, stop
+        self._clients = {name: node.create_client(srv, f"{replay}/{name}") for name, srv in (
+            ("get_state", GetReplayState), ("seek", Seek), ("set_rate", SetRate), ("pause", Trigger),
+            ("resume", Trigger))}
+
+    def _call(self, name: str, request: Any) -> Any:
+        client = self._clients[name]
+        if not client.wait_for_service(timeout_sec=min(self._timeout, 1.0)):
+            raise ReplayUnavailable(f"{self._replay}/{name}: no such service is running")
+        future = client.call_async(request)
+        if not _wait(future, self._timeout, self._stop) or future.result() is None:
+            raise ReplayUnavailable(f"{self._replay}/{name}: no answer within {self._timeout:g} s")
+        return future.result()
+
+    def state(self) -> PlayerState:
+        r = self._call("get_state", GetReplayState.Request())
+        return PlayerState(_ns(r.start), _ns(r.end), _ns(r.position), r.paused, r.ended, r.rate, r.passes, r.seeks,
+                           r.published)
+
+    def seek(self, t_ns: int) -> tuple[bool, str]:
+        sec, nanosec = divmod(t_ns, 1_000_000_000)
+        if not 0 <= sec < 2**31:
+            return False, f"time = {t_ns} ns refused: not a ROS time (0 to 2147483647 s)"
+        r = self._call("seek", Seek.Request(time=Time(sec=sec, nanosec=nanosec)))
+        return r.success, r.message
+
+    def set_rate(self, rate: float) -> tuple[bool, str]:
+        r = self._call("set_rate", SetRate.Request(rate=rate))
+        return r.success, r.message
+
+    def pause(self) -> tuple[bool, str]:
+        r = self._call("pause", Trigger.Request())
+        return r.success, r.message
+
+    def resume(self) -> tuple[bool, str]:
+        r = self._call("resume", Trigger.Request())
+        return r.success, r.message
 
 
 class _ParameterForwarder:
@@ -211,23 +293,34 @@ class FoxgloveRelay:
         parameter_nodes: Fully qualified names of the nodes whose parameters are offered.
         call_timeout: s to wait for a service or parameter answer.
         shared: The topics (full names, with types) the node already subscribes to and hands over.
+        playback_node: A replay to drive from Foxglove's timeline (its fully qualified name), or "".
 
     Raises:
         FoxgloveError: The server could not start (bad address, port taken, a definition missing).
     """
 
     def __init__(self, node: Node, polled: Any, *, host: str, port: int, topics: Sequence[str],
-                 parameter_nodes: Sequence[str], call_timeout: float, shared: dict[str, str]) -> None:
+                 parameter_nodes: Sequence[str], call_timeout: float, shared: dict[str, str],
+                 playback_node: str = "") -> None:
         self._node = node
         self._polled = polled
         self._include = [re.compile(p) for p in topics if p]
-        ns = node.get_namespace().rstrip("/")
-        services = [ForwardedService(f"{ns}/{name}", type_name) for name, type_name in RIG_SERVICES]
+        self._stop = threading.Event()
+        self.playback = None
+        if playback_node:
+            self.playback = PlaybackControl(_ReplayControls(node, playback_node, call_timeout, self._stop),
+                                            playback_node)
+            services = [ForwardedService(f"{playback_node}/{name}", t) for name, t in REPLAY_SERVICES]
+        else:
+            ns = node.get_namespace().rstrip("/")
+            services = [ForwardedService(f"{ns}/{name}", type_name) for name, type_name in RIG_SERVICES]
         params = [n for n in parameter_nodes if n]
         self.sink = FoxgloveSink(
             host=host, port=port, name=f"rimd {node.get_fully_qualified_name()}", services=services,
-            service_backend=_ServiceForwarder(node, services, call_timeout),
-            parameter_backend=_ParameterForwarder(node, params, call_timeout) if params else None)
+            service_backend=_ServiceForwarder(node, services, call_timeout,
+                                              f"the replay {playback_node}" if playback_node else "the simulator"),
+            parameter_backend=_ParameterForwarder(node, params, call_timeout) if params else None,
+            playback=self.playback)
         self._parameter_nodes = set(params)
         self._clock_ns: int | None = None
         self.forwarded = 0
@@ -242,6 +335,10 @@ class FoxgloveRelay:
         self._timers = [node.create_timer(DISCOVERY_PERIOD_S, self.discover),
                         node.create_timer(TIME_PERIOD_S, self._broadcast_time)]
         self.discover()
+        self._watcher = None
+        if self.playback is not None:
+            self._watcher = threading.Thread(target=self._watch_playback, name="foxglove-playback", daemon=True)
+            self._watcher.start()
 
     @property
     def url(self) -> str:
@@ -258,7 +355,11 @@ class FoxgloveRelay:
 
     # -- messages ----------------------------------------------------------------------------------------------
     def now_ns(self) -> int:
-        """The rig clock: the last /clock received, else the wall clock."""
+        """The rig clock: a replay's playback time; else the last /clock received, else the wall clock."""
+        if self.playback is not None:
+            now = self.playback.now_ns()
+            if now is not None:
+                return now
         return self._clock_ns if self._clock_ns is not None else time.time_ns()
 
     def on_message(self, topic: str, data: bytes) -> None:
@@ -303,6 +404,27 @@ class FoxgloveRelay:
 
         return handler
 
+    def _watch_playback(self) -> None:
+        """Read the replay's state every PLAYBACK_POLL_S: offer its range, tell the clients of every change."""
+        log = self._node.get_logger()
+        while not self._stop.is_set():
+            report, line = self.playback.poll()
+            span = self.playback.time_range
+            if span is not None and span != self.sink.playback_range:
+                try:
+                    self.sink.set_playback_range(*span)
+                    log.info(f"foxglove: playback control of {self.playback.name} over its recording's log times "
+                             f"{span[0] / 1e9:.9f} to {span[1] / 1e9:.9f} s ({self.url})")
+                except FoxgloveError as exc:
+                    log.error(f"foxglove: playback control of {self.playback.name} not offered: {exc}")
+            if report is not None:
+                self.sink.broadcast_playback(report)
+            if line:
+                gone = "stopped answering" in line
+                (log.warning if gone else log.info)(f"foxglove: {line}")
+                self.sink.status(line, error=gone, status_id="playback")
+            self._stop.wait(PLAYBACK_POLL_S)
+
     def _on_parameter_event(self, event: ParameterEvent) -> None:
         if event.node not in self._parameter_nodes:
             return
@@ -312,6 +434,9 @@ class FoxgloveRelay:
 
     def close(self) -> None:
         """Stop the server (idempotent)."""
+        self._stop.set()
+        if self._watcher is not None:
+            self._watcher.join(timeout=3.0)
         for timer in self._timers:
             timer.cancel()
         self.sink.close()

@@ -10,9 +10,12 @@ Services, with rosbag2's player names (types: ``std_srvs/srv/Trigger`` for pause
 which answer a message where rosbag2's answer nothing; ``rimd_msgs/srv`` IsPaused, GetRate, SetRate, Seek,
 PlayNext, Burst for the others, with rosbag2_interfaces' fields, since that package is not installable here):
 ``~/pause``, ``~/resume``, ``~/toggle_paused``, ``~/is_paused``, ``~/get_rate``, ``~/set_rate``, ``~/seek``,
-``~/play_next``, ``~/burst``. Parameters: :class:`rimd_sim.recording.player.ReplaySettings` (one declaration
-each); in lockstep (``lockstep.*``) the replay waits for its consumers like the simulator, publishes
-``/clock`` and names each pass on ``/rig/session`` (reason ``replay``).
+``~/play_next``, ``~/burst``; and ``~/get_state`` (``rimd_msgs/srv/GetReplayState``: the part played, the
+position, paused, ended, rate, passes, seeks and messages published in one snapshot, for a client that shows a
+timeline). With ``keep_alive`` the node stays up at the end, where ``~/seek`` plays again. Parameters:
+:class:`rimd_sim.recording.player.ReplaySettings` (one declaration each); in lockstep (``lockstep.*``) the
+replay waits for its consumers like the simulator, publishes ``/clock`` and names each pass on ``/rig/session``
+(reason ``replay``).
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
-from rimd_msgs.srv import Burst, GetRate, IsPaused, PlayNext, Seek, SetRate
+from rimd_msgs.srv import Burst, GetRate, GetReplayState, IsPaused, PlayNext, Seek, SetRate
 from rimd_sim.client import PROGRESS_QOS, PROGRESS_TOPIC, SESSION_QOS, SESSION_TOPIC
 from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.pacing import Hold, Wait
@@ -174,7 +177,8 @@ class ReplayNode(Node):
                                    ("toggle_paused", Trigger, self._on_toggle), ("is_paused", IsPaused,
                                    self._on_is_paused), ("get_rate", GetRate, self._on_get_rate),
                                    ("set_rate", SetRate, self._on_set_rate), ("seek", Seek, self._on_seek),
-                                   ("play_next", PlayNext, self._on_play_next), ("burst", Burst, self._on_burst)):
+                                   ("play_next", PlayNext, self._on_play_next), ("burst", Burst, self._on_burst),
+                                   ("get_state", GetReplayState, self._on_get_state)):
             self.create_service(srv, f"~/{name}", handler)
         self._thread = threading.Thread(target=self._run, name="rimd_replay", daemon=True)
         window = (f" from {p.start_offset:g} s" if p.start_offset else "") + (
@@ -182,6 +186,7 @@ class ReplayNode(Node):
         log.info(f"replaying {len(self._pubs)} topics of {p.file} ({self._recording.message_count} messages){window} "
                  f"at {p.rate:g}x" + (", looping" if p.loop else "") + (", restamped" if p.restamp else "")
                  + (f", in lockstep with {', '.join(p.lockstep.consumers)}" if self._lockstep else "")
+                 + (", kept alive at the end" if p.keep_alive else "")
                  + (" (paused: ~/resume, ~/play_next or ~/burst)" if p.start_paused else ""))
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
@@ -246,6 +251,7 @@ class ReplayNode(Node):
             self._wait_for_subscribers()
             player = self.player
             player.start()
+            at_end = False
             while not self._stop.is_set():
                 if player.take_new_pass():
                     self._name_pass()
@@ -254,10 +260,18 @@ class ReplayNode(Node):
                     (self.get_logger().error if level == "error" else self.get_logger().warning)(f"lockstep: {line}")
                 if isinstance(outcome, list):
                     self._hold_logged = 0.0
+                    at_end = False
                     for out in outcome:
                         self._publish(out)
                 elif isinstance(outcome, Finished):
-                    break
+                    if not self._p.keep_alive:
+                        break
+                    if not at_end:
+                        self.get_logger().info(f"replay at the end: {player.published} messages published; kept "
+                                               "alive (keep_alive): ~/seek plays again")
+                    at_end = True
+                    self._wait(0.05)
+                    continue
                 elif isinstance(outcome, Hold):
                     self._on_hold(outcome)
                     self._wait(0.1)
@@ -362,6 +376,15 @@ class ReplayNode(Node):
             return response
         response.success, response.message = True, f"sought: {landed}"
         self._wake.set()
+        return response
+
+    def _on_get_state(self, request, response):  # noqa: ARG002
+        state = self.player.state()
+        for stamp, value in ((response.start, state.start_ns), (response.end, state.end_ns),
+                             (response.position, state.position_ns)):
+            stamp.sec, stamp.nanosec = divmod(value, 1_000_000_000)
+        response.paused, response.ended, response.rate = state.paused, state.ended, state.rate
+        response.passes, response.seeks, response.published = state.passes, state.seeks, state.published
         return response
 
     def _on_play_next(self, request, response):  # noqa: ARG002

@@ -73,7 +73,8 @@ class RerunBridgeNode(PollingNode):
             self.foxglove = FoxgloveRelay(
                 self, self._polled, host=str(p["foxglove.host"]), port=int(p["foxglove.port"]),
                 topics=list(p["foxglove.topics"]), parameter_nodes=list(p["foxglove.parameter_nodes"]),
-                call_timeout=float(p["foxglove.call_timeout"]), shared=shared)
+                call_timeout=float(p["foxglove.call_timeout"]), shared=shared,
+                playback_node=str(p["foxglove.playback_node"]))
         if p["rerun"]:
             try:
                 self.stream = RerunStream(spec, blueprint(window=float(p["window"]), trail=float(p["trail"])),
@@ -117,10 +118,12 @@ class RerunBridgeNode(PollingNode):
                 f"rerun bridge ready: sink {spec.kind} -> {self.stream.viewer_url}; topics under "
                 f"{self.get_namespace()}; analytics {'per user config' if spec.analytics else 'off'}")
         if self.foxglove is not None:
+            replay = p["foxglove.playback_node"]
             self.get_logger().info(
                 f"foxglove server ready: {self.foxglove.url} (open it in Foxglove: Open connection > Foxglove "
-                f"WebSocket); {len(self.foxglove.sink.topics)} topics so far, services and parameters under "
-                f"{self.get_namespace()}")
+                f"WebSocket); {len(self.foxglove.sink.topics)} topics so far, "
+                + (f"the timeline drives the replay {replay} (playback control once it answers)" if replay else
+                   f"services and parameters under {self.get_namespace()}"))
 
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:

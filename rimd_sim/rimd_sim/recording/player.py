@@ -29,7 +29,7 @@ from rimd_sim.core.params import BAD_REGEX_LISTS, group, param, parameters, rege
 from rimd_sim.recording.cdr import HEADER_FIRST_TYPES, header_stamp, with_header_stamp
 from rimd_sim.recording.reader import RecordedMessage, Recording
 
-__all__ = ["Finished", "Outgoing", "Paused", "Player", "ReplaySettings"]
+__all__ = ["Finished", "Outgoing", "Paused", "Player", "PlayerState", "ReplaySettings"]
 
 
 def _remap_entry(entry: str) -> bool:
@@ -76,6 +76,9 @@ class ReplaySettings:
     restamp: bool = param(False, "shift every header stamp so that the first message carries the wall time it is "
                                  "published (for consumers that check freshness); the data keep their timing",
                           read_only=True)
+    keep_alive: bool = param(False, "stay up at the end of the part played (until stopped), where ~/seek plays "
+                                    "again: for a client that shows a timeline (`rimd replay --foxglove` sets it); "
+                                    "as rosbag's --keep-alive", read_only=True)
     lockstep: LockstepSettings = group(LockstepSettings, "lockstep.")
 
 
@@ -87,6 +90,38 @@ class Outgoing:
     data: bytes
     log_time: int
     stamp: int | None
+
+
+@dataclass(frozen=True)
+class PlayerState:
+    """Where the playback stands, in one snapshot (``~/get_state``).
+
+    Attributes:
+        start_ns, end_ns: The part played, as log times (from the start offset to the last message, or to the
+            end of ``playback_duration`` when that comes first).
+        position_ns: The log time the player stands at (the last message published, or where a seek, a resume or
+            a new pass put it).
+        paused: Paused (``~/pause``).
+        ended: Every message of the part has gone out (and no loop): only a seek plays again.
+        rate: The playback rate.
+        passes: Passes started (1 at start, one more per loop); seeks: seeks done. A change of either is a jump.
+        published: Messages handed out for publishing since the start.
+    """
+
+    start_ns: int
+    end_ns: int
+    position_ns: int
+    paused: bool
+    ended: bool
+    rate: float
+    passes: int
+    seeks: int
+    published: int = 0
+
+    @property
+    def status(self) -> str:
+        """``ended``, ``paused`` or ``playing`` (the end first: a replay paused at the end has ended)."""
+        return "ended" if self.ended else "paused" if self.paused else "playing"
 
 
 @dataclass(frozen=True)
@@ -143,6 +178,7 @@ class Player:
         self._next: RecordedMessage | None = None
         self._offset: int | None = None      # restamp offset (ns), fixed by the first message published
         self.passes = 0
+        self.seeks = 0
         self.published = 0
         self.run_id = ""
         self._new_pass = False
@@ -274,6 +310,13 @@ class Player:
         """The log time the player stands at."""
         return self._position
 
+    def state(self) -> PlayerState:
+        """Where the playback stands (see :class:`PlayerState`), every field from the same moment."""
+        with self._lock:
+            return PlayerState(self.start_ns, min(self.end_ns, self.last_ns), self._position, self._paused,
+                               not self.settings.loop and self._ended(), float(self.rate), self.passes, self.seeks,
+                               self.published)
+
     def pause(self) -> bool:
         """Pause; False when already paused."""
         with self._lock:
@@ -332,6 +375,7 @@ class Player:
                 passes, new = self.passes, self._new_pass
                 self._open_pass(t_ns)
                 self.passes, self._new_pass = passes, new   # a seek is not a new pass
+            self.seeks += 1
             landed = self._next.log_time if self._next is not None else None
             return ("at the end (no message at or after it)" if landed is None else
                     f"at the message recorded at {landed // 10**9}.{landed % 10**9:09d}"

@@ -96,7 +96,7 @@ def main(args: argparse.Namespace) -> int:
             signal.signal(s, handler)
     if plan.recording_dir:
         print(f"rimd rig: stopped; the recording is in {plan.recording_dir} "
-              f"(replay: rimd node replay --ros-args -p file:={plan.recording_dir})", flush=True)
+              f"(replay: rimd replay {plan.recording_dir}, add --foxglove to drive it from Foxglove)", flush=True)
     else:
         print("rimd rig: stopped", flush=True)
     return status

@@ -6,6 +6,7 @@ Every parameter is read at start (the sinks are opened once). ``rimd rig`` reads
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from rimd_sim.core.params import Param, param, parameters
@@ -13,6 +14,14 @@ from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT
 from rimd_sim.viz.sinks import SINKS
 
 __all__ = ["PARAMETERS", "BridgeSettings"]
+
+#: A fully qualified ROS node name: ``/name`` or ``/namespace/name`` (tokens of letters, digits and underscores,
+#: not starting with a digit).
+_NODE_NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+
+
+def _node_name_or_empty(value: str) -> bool:
+    return value == "" or _NODE_NAME.fullmatch(value) is not None
 
 
 @dataclass(frozen=True)
@@ -68,6 +77,14 @@ class BridgeSettings:
     foxglove_call_timeout: float = param(3.0, "time to wait for the answer of a forwarded service call or "
                                               "parameter request", unit="s", ge=0.1, le=60, read_only=True,
                                          name="foxglove.call_timeout")
+    foxglove_playback_node: str = param("", "with foxglove.enabled, a replay that Foxglove's timeline drives, by "
+                                            "its fully qualified node name (/rimd_replay): playback control over the "
+                                            "part it plays, through its services, which are offered instead of the "
+                                            "rig's ('' = the live rig)",
+                                        rule="empty or a fully qualified node name such as /rimd_replay",
+                                        check=_node_name_or_empty, breaks=("rimd_replay", "/rimd replay", "/",
+                                                                           "/a//b", "/2nd"),
+                                        read_only=True, name="foxglove.playback_node")
 
 
 #: The bridge's parameters by name.

@@ -17,6 +17,12 @@ What a Foxglove client (the Foxglove app, or any client of the protocol) gets fr
 * **Parameters.** ``Capability.Parameters``: get and set go to a :class:`ParameterBackend` (the node uses the
   target nodes' own parameter services). A set that the node refuses is answered with the value in force and
   a status message of level error naming the parameter and the node's reason, which Foxglove shows.
+* **Playback control** (a replay driven from Foxglove's timeline). Given a :class:`PlaybackHandler`
+  (:class:`rimd_sim.viz.playback.PlaybackControl`), :meth:`FoxgloveSink.set_playback_range` (re)starts the
+  server with the recording's time range, which advertises ``Capability.PlaybackControl`` (the range is fixed
+  for the life of an SDK server: a new range restarts it on the same port, and the clients reconnect); each
+  client request goes to the handler, whose state goes back (the SDK broadcasts it, with the request id) and
+  whose errors become error statuses; :meth:`FoxgloveSink.broadcast_playback` tells the clients of a change.
 
 The server binds ``host:port`` (default ``127.0.0.1:8765``; port 0 takes a free port, :attr:`FoxgloveSink.port`
 says which). :meth:`FoxgloveSink.close` stops it and is idempotent; the sink is a context manager.
@@ -27,22 +33,27 @@ from __future__ import annotations
 import ipaddress
 import logging
 import threading
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import foxglove
 from foxglove import MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema, StatusLevel
-from foxglove.websocket import Capability, ServerListener
+from foxglove.websocket import Capability, PlaybackCommand, PlaybackState, PlaybackStatus, ServerListener
 
 from rimd_sim.recording.msgdefs import MessageDefinitionError, message_definition, service_definitions
+from rimd_sim.viz.playback import PlaybackReport, PlaybackRequest
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "FoxgloveError", "FoxgloveSink", "ForwardedService", "ParameterBackend",
-           "ParameterEntry", "ServiceBackend", "ServiceCallError", "check_address", "websocket_url"]
+           "ParameterEntry", "PlaybackHandler", "ServiceBackend", "ServiceCallError", "check_address",
+           "websocket_url"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
 SCHEMA_ENCODING = "ros2msg"
+#: How long a restarted server (a new playback range) waits for the stopped one to release the port (s).
+RESTART_PATIENCE_S = 2.0
 MESSAGE_ENCODING = "cdr"
 #: The kinds of parameter values (ROS 2's parameter types, by name).
 PARAMETER_KINDS = ("bool", "integer", "double", "string", "byte_array", "bool_array", "integer_array",
@@ -100,6 +111,23 @@ class ParameterBackend(Protocol):
     def set(self, entries: Sequence[ParameterEntry]) -> list[tuple[str, bool, str]]:
         """Set each entry; return ``(name, accepted, reason)`` per entry, the reason the node's own."""
         ...
+
+
+class PlaybackHandler(Protocol):
+    """Carries out the clients' playback control requests; called from the server's threads."""
+
+    def handle(self, request: PlaybackRequest) -> tuple[PlaybackReport | None, list[str]]:
+        """The state to answer with (None: none known) and the error lines to show the clients."""
+        ...
+
+
+_STATUSES = {"playing": PlaybackStatus.Playing, "paused": PlaybackStatus.Paused, "ended": PlaybackStatus.Ended}
+
+
+def playback_state(report: PlaybackReport, request_id: str | None = None) -> Any:
+    """The SDK's PlaybackState of a report."""
+    return PlaybackState(status=_STATUSES[report.status], current_time=int(report.current_ns),
+                         playback_speed=float(report.speed), did_seek=report.did_seek, request_id=request_id)
 
 
 def check_address(host: str, port: int) -> None:
@@ -160,6 +188,7 @@ class FoxgloveSink:
         services: The services to offer (their definitions must be installed).
         service_backend: Performs the calls (required when ``services`` is not empty).
         parameter_backend: Serves the parameters (None: no Parameters capability).
+        playback: Handles playback control (None: none); the capability comes with :meth:`set_playback_range`.
 
     Raises:
         FoxgloveError: Bad address, the port is taken, or a service's definition is not installed.
@@ -167,7 +196,7 @@ class FoxgloveSink:
 
     def __init__(self, *, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, name: str = "rimd",
                  services: Sequence[ForwardedService] = (), service_backend: ServiceBackend | None = None,
-                 parameter_backend: ParameterBackend | None = None) -> None:
+                 parameter_backend: ParameterBackend | None = None, playback: PlaybackHandler | None = None) -> None:
         check_address(host, port)
         self._context = foxglove.Context()
         self._channels: dict[str, Any] = {}
@@ -175,6 +204,8 @@ class FoxgloveSink:
         self._services = list(services)
         self._service_backend = service_backend
         self._parameter_backend = parameter_backend
+        self._playback = playback
+        self.playback_range: tuple[int, int] | None = None
         self.unadvertised: dict[str, str] = {}   # topic -> why it has no channel
         capabilities = [Capability.Time]
         if self._services:
@@ -183,17 +214,27 @@ class FoxgloveSink:
             capabilities.append(Capability.Services)
         if parameter_backend is not None:
             capabilities.append(Capability.Parameters)
-        fox_services = [self._service(s) for s in self._services]
-        try:
-            self._server = foxglove.start_server(
-                name=name, host=host, port=port, capabilities=capabilities,
-                server_listener=_Listener(self) if parameter_backend is not None else None,
-                supported_encodings=[MESSAGE_ENCODING], services=fox_services or None, context=self._context)
-        except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types (e.g. address in use)
-            raise FoxgloveError(f"the Foxglove server could not listen on {websocket_url(host, port)}: {exc}") from None
+        self._options = {"name": name, "host": host, "capabilities": capabilities,
+                         "server_listener": _Listener(self) if parameter_backend or playback else None,
+                         "supported_encodings": [MESSAGE_ENCODING],
+                         "services": [self._service(s) for s in self._services] or None, "context": self._context}
         self.host = host
+        self._server = self._start(port)
         self.port = int(self._server.port)
         self._closed = False
+
+    def _start(self, port: int, patience: float = 0.0) -> Any:
+        """Start the SDK's server; ``patience``: s to keep trying while the port is busy (a restart)."""
+        deadline = time.monotonic() + patience
+        while True:
+            try:
+                return foxglove.start_server(port=port, playback_time_range=self.playback_range, **self._options)
+            except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types (e.g. address in use)
+                if time.monotonic() < deadline:
+                    time.sleep(0.005)
+                    continue
+                raise FoxgloveError(f"the Foxglove server could not listen on {websocket_url(self.host, port)}: "
+                                    f"{exc}") from None
 
     # -- channels ----------------------------------------------------------------------------------------------
     @property
@@ -243,6 +284,40 @@ class FoxgloveSink:
         """Show ``message`` in the clients (Foxglove's problems and notifications)."""
         if not self._closed:
             self._server.publish_status(message, StatusLevel.Error if error else StatusLevel.Info, status_id)
+
+    # -- playback control --------------------------------------------------------------------------------------
+    def set_playback_range(self, start_ns: int, end_ns: int) -> bool:
+        """Offer playback control over ``[start_ns, end_ns]``; False when that range is already offered.
+
+        The server restarts on its port with the range (connected clients are dropped and reconnect).
+
+        Raises:
+            FoxgloveError: The port could not be listened on again.
+        """
+        if self._playback is None:
+            raise ValueError("a playback range without a playback handler")
+        with self._lock:
+            if self._closed or self.playback_range == (start_ns, end_ns):
+                return False
+            self._server.stop()   # it lets the port go a few ms later: the new server waits for it
+            self.playback_range = (int(start_ns), int(end_ns))
+            self._server = self._start(self.port, patience=RESTART_PATIENCE_S)
+            return True
+
+    def broadcast_playback(self, report: PlaybackReport) -> None:
+        """Tell every client the playback state (a change not asked by a request)."""
+        if not self._closed and self.playback_range is not None:
+            self._server.broadcast_playback_state(playback_state(report))
+
+    def handle_playback(self, request: Any) -> Any:
+        """The SDK's PlaybackControlRequest carried out: its errors shown as error statuses; the state answered."""
+        report, errors = self._playback.handle(PlaybackRequest(
+            play=request.playback_command == PlaybackCommand.Play, speed=float(request.playback_speed),
+            seek_ns=None if request.seek_time is None else int(request.seek_time),
+            request_id=str(request.request_id or "")))
+        for line in errors:
+            self.status(line, error=True, status_id="playback")
+        return None if report is None else playback_state(report, request.request_id)
 
     # -- services ----------------------------------------------------------------------------------------------
     def _service(self, service: ForwardedService) -> Any:
@@ -333,7 +408,7 @@ class FoxgloveSink:
 
 
 class _Listener(ServerListener):
-    """The SDK's server listener: parameter requests go to the sink (errors logged, never raised into Rust)."""
+    """The SDK's server listener: parameter and playback requests go to the sink (never raised into Rust)."""
 
     def __init__(self, sink: FoxgloveSink) -> None:
         self._sink = sink
@@ -351,3 +426,11 @@ class _Listener(ServerListener):
         except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
             self._sink.status(f"parameters could not be set: {exc}", error=True, status_id="parameters")
             return []
+
+    def on_playback_control_request(self, playback_control_request: Any) -> Any:
+        try:
+            return self._sink.handle_playback(playback_control_request)
+        except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
+            self._sink.status(f"playback: the request could not be carried out: {exc}", error=True,
+                              status_id="playback")
+            return None
