@@ -55,16 +55,17 @@ def _experiment_args(*argv: str) -> argparse.Namespace:
 
 
 def test_experiment_schedules_the_design(capsys):
-    from rimd_sim.verbs.experiment import schedule
+    from rimd_sim.verbs.experiment import plan
 
-    freqs = schedule(_experiment_args("--for-identification", "--dwell", "10", "--settle", "3", "--ramp-rate", "2"))
-    assert freqs == identification_steps(SimConfig(), dwell=10.0, settle=3.0, ramp_rate=2.0).frequencies
+    chosen = plan(_experiment_args("--for-identification", "--dwell", "10", "--settle", "3", "--ramp-rate", "2"))
+    design = identification_steps(SimConfig(), dwell=10.0, settle=3.0, ramp_rate=2.0)
+    assert list(chosen.frequencies) == design.frequencies
     assert "for identification of the rig of" in capsys.readouterr().err
 
 
 def test_experiment_refuses_the_design_with_frequencies():
     from rimd_sim.cli import CommandError
-    from rimd_sim.verbs.experiment import schedule
+    from rimd_sim.verbs.experiment import plan
 
     with pytest.raises(CommandError, match="--for-identification chooses the frequencies"):
-        schedule(_experiment_args("--for-identification", "--frequencies", "3.0"))
+        plan(_experiment_args("--for-identification", "--frequencies", "3.0"))

@@ -44,7 +44,7 @@ from rimd_sim.core.config import (
 from rimd_sim.core.errors import ConfigError, InputError
 from rimd_sim.core.files import read_yaml, resolve_config
 
-__all__ = ["PlannedNode", "Rig", "RigPlan", "plan_replay", "plan_rig"]
+__all__ = ["PlannedNode", "Rig", "RigPlan", "StopSignals", "plan_replay", "plan_rig"]
 
 #: Topics every open-loop consumer subscribes to before the simulator is resumed.
 RIG_TOPICS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
@@ -281,6 +281,30 @@ def _bridge_checked(config_path: Path, section: dict, rerun: bool, foxglove: boo
     return websocket_url(host, port) if port else "the ws:// address the bridge logs (foxglove.port 0: a free port)"
 
 
+class StopSignals:
+    """SIGINT and SIGTERM, within its ``with`` block, set :attr:`requested` instead of stopping this process.
+
+    A verb that runs a rig then stops it cleanly (its recording closed) whichever of the two arrives.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: dict[int, Any] = {}
+
+    def _on_signal(self, signum: int, frame: Any) -> None:  # noqa: ARG002
+        self.requested = True
+
+    def __enter__(self) -> StopSignals:
+        """Take SIGINT and SIGTERM."""
+        self._previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Give the signals back to their previous handlers."""
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
+
+
 @dataclass
 class Rig:
     """The processes of a :class:`RigPlan`: start, watch, stop. A context manager; :meth:`stop` is idempotent.
@@ -342,6 +366,20 @@ class Rig:
         for name, proc in self.processes.items():
             if proc.poll() is not None:
                 return name, proc.returncode
+        return None
+
+    def watch(self, stop: StopSignals, duration: float = 0.0, ends_itself: str | None = None) -> tuple[str, int] | None:
+        """Wait until ``stop`` is requested, ``duration`` s have passed (0: no limit) or a process exits.
+
+        Returns the process that exited, as (name, status), unless it is ``ends_itself`` with status 0 (a replay
+        that reached its end); None otherwise.
+        """
+        deadline = time.monotonic() + duration if duration > 0 else None
+        while not stop.requested and (deadline is None or time.monotonic() < deadline):
+            failed = self.failed()
+            if failed is not None:
+                return None if failed == (ends_itself, 0) else failed
+            time.sleep(0.1)
         return None
 
     def stop(self) -> int:

@@ -21,6 +21,7 @@ A reader thread files every frame by kind; the test waits on them with bounded d
 from __future__ import annotations
 
 import json
+import re
 import struct
 import threading
 import time
@@ -79,6 +80,7 @@ class FoxgloveClient:
         self.received = Received()
         self._cond = threading.Condition()
         self._next_id = 1
+        self._subscriptions: dict[int, int] = {}   # subscription id -> channel id
         self.closed_reason: str | None = None
         self._reader = threading.Thread(target=self._read, name="foxglove-client", daemon=True)
         self._reader.start()
@@ -114,6 +116,14 @@ class FoxgloveClient:
                 r.services[service["name"]] = service
         elif op == "status":
             r.statuses.append(msg)
+            # The SDK can send a channel's advertisement a moment before it takes subscriptions to it: a client
+            # that subscribes at once may hear "Unknown channel ID: N" (seen under load); it asks again.
+            unknown = re.fullmatch(r"Unknown channel ID: (\d+)", msg.get("message", ""))
+            if unknown and int(unknown.group(1)) in r.channels and len(r.statuses) < 200:
+                channel = int(unknown.group(1))
+                again = [{"id": s, "channelId": c} for s, c in self._subscriptions.items() if c == channel]
+                if again:
+                    self._ws.send(json.dumps({"op": "subscribe", "subscriptions": again}))
         elif op == "parameterValues":
             r.parameter_values.append(msg)
         elif op == "serviceCallFailure":
@@ -164,6 +174,7 @@ class FoxgloveClient:
     def subscribe(self, channel_id: int) -> int:
         """Subscribe to a channel; return the subscription id its messages come with."""
         subscription = self._new_id()
+        self._subscriptions[subscription] = channel_id
         self._ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": subscription, "channelId": channel_id}]}))
         return subscription
 

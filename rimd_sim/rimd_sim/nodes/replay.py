@@ -355,26 +355,28 @@ class ReplayNode(Node):
         return response
 
     def _on_set_rate(self, request, response):
-        try:
+        def set_rate() -> str:
             self.player.set_rate(request.rate)
-        except ConfigError as exc:
-            response.success, response.message = False, str(exc).replace("parameter 'rate'", "rate", 1)
-            return response
-        response.success, response.message = True, f"rate {self.player.rate:g}"
-        self._wake.set()
-        return response
+            return f"rate {self.player.rate:g}"
+
+        return self._answer(response, set_rate, "rate")
 
     def _on_seek(self, request, response):
         if request.time.nanosec >= 1_000_000_000:
             response.success = False
             response.message = f"time.nanosec = {request.time.nanosec} refused: must be < 1000000000"
             return response
+        stamp = request.time.sec * 1_000_000_000 + request.time.nanosec
+        return self._answer(response, lambda: f"sought: {self.player.seek(stamp)}", "time")
+
+    def _answer(self, response, call, field: str):  # noqa: ANN001, ANN202
+        """Answer a player request: ``call()``'s message, or the refusal naming the request's ``field``."""
         try:
-            landed = self.player.seek(request.time.sec * 1_000_000_000 + request.time.nanosec)
+            message = call()
         except ConfigError as exc:
-            response.success, response.message = False, str(exc).replace("parameter 'time'", "time", 1)
+            response.success, response.message = False, str(exc).replace(f"parameter '{field}'", field, 1)
             return response
-        response.success, response.message = True, f"sought: {landed}"
+        response.success, response.message = True, message
         self._wake.set()
         return response
 

@@ -235,9 +235,17 @@ def header_stamp(data: bytes) -> int | None:
 
 
 def with_header_stamp(data: bytes, stamp_ns: int) -> bytes:
-    """The serialized message with its leading stamp replaced by ``stamp_ns`` (same byte order, same length)."""
+    """The serialized message with its leading stamp replaced by ``stamp_ns`` (same byte order, same length).
+
+    Raises:
+        ValueError: A stamp ``builtin_interfaces/Time`` cannot hold (``sec`` is a signed 32-bit integer).
+    """
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    if not -2**31 <= sec < 2**31:
+        raise ValueError(f"stamp {stamp_ns} ns refused: builtin_interfaces/Time holds seconds from -2**31 to "
+                         "2**31 - 1")
     out = bytearray(data)
-    _TIME[byte_order(data)].pack_into(out, 4, stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+    _TIME[byte_order(data)].pack_into(out, 4, sec, nanosec)
     return bytes(out)
 
 
