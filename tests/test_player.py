@@ -177,3 +177,23 @@ def test_in_lockstep_a_consumer_that_has_not_reported_holds_the_replay(recording
         clock.now += 0.001
     assert isinstance(got, Hold)
     assert "daq" in p.holders_text()
+
+
+def test_in_lockstep_a_restamped_replay_holds_on_the_stamps_its_consumers_report(recording):
+    """With ``restamp`` the consumers report the stamps they received (shifted to the replay's clock): the replay
+    must hold on those, not on the recorded ones (which lie far in the past and would never hold anything)."""
+    clock = FakeClock()
+    p = player(recording, clock, restamp=True, rate=100.0, **{"lockstep.enabled": True, "lockstep.consumers": ["daq"],
+                                                             "lockstep.window": 0.05})
+    p.start()
+    assert isinstance(p.step(), Hold)
+    assert p.progress("daq", 0).joined
+    sent = []
+    while isinstance(got := p.step(), list) or isinstance(got, Wait):
+        sent += got if isinstance(got, list) else []
+        clock.now += 0.001
+    assert isinstance(got, Hold) and sent, got
+    stamps = [m.stamp for m in sent if m.stamp is not None]
+    assert stamps[-1] - stamps[0] <= 0.05e9 + 0.02e9   # the window past the join, plus at most a block or two
+    assert p.progress("daq", stamps[-1]).accepted       # a report in the restamped base is taken, not "future"
+    assert isinstance(p.step(), list)

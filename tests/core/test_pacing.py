@@ -266,3 +266,19 @@ def test_settings_are_declared_and_checked():
     with pytest.raises(ValueError, match="no candidate"):
         Pacer(0.0, clock=FakeClock()).next([])
     assert Lockstep(lockstep("a")).limit(Lockstep(lockstep("a")).consumers["a"]) == float("-inf")
+
+
+def test_the_first_message_goes_whatever_its_stamp_then_the_window_holds():
+    """A replay of a real-time recording: its stamps are wall-clock epoch times (1.8e18 ns), far beyond a joined
+    consumer's zero plus the window. Nothing published yet, so nothing can be waited for: the first message goes,
+    then the consumer holds the run at its report plus the window (before the fix the replay held for ever)."""
+    epoch = 1_795_525_000 * S
+    pacer = Pacer(0.0, lockstep("daq", window=0.05), clock=FakeClock())
+    ends = [epoch + 10 * MS * (i + 1) for i in range(10)]
+    assert isinstance(pacer.next(ends), Hold)          # not joined yet
+    pacer.lockstep.progress("daq", 0)
+    assert pacer.next(ends[:1]) == Go(1)
+    pacer.published(ends[0])
+    assert isinstance(pacer.next(ends[1:]), Hold)      # done through 0: it has not taken the first one
+    assert pacer.lockstep.progress("daq", ends[0]).accepted
+    assert pacer.next(ends[1:]) == Go(5)               # 10 ms blocks up to 50 ms past what it has done

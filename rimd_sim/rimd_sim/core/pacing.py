@@ -276,11 +276,14 @@ class Lockstep:
         #: Data time up to which the publisher has published, in all and per topic.
         self.published_ns = 0
         self.published_on: dict[str, int] = {}
+        self.any_published = False
+        self._origin = 0
         self._events: list[tuple[str, str]] = []
 
     def published(self, data_ns: int, topic: str = ALL_TOPICS) -> None:
         """The publisher publishes (before the publish call) a message stamped ``data_ns`` on ``topic``."""
         data_ns = int(data_ns)
+        self.any_published = True
         if data_ns > self.published_ns:
             self.published_ns = data_ns
         if topic and data_ns > self.published_on.get(topic, -1):
@@ -365,10 +368,13 @@ class Lockstep:
         if not c.joined:
             return -math.inf
         window = self.settings.window_ns
+        # The front of the run: what was published; before anything, just short of the first candidate (a replay's
+        # stamps may start anywhere, at a wall-clock epoch: the window counts from its first message).
+        front = self.published_ns if self.any_published else self._origin
         bound = math.inf
         for topic, done in c.done.items():
             # Caught up on a topic (it has everything published there, a hole or not): it is at the front.
-            bound = min(bound, (done if done < self._published(topic) else self.published_ns) + window)
+            bound = min(bound, (done if done < self._published(topic) else front) + window)
         return bound
 
     def allowed(self, ends: Sequence[int]) -> tuple[int, tuple[str, ...]]:
@@ -377,6 +383,8 @@ class Lockstep:
         Also applies the timeout policy to the consumers that hold the run.
         """
         now = self.clock()
+        if not self.any_published:
+            self._origin = max(0, ends[0] - 1)
         limits = {name: self.limit(c) for name, c in self.consumers.items()}
         bound = min(limits.values(), default=math.inf)
         count = 0

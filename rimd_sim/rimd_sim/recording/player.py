@@ -270,6 +270,8 @@ class Player:
     def _decide(self) -> Go | Wait | Hold:
         msg = self._next
         stamp = self._stamp(msg)
+        if stamp is not None and self.settings.restamp:   # decided on the stamp it will leave with, as reported
+            stamp += self._offset if self._offset is not None else time.time_ns() - stamp
         return self._pacer.next([stamp if stamp is not None else self._last_stamp()], schedule_times=[msg.log_time])
 
     def _last_stamp(self) -> int:
