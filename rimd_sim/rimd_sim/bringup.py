@@ -26,7 +26,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -381,6 +381,26 @@ class Rig:
                 return None if failed == (ends_itself, 0) else failed
             time.sleep(0.1)
         return None
+
+    def run(self, verb: str, announce: Callable[[], None], *, duration: float = 0.0,
+            ends_itself: str | None = None) -> int:
+        """Start, ``announce()``, :meth:`watch` within :class:`StopSignals`, then stop: the status of ``rimd VERB``.
+
+        1 when a process exited by itself (said on stderr as ``rimd VERB: NAME exited with status N``) or
+        :meth:`stop` found an error; 0 otherwise. The rig is stopped whatever happens.
+        """
+        status = 0
+        with StopSignals() as stop:
+            try:
+                self.start()
+                announce()
+                failed = self.watch(stop, duration=duration, ends_itself=ends_itself)
+                if failed is not None:
+                    print(f"rimd {verb}: {failed[0]} exited with status {failed[1]}", file=sys.stderr)
+                    status = 1
+            finally:
+                status = self.stop() or status
+        return status
 
     def stop(self) -> int:
         """Stop every process in reverse order; 0, or 1 when a node exited with an error."""
