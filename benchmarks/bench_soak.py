@@ -272,14 +272,11 @@ def wait_running(rig: subprocess.Popen, log: Path, timeout: float) -> bool:
 
 def stop_rig(rig: subprocess.Popen, procs: dict[str, int]) -> int:
     """SIGINT to ``rimd rig`` (it stops its nodes: simulator first, recorder last); return its exit status."""
-    for sig, wait in ((signal.SIGINT, 120.0), (signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)):
-        if rig.poll() is not None:
-            break
-        rig.send_signal(sig)
-        try:
-            rig.wait(wait)
-        except subprocess.TimeoutExpired:
-            print(f"bench_soak: rimd rig did not stop on {signal.Signals(sig).name}", file=sys.stderr)
+    from rimd_sim.bringup import stop_process
+
+    stop_process(rig, ((signal.SIGINT, 120.0), (signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)),
+                 on_timeout=lambda sig: print(f"bench_soak: rimd rig did not stop on {signal.Signals(sig).name}",
+                                              file=sys.stderr))
     for name, pid in procs.items():   # only if the rig could not stop them: its own children, by pid
         if name != PARENT and read_stat(pid) is not None:
             print(f"bench_soak: {name} ({pid}) still runs after the rig: SIGKILL", file=sys.stderr)
