@@ -27,11 +27,7 @@ The exit status is 0 whenever the rig ran and was measured, whatever the verdict
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -110,10 +106,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=120.0, help="measured wall time (default 120)")
     parser.add_argument("--warmup", type=float, default=10.0, help="s run before measuring (default 10)")
-    parser.add_argument("--period", type=float, default=5.0, help="s between /proc samples (default 5)")
-    parser.add_argument("--json", type=Path, default=None, help="also write the figures to this JSON file")
-    parser.add_argument("--keep", action="store_true", help="keep the temporary directory (also: BENCH_KEEP=1)")
-    parser.add_argument("--startup-timeout", type=float, default=180.0, help="s for the rig to start (default 180)")
+    soak.add_rig_arguments(parser)
     args = parser.parse_args()
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0:
         parser.error("--seconds and --period must be positive, --warmup not negative")
@@ -123,27 +116,22 @@ def main() -> None:
     from rimd_sim.recording.reader import RecordingError
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate
-    tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
-    keep = args.keep or bool(os.environ.get("BENCH_KEEP"))
-    lease = soak.lease_domain()
-    rig = None
-    try:
-        print(f"bench_rig: `rimd rig` in {tmp}, ROS_DOMAIN_ID {lease.domain_id}; {args.warmup:g} s warm-up, then "
+    with soak.RigRun.open("bench_rig_", args.keep) as run:
+        tmp = run.tmp
+        print(f"bench_rig: `rimd rig` in {tmp}, ROS_DOMAIN_ID {run.domain_id}; {args.warmup:g} s warm-up, then "
               f"{args.seconds:g} s measured", flush=True)
-        rig = soak.start_rig(tmp, lease.domain_id, args.warmup + args.seconds)
-        from_sample_0 = soak.wait_running(rig, tmp / "rig.log", args.startup_timeout)
+        from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout)
         started = time.monotonic()
-        procs = soak.rig_processes(rig.pid)
         missing = [n for n in soak.NODES.values() if n not in procs]
         if missing:
             print(f"bench_rig: NOT FOUND: {', '.join(missing)}", file=sys.stderr)
         time.sleep(args.warmup)
-        series = soak.sample_run(rig, procs, args.seconds, args.period)
+        series = soak.sample_run(run.rig, procs, args.seconds, args.period)
         wall = max(s.t[-1] for s in series.values() if s.t)
-        status = soak.stop_rig(rig, procs)
+        status = soak.stop_rig(run.rig, procs)
         data_seconds = time.monotonic() - started   # about the simulated time recorded (real time)
         result: dict = {"run": {"seconds": wall, "warmup": args.warmup, "period": args.period,
-                                "domain_id": lease.domain_id, "rig_exit_status": status,
+                                "domain_id": run.domain_id, "rig_exit_status": status,
                                 "from_sample_0": from_sample_0, "tmp": str(tmp)}}
         result["processes"] = {name: soak.process_figures(s) for name, s in series.items()}
         result["logs"] = soak.log_reports((tmp / "rig.log").read_text(errors="replace"))
@@ -155,17 +143,7 @@ def main() -> None:
             raise SystemExit(f"bench_rig: no readable recording: {exc}") from None
         result["goals"] = rig_goals(result["processes"], soak.goals(result)["nothing_lost"])
         report(result)
-        if args.json is not None:
-            args.json.write_text(json.dumps(result, indent=1) + "\n")
-            print(f"\nfigures written to {args.json}")
-    finally:
-        if rig is not None and rig.poll() is None:
-            soak.stop_rig(rig, soak.rig_processes(rig.pid))
-        lease.release()
-        if keep:
-            print(f"kept {tmp}")
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        soak.write_json(result, args.json)
 
 
 if __name__ == "__main__":

@@ -93,7 +93,7 @@ WARMUP_S = 60.0
 
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 RUNNING = "the rig runs from sample 0"
-RESUMED_ANYWAY = "resuming the rig anyway"
+RESUMED_ANYWAY = "the rig runs anyway"
 
 
 # ---- processes ---------------------------------------------------------------------------------------------
@@ -272,14 +272,11 @@ def wait_running(rig: subprocess.Popen, log: Path, timeout: float) -> bool:
 
 def stop_rig(rig: subprocess.Popen, procs: dict[str, int]) -> int:
     """SIGINT to ``rimd rig`` (it stops its nodes: simulator first, recorder last); return its exit status."""
-    for sig, wait in ((signal.SIGINT, 120.0), (signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)):
-        if rig.poll() is not None:
-            break
-        rig.send_signal(sig)
-        try:
-            rig.wait(wait)
-        except subprocess.TimeoutExpired:
-            print(f"bench_soak: rimd rig did not stop on {signal.Signals(sig).name}", file=sys.stderr)
+    from rimd_sim.bringup import stop_process
+
+    stop_process(rig, ((signal.SIGINT, 120.0), (signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)),
+                 on_timeout=lambda sig: print(f"bench_soak: rimd rig did not stop on {signal.Signals(sig).name}",
+                                              file=sys.stderr))
     for name, pid in procs.items():   # only if the rig could not stop them: its own children, by pid
         if name != PARENT and read_stat(pid) is not None:
             print(f"bench_soak: {name} ({pid}) still runs after the rig: SIGKILL", file=sys.stderr)
@@ -288,6 +285,61 @@ def stop_rig(rig: subprocess.Popen, procs: dict[str, int]) -> int:
             except ProcessLookupError:
                 pass
     return rig.returncode
+
+
+@dataclass
+class RigRun:
+    """One bench run of ``rimd rig``: a temporary directory, a leased ROS domain, the rig once started.
+
+    A context manager: on leaving, the rig (when still running) is stopped, the domain released and the
+    directory removed unless kept (``keep``, or BENCH_KEEP=1 in the environment).
+    """
+
+    tmp: Path
+    lease: object   # harness.domains.DomainLease
+    keep: bool
+    rig: subprocess.Popen | None = None
+
+    @classmethod
+    def open(cls, prefix: str, keep: bool) -> RigRun:
+        return cls(Path(tempfile.mkdtemp(prefix=prefix)), lease_domain(), keep or bool(os.environ.get("BENCH_KEEP")))
+
+    @property
+    def domain_id(self) -> int:
+        return self.lease.domain_id
+
+    def start(self, seconds: float, startup_timeout: float) -> tuple[bool, dict[str, int]]:
+        """Start the rig for ``seconds`` and wait until it runs: (from sample 0, its processes)."""
+        self.rig = start_rig(self.tmp, self.domain_id, seconds)
+        from_sample_0 = wait_running(self.rig, self.tmp / "rig.log", startup_timeout)
+        return from_sample_0, rig_processes(self.rig.pid)
+
+    def __enter__(self) -> RigRun:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self.rig is not None and self.rig.poll() is None:
+            stop_rig(self.rig, rig_processes(self.rig.pid))
+        self.lease.release()
+        if self.keep:
+            print(f"kept {self.tmp}")
+        else:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+
+
+def add_rig_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of both rig benches (this one and bench_rig) after their length."""
+    parser.add_argument("--period", type=float, default=5.0, help="s between /proc samples (default 5)")
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures to this JSON file")
+    parser.add_argument("--keep", action="store_true", help="keep the temporary directory (also: BENCH_KEEP=1)")
+    parser.add_argument("--startup-timeout", type=float, default=180.0, help="s for the rig to start (default 180)")
+
+
+def write_json(result: dict, path: Path | None) -> None:
+    """Write the figures to ``path`` (--json), when given."""
+    if path is not None:
+        path.write_text(json.dumps(result, indent=1) + "\n")
+        print(f"\nfigures written to {path}")
 
 
 # ---- the recording -----------------------------------------------------------------------------------------
@@ -586,10 +638,7 @@ def goals(result: dict) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0, help="wall time of the soak from sample 0 (default 60)")
-    parser.add_argument("--period", type=float, default=5.0, help="s between /proc samples (default 5)")
-    parser.add_argument("--json", type=Path, default=None, help="also write the figures to this JSON file")
-    parser.add_argument("--keep", action="store_true", help="keep the temporary directory (also: BENCH_KEEP=1)")
-    parser.add_argument("--startup-timeout", type=float, default=180.0, help="s for the rig to start (default 180)")
+    add_rig_arguments(parser)
     args = parser.parse_args()
     if args.minutes <= 0 or args.period <= 0:
         parser.error("--minutes and --period must be positive")
@@ -599,16 +648,12 @@ def main() -> None:
     from rimd_sim.core.config import find_config_file
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate
-    tmp = Path(tempfile.mkdtemp(prefix="bench_soak_"))
-    keep = args.keep or bool(os.environ.get("BENCH_KEEP"))
-    lease = lease_domain()
-    rig = None
-    try:
-        print(f"bench_soak: {args.minutes:g} min of `rimd rig` in {tmp}, ROS_DOMAIN_ID {lease.domain_id}; "
+    with RigRun.open("bench_soak_", args.keep) as run:
+        tmp = run.tmp
+        print(f"bench_soak: {args.minutes:g} min of `rimd rig` in {tmp}, ROS_DOMAIN_ID {run.domain_id}; "
               f"sampling /proc every {args.period:g} s", flush=True)
-        rig = start_rig(tmp, lease.domain_id, seconds)
-        from_sample_0 = wait_running(rig, tmp / "rig.log", args.startup_timeout)
-        procs = rig_processes(rig.pid)
+        from_sample_0, procs = run.start(seconds, args.startup_timeout)
+        rig = run.rig
         missing = [n for n in NODES.values() if n not in procs]
         print(f"bench_soak: running from sample 0: {', '.join(f'{n} {p}' for n, p in procs.items())}"
               + (f"; NOT FOUND: {', '.join(missing)}" if missing else ""), flush=True)
@@ -621,7 +666,7 @@ def main() -> None:
             print(f"bench_soak: the rig ended by itself during the run (status {early_exit})", file=sys.stderr)
         print("bench_soak: reading the recording", flush=True)
         result: dict = {"run": {"minutes": args.minutes, "seconds": wall, "period": args.period,
-                                "domain_id": lease.domain_id, "rig_exit_status": status,
+                                "domain_id": run.domain_id, "rig_exit_status": status,
                                 "from_sample_0": from_sample_0, "tmp": str(tmp)}}
         result["processes"] = {name: process_figures(s) for name, s in series.items()}
         result["logs"] = log_reports((tmp / "rig.log").read_text(errors="replace"))
@@ -634,17 +679,7 @@ def main() -> None:
                              f"{(tmp / 'rig.log').read_text(errors='replace')[-3000:]}") from None
         result["goals"] = goals(result)
         report(result)
-        if args.json is not None:
-            args.json.write_text(json.dumps(result, indent=1) + "\n")
-            print(f"\nfigures written to {args.json}")
-    finally:
-        if rig is not None and rig.poll() is None:
-            stop_rig(rig, rig_processes(rig.pid))
-        lease.release()
-        if keep:
-            print(f"kept {tmp}")
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        write_json(result, args.json)
 
 
 if __name__ == "__main__":

@@ -359,6 +359,24 @@ def _test_node(ros_executor: Any) -> Any:
     return node
 
 
+def _watch_motor(ros_executor: Any, proc: Any, who: str) -> tuple[Any, Any, Callable[[], None]]:
+    """(probe node, counter of /rig/motor/state once ``proc`` publishes it, ``alive()``).
+
+    ``alive()`` asserts that the process still runs and still publishes; ``who`` names it in the messages.
+    """
+    from rimd_msgs.msg import MotorState
+
+    node = _test_node(ros_executor)
+    motor = Counter(ros_executor, node, MotorState, "/rig/motor/state")
+    assert motor.wait_more(5, timeout=30), f"{who} does not publish"
+
+    def alive() -> None:
+        assert proc.is_running(), proc.tail()
+        assert motor.wait_more(), f"{who} stopped publishing"
+
+    return node, motor, alive
+
+
 def check_services(executor: Any, node: Any, name: str, namespace: str, covered: set[str]) -> None:
     """The node's own services (not rclpy's parameter and type description ones) are those the test covers."""
     def own() -> set[str]:
@@ -383,18 +401,11 @@ def _simulator(ros_processes: Any, *args: str) -> Any:
 # ---- the simulator -----------------------------------------------------------------------------------------
 
 def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_executor):
-    from rimd_msgs.msg import MotorState
     from rimd_msgs.srv import Perturb, SetMotorFrequency
     from rimd_sim.core.config import CONTACT_LAWS, NODE_PARAMETERS, PARAMETERS
 
     rig = _simulator(ros_processes)
-    node = _test_node(ros_executor)
-    motor = Counter(ros_executor, node, MotorState, "/rig/motor/state")
-    assert motor.wait_more(5, timeout=30), "the rig does not publish"
-
-    def alive() -> None:
-        assert rig.is_running(), rig.tail()
-        assert motor.wait_more(), "the rig stopped publishing"
+    node, motor, alive = _watch_motor(ros_executor, rig, "the rig")
 
     check_services(ros_executor, node, "rimd_simulator", "/rig", {
         "/rig/set_motor_frequency", "/rig/perturb", "/rig/reset", "/rig/pause", "/rig/resume",
@@ -659,7 +670,6 @@ def test_recorder_refuses_bad_input_and_keeps_recording(ros_processes, ros_execu
 
 def test_replay_refuses_bad_input_and_keeps_replaying(ros_processes, ros_executor, tmp_path):
     from harness.rig_mcap import write_rig_mcap
-    from rimd_msgs.msg import MotorState
     from rimd_msgs.srv import Burst, PlayNext, Seek, SetRate
     from rimd_sim.nodes.replay import PARAMETERS, ReplayError, check_parameters
 
@@ -671,13 +681,7 @@ def test_replay_refuses_bad_input_and_keeps_replaying(ros_processes, ros_executo
     write_rig_mcap(path, seconds=3)
     replay = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={path}", "-p", "loop:=true")
     replay.wait_for_output(r"replaying \d+ topics", timeout=30)
-    node = _test_node(ros_executor)
-    motor = Counter(ros_executor, node, MotorState, "/rig/motor/state")
-    assert motor.wait_more(5, timeout=30), "the replay does not publish"
-
-    def alive() -> None:
-        assert replay.is_running(), replay.tail()
-        assert motor.wait_more(), "the replay stopped publishing"
+    node, motor, alive = _watch_motor(ros_executor, replay, "the replay")
 
     check_services(ros_executor, node, "rimd_replay", "/", {f"/rimd_replay/{name}" for name in (
         "pause", "resume", "toggle_paused", "is_paused", "get_rate", "set_rate", "seek", "play_next", "burst",

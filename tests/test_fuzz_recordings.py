@@ -468,24 +468,20 @@ def check_rerun(path: Path, rrd: Path, status: int, stdout: str, stderr: str) ->
         assert len(lines) == 1 and lines[0].startswith("rimd rerun: ") and stdout == "", stderr
 
 
-@fuzz(15)
-@given(st.data())
-def test_analyze_on_damaged_recordings(sources, work, data):
-    what, damaged = data.draw(damaged_file(sources["rig"]), label="damage")
-    CASES["analyze"] += 1
-    path, out = work / "analyze.mcap", work / f"analysis_{CASES['analyze']}"
-    path.write_bytes(damaged)
-    check_analyze(path, out, *rimd("analyze", str(path), "--out", str(out)))
+#: Per conversion verb: its output option, the output's name for case N, and the check of what it did.
+CONVERSIONS = {"analyze": ("--out", "analysis_{}", check_analyze), "rerun": ("--save", "rerun_{}.rrd", check_rerun)}
 
 
+@pytest.mark.parametrize("verb", sorted(CONVERSIONS))
 @fuzz(15)
 @given(st.data())
-def test_rerun_on_damaged_recordings(sources, work, data):
-    what, damaged = data.draw(damaged_file(sources["rig"]), label="damage")
-    CASES["rerun"] += 1
-    path, rrd = work / "rerun.mcap", work / f"rerun_{CASES['rerun']}.rrd"
+def test_verb_on_damaged_recordings(sources, work, verb, data):
+    option, output, check = CONVERSIONS[verb]
+    _what, damaged = data.draw(damaged_file(sources["rig"]), label="damage")
+    CASES[verb] += 1
+    path, dest = work / f"{verb}.mcap", work / output.format(CASES[verb])
     path.write_bytes(damaged)
-    check_rerun(path, rrd, *rimd("rerun", str(path), "--save", str(rrd)))
+    check(path, dest, *rimd(verb, str(path), option, str(dest)))
 
 
 def test_verbs_on_a_foreign_type(sources, work):

@@ -26,6 +26,7 @@ import struct
 
 import pytest
 
+from harness.clock import FakeClock
 from harness.foxglove_client import FoxgloveClient
 from harness.rig_mcap import write_rig_mcap
 from rimd_sim.core.errors import ConfigError
@@ -43,14 +44,6 @@ from rimd_sim.viz.playback import (
 
 S = 1_000_000_000
 NAME = "/rimd_replay"
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 10.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 class PlayerControls:

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from harness.clock import FakeClock
 from harness.rig_mcap import write_rig_mcap
 from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.pacing import Hold, Wait
@@ -23,14 +24,6 @@ from rimd_sim.recording.player import Finished, Paused, Player, ReplaySettings
 from rimd_sim.recording.reader import open_recording
 
 S = 1_000_000_000
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 50.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 @pytest.fixture(scope="module")

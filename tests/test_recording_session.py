@@ -18,6 +18,7 @@ from pathlib import Path
 
 from rclpy.serialization import serialize_message
 
+from harness.clock import FakeClock
 from rimd_msgs.msg import SampleBlock
 from rimd_sim.recording.bag import BagWriter, qos_profile_dict
 from rimd_sim.recording.reader import open_recording
@@ -72,14 +73,6 @@ class FakeFile:
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 def block(index: int, n: int = 100) -> bytes:

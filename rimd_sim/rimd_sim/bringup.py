@@ -26,7 +26,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -382,6 +382,26 @@ class Rig:
             time.sleep(0.1)
         return None
 
+    def run(self, verb: str, announce: Callable[[], None], *, duration: float = 0.0,
+            ends_itself: str | None = None) -> int:
+        """Start, ``announce()``, :meth:`watch` within :class:`StopSignals`, then stop: the status of ``rimd VERB``.
+
+        1 when a process exited by itself (said on stderr as ``rimd VERB: NAME exited with status N``) or
+        :meth:`stop` found an error; 0 otherwise. The rig is stopped whatever happens.
+        """
+        status = 0
+        with StopSignals() as stop:
+            try:
+                self.start()
+                announce()
+                failed = self.watch(stop, duration=duration, ends_itself=ends_itself)
+                if failed is not None:
+                    print(f"rimd {verb}: {failed[0]} exited with status {failed[1]}", file=sys.stderr)
+                    status = 1
+            finally:
+                status = self.stop() or status
+        return status
+
     def stop(self) -> int:
         """Stop every process in reverse order; 0, or 1 when a node exited with an error."""
         status = 0
@@ -397,19 +417,41 @@ class Rig:
         return status
 
 
-def _stop(proc: subprocess.Popen, name: str) -> int | None:
-    for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+def stop_process(proc: subprocess.Popen, waits: Sequence[tuple[int, float]] = (
+        (signal.SIGINT, 10.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)), *,
+        send: Callable[[int], None] | None = None, on_timeout: Callable[[int], None] | None = None) -> int | None:
+    """Send ``proc`` each signal of ``waits`` in turn and wait its bounded time (s), until it has exited.
+
+    Args:
+        proc: The child process.
+        waits: (signal, seconds) in order; by default SIGINT (a node finishes its work), SIGTERM, SIGKILL.
+        send: How a signal is sent (default ``proc.send_signal``; ``os.killpg`` for a process group); the
+            process gone meanwhile ends the sequence.
+        on_timeout: Called with the signal that did not stop it in its time.
+
+    Returns:
+        Its exit status (None if it outlived even the last signal's wait).
+    """
+    for sig, wait in waits:
         if proc.poll() is not None:
             break
         try:
-            os.killpg(proc.pid, sig)
+            (send or proc.send_signal)(sig)
         except ProcessLookupError:
             break
         try:
             proc.wait(wait)
         except subprocess.TimeoutExpired:
-            print(f"rimd rig: {name} did not stop on {signal.Signals(sig).name}", file=sys.stderr)
+            if on_timeout is not None:
+                on_timeout(sig)
     return proc.returncode
+
+
+def _stop(proc: subprocess.Popen, name: str) -> int | None:
+    def say(sig: int) -> None:
+        print(f"rimd rig: {name} did not stop on {signal.Signals(sig).name}", file=sys.stderr)
+
+    return stop_process(proc, send=lambda sig: os.killpg(proc.pid, sig), on_timeout=say)
 
 
 def _subscribed(node: Any, topic: str, consumers: tuple[str, ...]) -> bool:

@@ -185,15 +185,9 @@ class ExperimentRecorder:
         proc = self.proc
         if proc is None:
             return None
-        for sig, wait in ((signal.SIGINT, 20.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
-            if proc.poll() is not None:
-                break
-            proc.send_signal(sig)
-            try:
-                proc.wait(wait)
-            except subprocess.TimeoutExpired:
-                continue
-        return proc.returncode
+        from rimd_sim.bringup import stop_process
+
+        return stop_process(proc, ((signal.SIGINT, 20.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)))
 
 
 @dataclass

@@ -12,25 +12,13 @@ from __future__ import annotations
 
 import pytest
 
+from harness.clock import FakeClock
 from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.pacing import Go, Hold, Lockstep, LockstepSettings, Pacer, Schedule, Wait
 from rimd_sim.core.params import build
 
 MS = 1_000_000
 S = 1_000_000_000
-
-
-class FakeClock:
-    """A monotonic clock that moves only when told."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
-
-    def advance(self, seconds: float) -> None:
-        self.now += seconds
 
 
 def blocks(start_ms: int, count: int = 10, period_ms: int = 10) -> list[int]:

@@ -27,12 +27,33 @@ def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa
     return path
 
 
+def _force_over_impacts():  # noqa: ANN202 - (figure, force axes, impacts axes)
+    """Two panels sharing the frequency axis: the peak force (3/4 of the height) over impacts per cycle."""
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax2.set_ylabel("impacts / cycle")
+    return fig, ax, ax2
+
+
+def _save_force_over_impacts(fig, ax, ax2, path: Path, title: str, *, force: str, frequency: str,  # noqa: ANN001
+                             legend: dict) -> Path:
+    """Label and save a :func:`_force_over_impacts` figure.
+
+    ``force`` and ``frequency`` are the axis labels, ``legend`` the options of the force panel's legend.
+    """
+    ax.set_ylabel(force)
+    ax.legend(**legend)
+    ax2.set_xlabel(frequency)
+    for a in (ax, ax2):
+        a.grid(alpha=0.3)
+    return _save(fig, path, title, ax)
+
+
 def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
     """Non-dimensional peak force F_i/mg versus Omega/omega (the paper's Figs 6 and 8).
 
     One line per sweep; the lower panel gives impacts per cycle (1: band A, 0.5: band B).
     """
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    fig, ax, ax2 = _force_over_impacts()
     for res in results:
         x = [p.frequency_ratio for p in res.points]
         ax.plot(x, [p.force_ratio for p in res.points], "-o", ms=3, label=f"gap {res.gap_mm:g} mm, {res.direction}")
@@ -42,13 +63,8 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
                 ax.annotate(f"{name}: {band.frequency_hz:g} Hz, {band.peak_force_n:.0f} N",
                             (band.frequency_ratio, band.force_ratio), textcoords="offset points", xytext=(5, 5),
                             fontsize=8)
-    ax.set_ylabel("F_i / mg")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
-    ax2.set_ylabel("impacts / cycle")
-    ax2.set_xlabel("Omega / omega_n")
-    ax2.grid(alpha=0.3)
-    return _save(fig, path, title, ax)
+    return _save_force_over_impacts(fig, ax, ax2, path, title, force="F_i / mg", frequency="Omega / omega_n",
+                                    legend={"fontsize": 8, "loc": "upper left"})
 
 
 # ---- nonlinear analyses (issue 7): bifurcation, phase plane + Poincare map, Peterka map, basins ----------
@@ -230,7 +246,7 @@ def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
     Per source: the steady window's largest peak (the paper's F_i, filled marker) and the mean of its peaks with
     error bars of one standard deviation (the spread per step); impacts per cycle below.
     """
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    fig, ax, ax2 = _force_over_impacts()
     for label, marker, shift in (("events", "o", -0.01), ("channel", "s", 0.01)):
         pts = [r for r in rows if r.get(f"peak_force_{label}_n") is not None]
         if not pts:
@@ -245,13 +261,8 @@ def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
         ax.errorbar(f + shift, mean, yerr=std, fmt="_", ms=10, capsize=4, lw=1.2,
                     label=f"mean +- 1 std of the steady peaks, {name}")
         ax2.plot(f + shift, [r[f"impacts_per_cycle_{label}"] for r in pts], marker, ms=6)
-    ax.set_ylabel("steady peak force (N)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
-    ax2.set_ylabel("impacts / cycle")
-    ax2.set_xlabel("motor frequency setpoint (Hz)")
-    ax2.grid(alpha=0.3)
-    return _save(fig, path, title, ax)
+    return _save_force_over_impacts(fig, ax, ax2, path, title, force="steady peak force (N)",
+                                    frequency="motor frequency setpoint (Hz)", legend={"fontsize": 7, "loc": "best"})
 
 
 def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "",

@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import types
+from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
@@ -106,16 +107,16 @@ class StopRule:
                 f"stop_tolerance={self.stop_tolerance}, early={self.early})")
 
 
+@dataclass(eq=False)
 class EnsembleResult:
-    """Per-cell outputs of :func:`run_cells` (arrays of one entry per cell)."""
+    """Per-cell outputs of :func:`run_cells` (arrays of one entry per cell; the codes of the module docstring)."""
 
-    def __init__(self, period, impacts, kind, cycles, final, steps):
-        self.period = period
-        self.impacts = impacts
-        self.kind = kind
-        self.cycles = cycles
-        self.final = final
-        self.steps = steps
+    period: np.ndarray
+    impacts: np.ndarray
+    kind: np.ndarray
+    cycles: np.ndarray
+    final: np.ndarray   # (theta, theta_dot) per cell
+    steps: np.ndarray
 
     def labels(self) -> list[str]:
         """The class labels of :mod:`rimd_sim.analysis.dynamics` (``p/n``, ``no impact``, ...)."""

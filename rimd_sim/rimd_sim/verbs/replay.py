@@ -7,7 +7,6 @@ bridge serving Foxglove, pointed at the replay) and :class:`rimd_sim.bringup.Rig
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from rimd_sim.cli import count, nonnegative_float, number
@@ -37,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Start the replay (and the bridge), wait until it ends or Ctrl-C; return non-zero if a node failed."""
-    from rimd_sim.bringup import Rig, StopSignals, plan_replay
+    from rimd_sim.bringup import Rig, plan_replay
     from rimd_sim.cli import CommandError
     from rimd_sim.core.errors import ConfigError
 
@@ -56,22 +55,16 @@ def main(args: argparse.Namespace) -> int:
         if exc.key != "topics":
             raise
         raise CommandError(f"--topics {' '.join(args.topics)} refused: {exc.rule}") from None
-    status = 0
-    rig = Rig(plan)
-    with StopSignals() as stop:
-        try:
-            rig.start()
-            if plan.foxglove_address:
-                print(f"rimd replay: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
-                      "WebSocket); the replay is paused: press play on the timeline. Ctrl-C stops.", flush=True)
-            else:
-                print(f"rimd replay: replaying {args.recording} on its recorded topics"
-                      + ("" if args.loop else " until its end") + "; Ctrl-C stops.", flush=True)
-            failed = rig.watch(stop, ends_itself="rimd_replay")   # the replay ending by itself is the normal end
-            if failed is not None:
-                print(f"rimd replay: {failed[0]} exited with status {failed[1]}", file=sys.stderr)
-                status = 1
-        finally:
-            status = rig.stop() or status
+
+    def announce() -> None:
+        if plan.foxglove_address:
+            print(f"rimd replay: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
+                  "WebSocket); the replay is paused: press play on the timeline. Ctrl-C stops.", flush=True)
+        else:
+            print(f"rimd replay: replaying {args.recording} on its recorded topics"
+                  + ("" if args.loop else " until its end") + "; Ctrl-C stops.", flush=True)
+
+    # the replay ending by itself is the normal end
+    status = Rig(plan).run("replay", announce, ends_itself="rimd_replay")
     print("rimd replay: stopped", flush=True)
     return status

@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Start the rig's nodes and wait; return non-zero if a node failed."""
-    from rimd_sim.bringup import Rig, StopSignals, plan_rig
+    from rimd_sim.bringup import Rig, plan_rig
     from rimd_sim.cli import CommandError
 
     if args.consumer and not args.lockstep:
@@ -50,37 +50,31 @@ def main(args: argparse.Namespace) -> int:
     plan = plan_rig(args.config, output_dir=args.output_dir, record=not args.no_record, rerun=not args.no_rerun,
                     foxglove=args.foxglove, lockstep=args.lockstep, consumers=args.consumer,
                     real_time_factor=args.real_time_factor)
-    status = 0
     rig = Rig(plan)
     config = plan.config
-    with StopSignals() as stop:
-        try:
-            rig.start()
-            if plan.foxglove_address:
-                print(f"rimd rig: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
-                      "WebSocket; layout: config/foxglove/rig_layout.json)", flush=True)
-            print(f"rimd rig: running {', '.join(plan.names)} with {plan.config_path} "
-                  f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
-                  f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
-                  + (f"Recording into {plan.recording_dir}. " if plan.recording_dir else "Not recording. ")
-                  + "Ctrl-C stops.", flush=True)
-            if plan.lockstep_consumers:
-                print(f"rimd rig: lockstep with {', '.join(plan.lockstep_consumers)} (window "
-                      f"{plan.lockstep_window:g} s of simulation time, speed cap {config.real_time_factor:g}x, "
-                      "0 = none): the rig waits for each of them from sample 0 and goes as fast as the slowest",
-                      flush=True)
-            elif any(n.consumer for n in plan.nodes):
-                if rig.resume_when_connected():
-                    print("rimd rig: every consumer is connected; the rig runs from sample 0", flush=True)
-                elif rig.failed() is None:
-                    print("rimd rig: the consumers did not all connect within 20 s; the rig runs anyway",
-                          file=sys.stderr, flush=True)
-            failed = rig.watch(stop, duration=args.duration)
-            if failed is not None:
-                print(f"rimd rig: {failed[0]} exited with status {failed[1]}", file=sys.stderr)
-                status = 1
-        finally:
-            status = rig.stop() or status
+
+    def announce() -> None:
+        if plan.foxglove_address:
+            print(f"rimd rig: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
+                  "WebSocket; layout: config/foxglove/rig_layout.json)", flush=True)
+        print(f"rimd rig: running {', '.join(plan.names)} with {plan.config_path} "
+              f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
+              f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
+              + (f"Recording into {plan.recording_dir}. " if plan.recording_dir else "Not recording. ")
+              + "Ctrl-C stops.", flush=True)
+        if plan.lockstep_consumers:
+            print(f"rimd rig: lockstep with {', '.join(plan.lockstep_consumers)} (window "
+                  f"{plan.lockstep_window:g} s of simulation time, speed cap {config.real_time_factor:g}x, "
+                  "0 = none): the rig waits for each of them from sample 0 and goes as fast as the slowest",
+                  flush=True)
+        elif any(n.consumer for n in plan.nodes):
+            if rig.resume_when_connected():
+                print("rimd rig: every consumer is connected; the rig runs from sample 0", flush=True)
+            elif rig.failed() is None:
+                print("rimd rig: the consumers did not all connect within 20 s; the rig runs anyway",
+                      file=sys.stderr, flush=True)
+
+    status = rig.run("rig", announce, duration=args.duration)
     if plan.recording_dir:
         print(f"rimd rig: stopped; the recording is in {plan.recording_dir} "
               f"(replay: rimd replay {plan.recording_dir}, add --foxglove to drive it from Foxglove)", flush=True)

@@ -34,7 +34,7 @@ import ipaddress
 import logging
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -413,24 +413,22 @@ class _Listener(ServerListener):
     def __init__(self, sink: FoxgloveSink) -> None:
         self._sink = sink
 
-    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
+    def _shown(self, call: Callable[[], Any], failed: str, status_id: str, fallback: Any) -> Any:
+        """``call()``; should it raise, ``failed: <exception>`` is shown to the clients and ``fallback`` returned."""
         try:
-            return self._sink.get_parameters(param_names)
+            return call()
         except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
-            self._sink.status(f"parameters could not be read: {exc}", error=True, status_id="parameters")
-            return []
+            self._sink.status(f"{failed}: {exc}", error=True, status_id=status_id)
+            return fallback
+
+    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
+        return self._shown(lambda: self._sink.get_parameters(param_names), "parameters could not be read",
+                           "parameters", [])
 
     def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
-        try:
-            return self._sink.set_parameters(parameters)
-        except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
-            self._sink.status(f"parameters could not be set: {exc}", error=True, status_id="parameters")
-            return []
+        return self._shown(lambda: self._sink.set_parameters(parameters), "parameters could not be set",
+                           "parameters", [])
 
     def on_playback_control_request(self, playback_control_request: Any) -> Any:
-        try:
-            return self._sink.handle_playback(playback_control_request)
-        except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
-            self._sink.status(f"playback: the request could not be carried out: {exc}", error=True,
-                              status_id="playback")
-            return None
+        return self._shown(lambda: self._sink.handle_playback(playback_control_request),
+                           "playback: the request could not be carried out", "playback", None)
