@@ -24,20 +24,26 @@ def add_model_arguments(parser, out: str, *, gap: float | None = None, f_range: 
     ``--gap-mm`` (when ``gap`` is given), ``--f-min``/``--f-max`` (``f_range``), ``--f-step``, ``--config`` and
     ``--out`` (default ``out``).
     """
-    from rimd_sim.cli import gap_mm, positive_float
+    from rimd_sim.cli import gap_mm
 
     if gap is not None:
         parser.add_argument("--gap-mm", type=gap_mm(), default=gap, help=f"gap (mm), default {gap:g}{gap_note}")
-    if f_range is not None:
-        parser.add_argument("--f-min", type=positive_float("--f-min", "Hz"), default=f_range[0],
-                            help=f"lowest motor frequency (Hz), default {f_range[0]:g}")
-        parser.add_argument("--f-max", type=positive_float("--f-max", "Hz"), default=f_range[1],
-                            help=f"highest motor frequency (Hz), default {f_range[1]:g}")
-    if f_step is not None:
-        parser.add_argument("--f-step", type=positive_float("--f-step", "Hz"), default=f_step,
-                            help=f"frequency step (Hz), default {f_step:g}")
+    add_frequency_grid(parser, f_range, f_step)
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
     parser.add_argument("--out", type=Path, default=Path(out), help="output directory")
+
+
+def add_frequency_grid(parser, f_range: tuple[float, float] | None, f_step: float | None, *,
+                       words: tuple[str, str, str] = ("lowest motor frequency", "highest motor frequency",
+                                                      "frequency step")) -> None:
+    """``--f-min``/``--f-max`` (when ``f_range`` is given) and ``--f-step`` (``f_step``), in Hz, positive."""
+    from rimd_sim.cli import positive_float
+
+    low, high = f_range if f_range is not None else (None, None)
+    for option, default, word in zip(("--f-min", "--f-max", "--f-step"), (low, high, f_step), words, strict=True):
+        if default is not None:
+            parser.add_argument(option, type=positive_float(option, "Hz"), default=default,
+                                help=f"{word} (Hz), default {default:g}")
 
 
 def add_map_arguments(parser, transient: int) -> None:

@@ -17,6 +17,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from rimd_sim.cli import CommandError, nonnegative_float, number, positive_float
+from rimd_sim.verbs._analysis_io import add_frequency_grid
 
 HERTZ = nonnegative_float("--frequencies", "Hz")
 
@@ -25,12 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd experiment``."""
     parser.add_argument("--frequencies", type=HERTZ, nargs="+", default=None,
                         help="motor frequencies (Hz) in the order they are set (instead of --f-min/--f-max/--f-step)")
-    parser.add_argument("--f-min", type=positive_float("--f-min", "Hz"), default=3.0,
-                        help="first frequency (Hz, default 3.0)")
-    parser.add_argument("--f-max", type=positive_float("--f-max", "Hz"), default=4.5,
-                        help="last frequency (Hz, default 4.5)")
-    parser.add_argument("--f-step", type=positive_float("--f-step", "Hz"), default=0.25,
-                        help="step (Hz, default 0.25, the paper's grid)")
+    add_frequency_grid(parser, (3.0, 4.5), 0.25, words=("first frequency", "last frequency",
+                                                        "frequency step, the paper's grid,"))
     parser.add_argument("--dwell", type=positive_float("--dwell", "s"), default=10.0,
                         help="simulation seconds per step, from the setpoint taking effect (default 10)")
     parser.add_argument("--settle", type=nonnegative_float("--settle", "s"), default=3.0,
