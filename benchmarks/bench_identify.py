@@ -113,11 +113,11 @@ def battery(args: argparse.Namespace, work: Path) -> None:
     print(_header())
     totals = {"covered": 0, "params": 0, "accepted": 0, "walls": []}
     clean: dict[int, dict] = {}
-    rigs = None
+    factory = None
     if not args.core:   # each rig in lockstep with the experiment's recorder, on a ROS domain of its own
         from rimd_sim.testing import RigFactory
 
-        rigs = RigFactory(work)
+        factory = RigFactory(work)
     try:
         for i, rig in enumerate(rigs):
             design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
@@ -126,7 +126,7 @@ def battery(args: argparse.Namespace, work: Path) -> None:
                 recording = work / f"rig{i}.mcap"
                 write_core_recording(recording, rig, schedule)
             else:
-                recording = record_through_rig(rigs, work / f"rig{i}", rig, schedule)
+                recording = record_through_rig(factory, work / f"rig{i}", rig, schedule)
             report, wall, _ = _identify(recording, work / f"id{i}")
             line, covered, params, accepted = _row(i, rig, report, wall)
             print(line, flush=True)
@@ -136,8 +136,8 @@ def battery(args: argparse.Namespace, work: Path) -> None:
             totals["accepted"] += accepted
             totals["walls"].append(wall)
     finally:
-        if rigs is not None:
-            rigs.stop_all()
+        if factory is not None:
+            factory.stop_all()
     n = len(rigs)
     print(f"identified within target or the parameter named by the verdict: {totals['accepted']}/{n} rigs "
           f"(must show 1: all)")
