@@ -190,8 +190,35 @@ def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp
     assert any(line.startswith("left out: ") for line in faulted.log)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 24 target not met yet: with the captures the short contact's stiffness "
-                   "comes out 1.3 % low (its 95 % interval, 7 %, covers it); the target is 0.5 %")
+def test_the_pulse_release_of_a_grazing_impact_is_a_root_and_moves_continuously():
+    """Hypothesis: the pulse's release is the force's first fall through 0, continuous in the free acceleration.
+
+    The numbers are those of a grazing impact of SHORT_CONTACT's recording (impact velocity 2.6 mm/s: ``eps`` =
+    240 1/s, ``eps1`` = -16225 1/s^2 at the solution the joint fit stalled at): there a Newton iteration from the
+    closed form stopped at 112, 177, 160, 324 or 14546 us as ``eps`` moved by 0.25 1/s, the force there up to 800
+    (per unit scale) from 0, and the joint fit's misfit jumped (the captures' test below came out 1.3 % off). The
+    expected values come from the pulse's own force: 0 at the release, positive before it.
+    """
+    import numpy as np
+
+    from rimd_sim.analysis.contact_pulse import RELEASE_HORIZON, SpringDashpotPulse, pulse_of
+
+    base = pulse_of(0.08, 1e7, 3000.0, sigma_free=0.05 * 4 * math.pi)
+    closed = base.release()
+    releases = []
+    for eps in np.linspace(235.0, 245.0, 41):
+        pulse = SpringDashpotPulse(base.sigma, base.w0, float(eps), base.sigma_free, -16225.0)
+        release = pulse.release()
+        before = pulse.shape(np.linspace(0.0, release, 4001)[:-1])
+        assert before.min() > 0, (eps, release)                      # the first fall through 0 ...
+        at = float(pulse.shape(np.array([release]))[0])
+        assert abs(at) < 1e-6 * pulse.shape(np.array([0.0]))[0] or release == pytest.approx(
+            RELEASE_HORIZON * closed), (eps, release, at)             # ... is a root, or beyond the horizon
+        releases.append(release)
+    steps = np.abs(np.diff(releases))
+    assert steps.max() < 0.01 * max(releases), releases               # no jump between neighbouring eps
+
+
 def test_captures_pin_a_short_contact_within_half_a_percent(tmp_path):
     from rimd_sim.analysis.identify import identify
 

@@ -23,7 +23,9 @@ quarter of a millisecond, its force falling from ``c v0`` within one 50 us sampl
 
 The release has a closed form without ``eps`` (underdamped: ``w s = pi - atan2(2 sigma_c w, w0^2 - 2 sigma
 sigma_c)``; overdamped: ``s = ln(g2 / g1) / (r1 - r2)`` with ``r = -sigma +- sqrt(-D)``, ``g = w0^2 + 2 sigma_c
-r``), refined by Newton's method with it.
+r``); with it, Newton's method from the closed form where it finds the first fall through 0, else that fall
+bracketed on a grid and bisected (a grazing impact), so that it moves continuously with the parameters
+(:func:`_release`).
 
 :func:`fit_pulses` fits one shape common to many impacts, each with its own onset and scale, to their
 samples: the oscilloscope's equivalent-time sampling (each impact falls at another phase of the 20 kHz grid,
@@ -76,8 +78,26 @@ def _shape(s: np.ndarray, sigma: float, w0: float, eps, sigma_free: float, eps1=
     return w0 * w0 * delta + 2.0 * (sigma - sigma_free) * ddelta
 
 
+#: Where :func:`_release` looks for the release when Newton's iteration does not give it, in units of the release
+#: without free acceleration: densely up to twice it, then geometrically to :data:`RELEASE_HORIZON` times it (a
+#: grazing impact, pushed on by its free acceleration).
+RELEASE_GRID = np.concatenate([np.linspace(0.0, 2.0, 257)[1:], 2.0 * np.geomspace(1.0, 50.0, 129)[1:]])
+RELEASE_HORIZON = float(RELEASE_GRID[-1])
+#: Points (fractions of Newton's root) where the force must be positive for that root to be the first fall.
+RELEASE_CHECK = np.linspace(0.0, 1.0, 33)[1:-1]
+
+
 def _release(sigma: float, w0: float, eps, sigma_free: float, eps1=0.0) -> np.ndarray:  # noqa: ANN001
-    """Time from the onset to the release, per ``eps`` and ``eps1`` (arrays)."""
+    """Time from the onset to the release (the force's first fall through 0), per ``eps`` and ``eps1`` (arrays).
+
+    Without free acceleration, the closed form (module doc). With it, Newton's method from the closed form, kept
+    where it converged to a fall through 0 with the force positive before it; elsewhere (the free acceleration a
+    large part of the motion: a grazing impact) the first sign change on :data:`RELEASE_GRID`, bisected. Either way
+    the first root, which moves continuously with the parameters (Newton's iterate alone did not: it could stop
+    where the force is far from 0, or land on a later root, and the joint fit's misfit jumped between two nearby
+    parameter sets). No fall through 0 within :data:`RELEASE_HORIZON` times the closed form: that horizon (the
+    contact outlasts any recorded window).
+    """
     sc = sigma - sigma_free
     w0sq = w0 * w0
     d = w0sq - sigma * sigma
@@ -92,20 +112,44 @@ def _release(sigma: float, w0: float, eps, sigma_free: float, eps1=0.0) -> np.nd
     else:
         s0 = 2.0 / sigma
     eps = np.asarray(eps, dtype=float)
-    eps1 = np.broadcast_to(np.asarray(eps1, dtype=float), eps.shape) if np.ndim(eps1) else eps1
-    s = np.full(eps.shape, s0)
     if not np.any(eps) and not np.any(eps1) and abs(d) > 1e-9 * w0sq:
-        return s
+        return np.full(eps.shape, s0)
+    e = eps.reshape(-1)
+    e1 = np.broadcast_to(np.asarray(eps1, dtype=float), eps.shape).reshape(-1)
+
+    def force(s: np.ndarray, ea: np.ndarray, e1a: np.ndarray) -> np.ndarray:
+        delta, ddelta = _state(s, sigma, w0, ea, e1a)
+        return w0sq * delta + 2 * sc * ddelta
+
+    s = np.full(e.shape, s0)
+    step = np.zeros(e.shape)
     for _ in range(12):   # Newton on F(s) = 0; dF/ds = w0^2 delta' + 2 sigma_c delta''
-        delta, ddelta = _state(s, sigma, w0, eps, eps1)
+        delta, ddelta = _state(s, sigma, w0, e, e1)
         f = w0sq * delta + 2 * sc * ddelta
-        acc = eps + eps1 * s - 2 * sigma * ddelta - w0sq * delta
+        acc = e + e1 * s - 2 * sigma * ddelta - w0sq * delta
         df = w0sq * ddelta + 2 * sc * acc
-        step = np.where(df != 0, f / np.where(df != 0, df, 1.0), 0.0)
-        s = np.maximum(s - step, 0.5 * s)
+        step = np.where(df < 0, f / np.where(df < 0, df, -1.0), np.inf)   # a fall through 0 has dF/ds < 0
+        s = np.where(np.isfinite(step), np.maximum(s - step, 0.5 * s), s)
         if np.all(np.abs(step) < 1e-14 + 1e-10 * s):
             break
-    return s
+    ok = np.abs(step) < 1e-12 + 1e-8 * s
+    if ok.any():   # the force positive before the root: it is the first fall
+        ok[ok] = (force(s[ok] * RELEASE_CHECK[:, None], e[ok], e1[ok]) > 0).all(axis=0)
+    bad = ~ok
+    if bad.any():
+        eb, e1b = e[bad], e1[bad]
+        grid = s0 * RELEASE_GRID
+        below = force(grid[:, None], eb, e1b) <= 0.0                 # (grid, impacts)
+        found = below.any(axis=0)
+        first = np.argmax(below, axis=0)
+        hi = np.where(found, grid[first], grid[-1])
+        lo = np.where(found & (first > 0), grid[np.maximum(first - 1, 0)], 0.0)
+        for _ in range(48):   # bisection: the bracket shrinks to 2^-48 of a grid step
+            mid = 0.5 * (lo + hi)
+            down = force(mid, eb, e1b) <= 0.0
+            lo, hi = np.where(down, lo, mid), np.where(down, mid, hi)
+        s[bad] = np.where(found, hi, grid[-1])
+    return s.reshape(eps.shape)
 
 
 @dataclass(frozen=True)

@@ -632,7 +632,10 @@ def _verdict(estimates: dict[str, Estimate], result: JointResult, contact, force
         verdict.poorly.append(("all", f"the twin does not follow the lasers (displacement residual "
                                       f"{math.sqrt(chi2):.1f} times the laser noise)",
                                "check the recording for faults the scan did not see, or the contact law"))
-    samples = (math.pi / contact.pulse.w0 * force.rate) if (contact is not None and force is not None) else None
+    # how many samples the contact spans at the rate of the samples its shape came from (captures: their own)
+    rate = None if contact is None else (1.0 / min(p.dt for p in contact.samples) if "captures" in contact.source
+                                         and contact.samples else force.rate if force is not None else None)
+    samples = (math.pi / contact.pulse.w0 * rate) if rate else None
     for p, e in estimates.items():
         kind, target = TARGETS[p]
         hw = e.half_width_95
