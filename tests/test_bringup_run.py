@@ -12,8 +12,12 @@ import signal
 import subprocess
 import sys
 
+import pytest
+
 from harness.rig_mcap import write_rig_mcap
 from rimd_sim.bringup import PlannedNode, Rig, RigPlan, stop_process
+
+pytestmark = pytest.mark.process   # child processes (no ROS)
 
 IGNORES_SIGINT = ("import signal, sys, time\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\nprint('ready', flush=True)\n"
                   "time.sleep(60)\n")
