@@ -30,10 +30,11 @@ run: setup
 test: setup
 	@bash scripts/run_tests.sh $(PYTEST_ARGS)
 
-# The inner loop: every test that starts no process (no node, CLI or worker); one that does fails here, naming
-# the marker it lacks (tests/conftest.py). Test by test on the workers (worksteal): no test here holds a ROS domain.
+# The inner loop: every test that starts no process (no node, CLI or worker; one that does fails here, naming the
+# marker it lacks: tests/conftest.py) and is not marked slow (two whole identifications, 40 s between them; make
+# test runs them). Test by test on the workers (worksteal): no test here holds a ROS domain.
 test-fast: setup
-	@RIMD_TEST_FAST=1 bash scripts/run_tests.sh -m "not process" --dist worksteal $(PYTEST_ARGS)
+	@RIMD_TEST_FAST=1 bash scripts/run_tests.sh -m "not process and not slow" --dist worksteal $(PYTEST_ARGS)
 
 lint: setup
 	@source ./env.sh && ruff check .

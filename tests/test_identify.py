@@ -156,6 +156,7 @@ def _impact_near(rig: dict, freqs: list[float], near: float, dwell: float, start
     return min((i.t_start for i in impacts), key=lambda t: abs(t - near))
 
 
+@pytest.mark.slow
 def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp_path):
     from rimd_sim.analysis.identify import identify
 
@@ -219,6 +220,7 @@ def test_the_pulse_release_of_a_grazing_impact_is_a_root_and_moves_continuously(
     assert steps.max() < 0.01 * max(releases), releases               # no jump between neighbouring eps
 
 
+@pytest.mark.slow
 def test_captures_pin_a_short_contact_within_half_a_percent(tmp_path):
     from rimd_sim.analysis.identify import identify
 
