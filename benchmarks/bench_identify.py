@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "rimd_sim"))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from harness.ident_rigs import Schedule, draw_rigs, record_through_rig, write_core_recording  # noqa: E402
+from harness.ident_rigs import Schedule, draw_rigs, impact_near, record_through_rig, write_core_recording  # noqa: E402
 
 NAMES = ("amplitude", "natural_frequency", "damping_ratio", "gap", "mass", "contact.stiffness", "contact.damping")
 SHORT = {"amplitude": "A0", "natural_frequency": "f_n", "damping_ratio": "zeta", "gap": "gap", "mass": "m",
@@ -151,23 +151,6 @@ def battery(args: argparse.Namespace, work: Path) -> None:
         captures(rigs, work)
 
 
-def _impact_near(rig: dict, freqs: list[float], near: float, start: float = 2.0) -> float:
-    from fractions import Fraction
-
-    from rimd_sim.core import SimConfig
-    from rimd_sim.core.model import RigModel
-
-    config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
-                                          "motor.initial_setpoint": freqs[0]})
-    model = RigModel(config, channels=False, truth=False)
-    impacts = list(model.advance(Fraction(repr(start))).impacts)
-    for k, f in enumerate(freqs):
-        if k:
-            impacts += model.set_motor_frequency(f, 2.0)
-        impacts += model.advance(Fraction(repr(start + (k + 1) * DWELL))).impacts
-    return min((i.t_start for i in impacts), key=lambda t: abs(t - near))
-
-
 def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
     """Each rig with a force dropout over an impact, block loss and a stuck laser, against its clean answer."""
     from rimd_sim.analysis.design import identification_steps
@@ -182,7 +165,7 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
         if "estimates" not in clean.get(i, {}):
             continue
         design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
-        hidden = _impact_near(rig, design.frequencies, 40.0)
+        hidden = impact_near(rig, design.frequencies, 40.0, DWELL)
         extra = [{"channel": "impact_force", "kind": "dropout", "start": round(hidden - 0.15, 3), "duration": 0.3},
                  *FAULTS]
         recording = work / f"rig{i}_faults.mcap"

@@ -24,12 +24,11 @@ import csv
 import io
 import math
 import shutil
-from fractions import Fraction
 from pathlib import Path
 
 import pytest
 
-from harness.ident_rigs import Schedule, draw_rigs, record_through_rig, write_core_recording
+from harness.ident_rigs import Schedule, draw_rigs, impact_near, record_through_rig, write_core_recording
 from harness.outputs import read_json
 from rimd_sim.analysis.design import identification_steps
 from rimd_sim.core import SimConfig
@@ -140,29 +139,13 @@ def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd
         assert row["peak_force_difference_of"] == "events" and abs(row["peak_force_difference"]) <= 0.01, row
 
 
-def _impact_near(rig: dict, freqs: list[float], near: float, dwell: float, start: float = 2.0) -> float:
-    """The start of the core's impact nearest ``near`` s, in the experiment's timeline."""
-    from rimd_sim.analysis.design import predict  # noqa: F401 - the same timeline
-    from rimd_sim.core.model import RigModel
-
-    config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
-                                          "motor.initial_setpoint": freqs[0]})
-    model = RigModel(config, channels=False, truth=False)
-    impacts = list(model.advance(Fraction(repr(start))).impacts)
-    for k, f in enumerate(freqs):
-        if k:
-            impacts += model.set_motor_frequency(f, 2.0)
-        impacts += model.advance(Fraction(repr(start + (k + 1) * dwell))).impacts
-    return min((i.t_start for i in impacts), key=lambda t: abs(t - near))
-
-
 @pytest.mark.slow
 def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp_path):
     from rimd_sim.analysis.identify import identify
 
     rig = SECOND_RIG
     design = identification_steps(SimConfig().with_parameters(rig), steps=4, dwell=6.0, settle=2.0)
-    hidden = _impact_near(rig, design.frequencies, 15.0, 6.0)
+    hidden = impact_near(rig, design.frequencies, 15.0, 6.0)
     faults = [{"channel": "impact_force", "kind": "dropout", "start": round(hidden - 0.15, 3), "duration": 0.3},
               {"channel": "rimd_displacement", "kind": "block_loss", "start": 19.0, "duration": 3.0,
                "magnitude": 0.3},

@@ -226,3 +226,21 @@ def record_through_rig(rigs, out: Path, params: Mapping[str, float], schedule: S
         processes.stop_all()
         rig.stop()
     return exp_dir / "recording"
+
+
+def impact_near(rig: Mapping[str, float], freqs: Sequence[float], near: float, dwell: float,
+                start: float = 2.0) -> float:
+    """The start (s) of the impact nearest ``near`` in the core's run of ``rig`` on the experiment's timeline (from
+    rest at ``freqs[0]``, step ``k`` from ``start + k * dwell``, ramps at 2 Hz/s): where to put a fault over one."""
+    from rimd_sim.core import SimConfig
+    from rimd_sim.core.model import RigModel
+
+    config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
+                                          "motor.initial_setpoint": freqs[0]})
+    model = RigModel(config, channels=False, truth=False)
+    impacts = list(model.advance(Fraction(repr(start))).impacts)
+    for k, f in enumerate(freqs):
+        if k:
+            impacts += model.set_motor_frequency(f, 2.0)
+        impacts += model.advance(Fraction(repr(start + (k + 1) * dwell))).impacts
+    return min((i.t_start for i in impacts), key=lambda t: abs(t - near))
