@@ -151,6 +151,20 @@ def battery(args: argparse.Namespace, work: Path) -> None:
         captures(rigs, work)
 
 
+def _core_case(i: int, rig: dict, work: Path, case: str, schedule: Schedule) -> tuple[dict | None, float]:
+    """Rig ``i`` run by the core on ``schedule``, written as the recorder writes it, identified.
+
+    Returns the report (None, said on a line, when refused) and the wall time.
+    """
+    recording = work / f"rig{i}_{case}.mcap"
+    write_core_recording(recording, rig, schedule)
+    report, wall, _ = _identify(recording, work / f"id{i}_{case}")
+    if "refused" in report:
+        print(f"{i:>3} REFUSED: {report['refused']}")
+        return None, wall
+    return report, wall
+
+
 def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
     """Each rig with a force dropout over an impact, block loss and a stuck laser, against its clean answer."""
     from rimd_sim.analysis.design import identification_steps
@@ -168,11 +182,9 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
         hidden = impact_near(rig, design.frequencies, 40.0, DWELL)
         extra = [{"channel": "impact_force", "kind": "dropout", "start": round(hidden - 0.15, 3), "duration": 0.3},
                  *FAULTS]
-        recording = work / f"rig{i}_faults.mcap"
-        write_core_recording(recording, rig, Schedule(design.frequencies, dwell=DWELL, faults=extra, seed=100 + i))
-        report, wall, _ = _identify(recording, work / f"id{i}_faults")
-        if "refused" in report:
-            print(f"{i:>3} REFUSED: {report['refused']}")
+        report, _ = _core_case(i, rig, work, "faults", Schedule(design.frequencies, dwell=DWELL, faults=extra,
+                                                                seed=100 + i))
+        if report is None:
             continue
         diffs = [_error(n, report["estimates"][n]["value"], clean[i]["estimates"][n]["value"]) for n in NAMES]
         ok = all(abs(d) <= (20.0 if n == "gap" else 1.0) for n, d in zip(NAMES, diffs, strict=True))
@@ -194,11 +206,9 @@ def captures(rigs: list[dict], work: Path) -> None:
     ok_all = 0
     for i, rig in enumerate(rigs):
         design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
-        recording = work / f"rig{i}_captures.mcap"
-        write_core_recording(recording, rig, Schedule(design.frequencies, dwell=DWELL, capture=True, seed=100 + i))
-        report, wall, _ = _identify(recording, work / f"id{i}_captures")
-        if "refused" in report:
-            print(f"{i:>3} REFUSED: {report['refused']}")
+        report, wall = _core_case(i, rig, work, "captures", Schedule(design.frequencies, dwell=DWELL, capture=True,
+                                                                     seed=100 + i))
+        if report is None:
             continue
         errs = [_error(n, report["estimates"][n]["value"], rig[n]) for n in ("mass", "contact.stiffness",
                                                                             "contact.damping")]
