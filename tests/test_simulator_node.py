@@ -218,6 +218,9 @@ def test_real_time_counts_and_exact_stamps(ros_processes, ros_executor):
 
 
 @pytest.mark.running
+# At 4x too (see above): at factor 0 this test's own subscriber, under load, fell more than the publishers' history
+# behind after the resume (first_index 165200 then 200000: a loss by the DDS contract, not a gap in the rig).
+@pytest.mark.parametrize("fast_rig", ["4.0"], indirect=True)
 def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     """Pause freezes the stream (no new blocks), resume continues it without a gap in first_index; a
     perturbation makes the hammer's inertial velocity jump by the requested amount at the stated time;
