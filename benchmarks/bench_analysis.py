@@ -29,7 +29,8 @@ import numpy as np  # noqa: E402
 
 from rimd_sim.analysis.peterka import peterka  # noqa: E402
 from rimd_sim.analysis.sweep import sweep  # noqa: E402
-from rimd_sim.core import RigModel, SimConfig  # noqa: E402
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 
 
 def main() -> None:

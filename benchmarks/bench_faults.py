@@ -35,7 +35,7 @@ VARIANTS = {
 
 def core(seconds: float) -> dict[str, float]:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rimd_sim"))
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
     from rimd_sim.core.capture import CaptureConfig
     from rimd_sim.core.faults import parse_fault_entry
     from rimd_sim.core.simulator import RigSimulator

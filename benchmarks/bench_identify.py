@@ -101,7 +101,7 @@ def _header() -> str:
 
 def battery(args: argparse.Namespace, work: Path) -> None:
     from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     rigs = draw_rigs(args.rigs)
     print(f"battery: {len(rigs)} rigs (seed 24), 6 steps of {DWELL:g} s each, recorded "
@@ -168,7 +168,7 @@ def _core_case(i: int, rig: dict, work: Path, case: str, schedule: Schedule) -> 
 def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
     """Each rig with a force dropout over an impact, block loss and a stuck laser, against its clean answer."""
     from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     print(f"\nfaults (in the core): a 0.3 s force dropout over an impact near 40 s, block loss 30 % on the RIMD laser "
           f"30-33 s, the cart laser stuck 20-20.5 s; the answer against the clean one; {_load()}")
@@ -199,7 +199,7 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
 def captures(rigs: list[dict], work: Path) -> None:
     """Each rig with the 1 MHz triggered captures: the contact's parameters against the truth."""
     from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     print(f"\ncaptures (in the core, 1 MHz): the contact's parameters against the truth; {_load()}")
     print("rig        m %        k %        c %  k and c within 0.5 %")
@@ -221,7 +221,7 @@ def captures(rigs: list[dict], work: Path) -> None:
 def timing(work: Path) -> None:
     """The default rig, 60 s of 6 steps, identified in a new process (must show 6: <= 60 s on an idle machine)."""
     from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     design = identification_steps(SimConfig(), dwell=DWELL, settle=3.0)
     recording = work / "default.mcap"

@@ -44,7 +44,8 @@ import numpy as np  # noqa: E402
 
 from rimd_sim.analysis import peterka as pk  # noqa: E402
 from rimd_sim.analysis.executor import run_tasks  # noqa: E402
-from rimd_sim.core import RigModel, SimConfig  # noqa: E402
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 
 
 def load() -> str:

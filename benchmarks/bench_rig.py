@@ -111,7 +111,7 @@ def main() -> None:
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0:
         parser.error("--seconds and --period must be positive, --warmup not negative")
 
-    from rimd_sim.core import load_config
+    from rimd_sim.core.config import load_config
     from rimd_sim.core.config import find_config_file
     from rimd_sim.recording.reader import RecordingError
 

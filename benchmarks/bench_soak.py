@@ -644,7 +644,7 @@ def main() -> None:
         parser.error("--minutes and --period must be positive")
     seconds = args.minutes * 60.0
 
-    from rimd_sim.core import load_config
+    from rimd_sim.core.config import load_config
     from rimd_sim.core.config import find_config_file
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate

@@ -20,7 +20,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from rimd_sim.analysis.pulse import pulse
-from rimd_sim.core import RigModel, load_config
+from rimd_sim.core.config import load_config
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.config import find_config_file
 
 TARGETS = {"F_A": 82.4, "F_B": 120.0, "ratio": 50.0 / 80.0}

@@ -21,7 +21,7 @@ import pytest
 
 from rimd_sim.analysis.contact_pulse import PulseSamples, fit_pulses, pulse_of, pulse_peaks
 from rimd_sim.analysis.pulse import pulse
-from rimd_sim.core import SimConfig
+from rimd_sim.core.config import SimConfig
 
 #: (mass kg, stiffness N/m, damping N s/m): contact damping ratios c / 2 sqrt(k m) of 0.09, 0.66 (the paper's),
 #: 1.0 and 5.3 (the battery's corners).

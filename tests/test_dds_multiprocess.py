@@ -33,7 +33,7 @@ def _ns(stamp) -> int:  # noqa: ANN001
 def test_sample_blocks_and_the_motor_service_across_processes(ros_processes, ros_executor):
     import rclpy
 
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
     from rimd_sim.core.simulator import RigSimulator
 
     config = SimConfig().with_parameters({"gap": 0.0})

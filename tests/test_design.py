@@ -18,7 +18,7 @@ import pytest
 
 from rimd_sim.analysis.design import DesignError, identification_steps
 from rimd_sim.analysis.sweep import sweep
-from rimd_sim.core import SimConfig
+from rimd_sim.core.config import SimConfig
 
 
 def test_default_rig_gets_six_steady_band_a_steps_around_the_papers_resonance():

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from rimd_sim.analysis.dynamics import CHAOTIC, NO_IMPACT, classify, steady_orbit
-from rimd_sim.core import ConfigError, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.config import find_config_file, load_config
 
 

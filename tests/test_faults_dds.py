@@ -132,7 +132,7 @@ def _events(messages):  # noqa: ANN001
 @pytest.mark.timeout(300)
 def test_every_fault_kind_is_detected_from_the_stream_and_ends_the_others_untouched(fault_runs):
     from rimd_sim.analysis.faultscan import drift_fit, drift_window, impact_times, scan_channel
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     base, faulted = fault_runs["baseline"], fault_runs["faulted"]
     # The truth from /rig/faults: a start and an end per fault, at the stated times.
@@ -226,7 +226,7 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
 
     from rimd_msgs.msg import SampleBlock
     from rimd_sim.analysis.faultscan import Block, scan_channel
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     blocks = []
     for d, _now, wall_ns in data[FORCE]:

@@ -31,7 +31,7 @@ import pytest
 from harness.ident_rigs import Schedule, draw_rigs, impact_near, record_through_rig, write_core_recording
 from harness.outputs import read_json
 from rimd_sim.analysis.design import identification_steps
-from rimd_sim.core import SimConfig
+from rimd_sim.core.config import SimConfig
 
 #: The issue's "second rig": every value off the defaults, an overdamped contact (c / 2 sqrt(k m) = 1.66).
 SECOND_RIG = draw_rigs(14)[0]
@@ -112,7 +112,7 @@ def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd
     assert abs(kick["time_s"] + origin - kick_at) < 2e-3, (kick, kick_at, origin)
     assert kick["velocity_m_s"] == pytest.approx(-0.03, rel=0.05)
     # identified.yaml runs as it is: the core loads it, the simulator node applies it (namespace /rig)
-    from rimd_sim.core import load_config
+    from rimd_sim.core.config import load_config
 
     loaded = load_config(out / "identified.yaml")
     assert loaded.rig.mass == pytest.approx(report["estimates"]["mass"]["value"])

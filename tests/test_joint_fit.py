@@ -24,7 +24,7 @@ from harness.ident_rigs import Schedule, draw_rigs, write_core_recording
 from rimd_sim.analysis import ident_local as loc
 from rimd_sim.analysis import recorded as rec
 from rimd_sim.analysis.identify import local_stages
-from rimd_sim.core import SimConfig
+from rimd_sim.core.config import SimConfig
 
 RIG = draw_rigs(14)[5]
 

@@ -29,7 +29,7 @@ import rimd_sim
 from harness.outputs import read_json
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics import steady_orbit
-from rimd_sim.core import load_config
+from rimd_sim.core.config import load_config
 from rimd_sim.core.ensemble import StopRule, run_cells
 from rimd_sim.core.model import model_for
 

@@ -21,7 +21,8 @@ from rosgraph_msgs.msg import Clock
 from harness.ros import call_service, spin_until
 from rimd_msgs.msg import ImpactEvent, MotorState, SampleBlock
 from rimd_msgs.srv import SetMotorFrequency
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 

@@ -30,7 +30,7 @@ from rimd_sim.analysis.dynamics import steady_orbit
 from rimd_sim.analysis.lyapunov import largest_lyapunov
 from rimd_sim.analysis.peterka import basins, peterka
 from rimd_sim.analysis.sweep import sweep
-from rimd_sim.core import load_config
+from rimd_sim.core.config import load_config
 from rimd_sim.core.config import find_config_file
 from rimd_sim.core.ensemble import StopRule, run_cells
 from rimd_sim.core.model import model_for

@@ -8,7 +8,8 @@ import math
 
 import pytest
 
-from rimd_sim.core import ConfigError, SimConfig, load_config
+from rimd_sim.core.config import SimConfig, load_config
+from rimd_sim.core.errors import ConfigError
 from rimd_sim.core.config import PARAMETERS, find_config_file, read_ros_parameters
 
 

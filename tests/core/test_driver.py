@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 
 import rimd_sim
-from rimd_sim.core import kernel, rigid
+import rimd_sim.core.kernel as kernel
+import rimd_sim.core.rigid as rigid
 from rimd_sim.core.config import STRUCTURE_MODELS
 from rimd_sim.core.model import MODELS
 
@@ -122,7 +123,9 @@ def test_the_registry_holds_every_structure_model():
 def test_a_running_model_keeps_its_model_and_its_modes_count():
     """RigModel refuses to be reconfigured to another model (its state would not fit), and a start whose modes do
     not fit the model, each with a message naming what was wrong."""
-    from rimd_sim.core import CommandError, ConfigError, RigModel, SimConfig
+    from rimd_sim.core.config import SimConfig
+    from rimd_sim.core.errors import CommandError, ConfigError
+    from rimd_sim.core.model import RigModel
 
     model = RigModel(SimConfig(), channels=False, truth=False)
     with pytest.raises(CommandError, match=r"structure.model cannot change while the model runs \(rigid to two_mass\)"):
@@ -143,7 +146,8 @@ def test_a_copied_model_continues_exactly_as_the_original_and_alone(name):
 
     import numpy as np
 
-    from rimd_sim.core import RigModel, SimConfig
+    from rimd_sim.core.config import SimConfig
+    from rimd_sim.core.model import RigModel
 
     config = SimConfig().with_parameters({"structure.model": name})
     original = RigModel(config)

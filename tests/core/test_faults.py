@@ -7,7 +7,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from rimd_sim.core import CommandError, ConfigError, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.errors import CommandError, ConfigError
 from rimd_sim.core.capture import CaptureConfig
 from rimd_sim.core.faults import parse_fault_entry
 from rimd_sim.core.simulator import RigSimulator
@@ -99,7 +100,7 @@ def test_capture_acceleration_outside_contact_is_close_to_the_full_1_mhz_evaluat
     """The fast acceleration is evaluated in contact only and interpolated from the 20 kHz channel outside:
     within 0.5 m/s^2 (noise of 0.05 included) of evaluating the model at every microsecond, where the
     contact reaches hundreds of m/s^2; the captured force peak within 0.5 % of the impact's."""
-    from rimd_sim.core import RigModel
+    from rimd_sim.core.model import RigModel
 
     sim = RigSimulator(CFG, capture=CaptureConfig(enabled=True))
     captures, impacts = [], []

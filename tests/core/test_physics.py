@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.contact import CONTACT_LAWS
 
 from . import reference

@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rimd_sim.core import CommandError, ConfigError, RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.errors import CommandError, ConfigError
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.simulator import RigSimulator
 
 CORE_SRC = str(Path(__file__).resolve().parents[2] / "rimd_sim")

@@ -20,7 +20,9 @@ from scipy.integrate import solve_ivp
 
 import rimd_sim
 from rimd_sim.analysis.pulse import LEAD_GAP, force_peaks, pulse, ring_frequency
-from rimd_sim.core import CommandError, ConfigError, RigModel, SimConfig, load_config
+from rimd_sim.core.config import SimConfig, load_config
+from rimd_sim.core.errors import CommandError, ConfigError
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.config import find_config_file
 from rimd_sim.core.model import MODELS
 from rimd_sim.core.simulator import RigSimulator

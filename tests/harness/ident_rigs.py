@@ -87,7 +87,7 @@ class Written:
 
 def rig_config(params: Mapping[str, float], schedule: Schedule):  # noqa: ANN201 - SimConfig
     """The simulator's configuration for ``params`` (flat names over the defaults) run under ``schedule``."""
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
 
     f0 = schedule.frequencies[0]
     return SimConfig().with_parameters({**params, "motor.initial_frequency": f0, "motor.initial_setpoint": f0,
@@ -232,7 +232,7 @@ def impact_near(rig: Mapping[str, float], freqs: Sequence[float], near: float, d
                 start: float = 2.0) -> float:
     """The start (s) of the impact nearest ``near`` in the core's run of ``rig`` on the experiment's timeline (from
     rest at ``freqs[0]``, step ``k`` from ``start + k * dwell``, ramps at 2 Hz/s): where to put a fault over one."""
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
     from rimd_sim.core.model import RigModel
 
     config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],

@@ -55,7 +55,7 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75,
     """
     from mcap_ros2.writer import Writer
 
-    from rimd_sim.core import SimConfig
+    from rimd_sim.core.config import SimConfig
     from rimd_sim.core.simulator import RigSimulator
 
     config = SimConfig().with_parameters({"motor.initial_frequency": frequency_hz,

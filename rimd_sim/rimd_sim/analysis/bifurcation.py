@@ -16,11 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.errors import ConfigError
 
-from .dynamics import check_frequencies, classify, nondimensional
-from .executor import run_tasks
+from rimd_sim.analysis.dynamics import check_frequencies, classify, nondimensional
+from rimd_sim.analysis.executor import run_tasks
 
 __all__ = ["BifurcationBranch", "BifurcationPoint", "bifurcation"]
 

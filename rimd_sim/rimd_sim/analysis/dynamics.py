@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.errors import ConfigError
 
 __all__ = [

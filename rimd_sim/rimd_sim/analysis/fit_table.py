@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 
 __all__ = ["TableEntry", "TableError", "evaluate", "fit_table", "read_table"]
 

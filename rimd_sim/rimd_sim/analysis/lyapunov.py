@@ -54,10 +54,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.errors import ConfigError
 
-from .dynamics import CHAOTIC, check_frequency, constant_frequency, steady_orbit
+from rimd_sim.analysis.dynamics import CHAOTIC, check_frequency, constant_frequency, steady_orbit
 
 __all__ = ["CHAOS_THRESHOLD", "LyapunovResult", "is_chaotic", "largest_lyapunov"]
 

@@ -34,13 +34,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rimd_sim.core import SimConfig
+from rimd_sim.core.config import SimConfig
 from rimd_sim.core.ensemble import StopRule, run_cells
 from rimd_sim.core.errors import ConfigError, IntegrationError
 from rimd_sim.core.model import model_for
 
-from .dynamics import check_frequencies, check_frequency, steady_orbit
-from .executor import run_tasks
+from rimd_sim.analysis.dynamics import check_frequencies, check_frequency, steady_orbit
+from rimd_sim.analysis.executor import run_tasks
 
 __all__ = ["BasinsResult", "PeterkaResult", "START_NAMES", "basins", "peterka"]
 

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .sweep import SweepResult  # noqa: E402
+from rimd_sim.analysis.sweep import SweepResult  # noqa: E402
 
 
 def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa: ANN001

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.config import SimConfig
-from ..core.errors import ConfigError
-from ..core.model import RigModel
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.model import RigModel
 
 __all__ = ["PulseResult", "force_peaks", "pulse", "ring_frequency"]
 

@@ -23,11 +23,12 @@ from typing import Literal
 
 import numpy as np
 
-from rimd_sim.core import RigModel, SimConfig
+from rimd_sim.core.config import SimConfig
+from rimd_sim.core.model import RigModel
 from rimd_sim.core.errors import ConfigError
 
-from .dynamics import check_frequencies
-from .executor import run_tasks, scheduler_address
+from rimd_sim.analysis.dynamics import check_frequencies
+from rimd_sim.analysis.executor import run_tasks, scheduler_address
 
 __all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .config import (
+from rimd_sim.core.config import (
     CHANNEL_NAMES,
     ChannelConfig,
     ContactParams,
@@ -12,9 +12,9 @@ from .config import (
     SimConfig,
     load_config,
 )
-from .contact import CONTACT_LAWS, ContactLaw, contact_force
-from .errors import CommandError, ConfigError, IntegrationError, RimdError
-from .model import TRUTH_FIELDS, Impact, ModelOutput, MotorState, RigModel, StroboPoint
+from rimd_sim.core.contact import CONTACT_LAWS, ContactLaw, contact_force
+from rimd_sim.core.errors import CommandError, ConfigError, IntegrationError, RimdError
+from rimd_sim.core.model import TRUTH_FIELDS, Impact, ModelOutput, MotorState, RigModel, StroboPoint
 
 __all__ = [
     "CHANNEL_NAMES",

@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .params import build, group, param
+from rimd_sim.core.params import build, group, param
 
 if TYPE_CHECKING:
-    from .config import ChannelConfig
+    from rimd_sim.core.config import ChannelConfig
 
 __all__ = ["CaptureConfig", "CaptureRecord", "CaptureSettings", "TriggeredCapture"]
 

@@ -27,12 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .capture import CaptureConfig
-from .contact import CONTACT_LAWS
-from .errors import ConfigError
-from .files import read_yaml
-from .pacing import LockstepSettings
-from .params import Param, build, group, keyed, param, parameters, to_flat
+from rimd_sim.core.capture import CaptureConfig
+from rimd_sim.core.contact import CONTACT_LAWS
+from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.files import read_yaml
+from rimd_sim.core.pacing import LockstepSettings
+from rimd_sim.core.params import Param, build, group, keyed, param, parameters, to_flat
 
 __all__ = [
     "CHANNEL_NAMES",

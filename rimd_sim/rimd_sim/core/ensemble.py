@@ -54,9 +54,9 @@ from functools import cache
 
 import numpy as np
 
-from . import kernel as k
-from .errors import ConfigError
-from .model import MODELS
+import rimd_sim.core.kernel as k
+from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.model import MODELS
 
 __all__ = [
     "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "EnsembleResult", "StopRule", "run_cells",

@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import CHANNEL_NAMES, ChannelConfig
-from .errors import CommandError
+from rimd_sim.core.config import CHANNEL_NAMES, ChannelConfig
+from rimd_sim.core.errors import CommandError
 
 __all__ = [
     "FAULT_KINDS",

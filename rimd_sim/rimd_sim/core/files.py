@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .errors import InputError
+from rimd_sim.core.errors import InputError
 
 __all__ = ["config_dirs", "read_yaml", "resolve_config"]
 

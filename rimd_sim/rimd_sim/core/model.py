@@ -26,10 +26,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import kernel as k
-from . import rigid, structural
-from .config import CHANNEL_NAMES, STRUCTURE_MODELS, SimConfig
-from .errors import CommandError, ConfigError, IntegrationError
+import rimd_sim.core.kernel as k
+import rimd_sim.core.rigid as rigid
+import rimd_sim.core.structural as structural
+from rimd_sim.core.config import CHANNEL_NAMES, STRUCTURE_MODELS, SimConfig
+from rimd_sim.core.errors import CommandError, ConfigError, IntegrationError
 
 __all__ = [
     "MODELS", "Impact", "ModelOutput", "MotorState", "PhysicsModel", "RigModel", "StroboPoint", "as_time",

@@ -44,8 +44,8 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from .errors import ConfigError
-from .params import group, param
+from rimd_sim.core.errors import ConfigError
+from rimd_sim.core.params import group, param
 
 __all__ = [
     "ALL_TOPICS",

@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import ConfigError
+from rimd_sim.core.errors import ConfigError
 
 __all__ = ["BAD_REGEX_LISTS", "Param", "build", "defaults", "group", "keyed", "param", "parameters",
            "regex_list_problem", "to_flat", "validate_all"]

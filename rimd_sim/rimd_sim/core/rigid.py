@@ -14,8 +14,8 @@ import math
 
 import numpy as np
 
-from .contact import CONTACT_LAWS
-from .kernel import (
+from rimd_sim.core.contact import CONTACT_LAWS
+from rimd_sim.core.kernel import (
     CONTACT,
     F_VIMP,
     N_PARAM,

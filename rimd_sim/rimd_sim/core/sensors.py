@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from scipy import signal
 
-from .config import CHANNEL_NAMES, ChannelConfig
+from rimd_sim.core.config import CHANNEL_NAMES, ChannelConfig
 
 __all__ = ["Instrument", "Reading"]
 

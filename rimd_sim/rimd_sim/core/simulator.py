@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from .capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig, CaptureRecord, TriggeredCapture
-from .config import CHANNEL_NAMES, SimConfig
-from .errors import CommandError, ConfigError
-from .faults import FaultEvent, FaultLayer, FaultSpec, validate_fault
-from .model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, model_for, samples_before
-from .sensors import Instrument
+from rimd_sim.core.capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig, CaptureRecord, TriggeredCapture
+from rimd_sim.core.config import CHANNEL_NAMES, SimConfig
+from rimd_sim.core.errors import CommandError, ConfigError
+from rimd_sim.core.faults import FaultEvent, FaultLayer, FaultSpec, validate_fault
+from rimd_sim.core.model import Impact, ModelOutput, MotorState, RigModel, StroboPoint, as_time, model_for, samples_before
+from rimd_sim.core.sensors import Instrument
 
 __all__ = ["AppliedCommand", "ChannelBlock", "RigSimulator", "SimBlock"]
 

@@ -42,8 +42,8 @@ import math
 
 import numpy as np
 
-from . import rigid
-from .kernel import (
+import rimd_sim.core.rigid as rigid
+from rimd_sim.core.kernel import (
     CONTACT,
     F_VIMP,
     N_PARAM,

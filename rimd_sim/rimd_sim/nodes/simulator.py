@@ -53,7 +53,8 @@ from rimd_msgs.msg import (
     SampleBlock,
 )
 from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
-from rimd_sim.core import CHANNEL_NAMES, CommandError, ConfigError, IntegrationError, SimConfig
+from rimd_sim.core.config import CHANNEL_NAMES, SimConfig
+from rimd_sim.core.errors import CommandError, ConfigError, IntegrationError
 from rimd_sim.core.config import MAX_RAMP_RATE, NODE_PARAMETERS, PARAMETERS, SimulatorNodeSettings
 from rimd_sim.core.faults import parse_fault_entry
 from rimd_sim.core.pacing import Go, Hold, Pacer, Wait

@@ -9,7 +9,7 @@ import argparse
 
 from rimd_sim.cli import CommandError, count, number, positive_float
 
-from ._analysis_io import (
+from rimd_sim.verbs._analysis_io import (
     add_map_arguments,
     add_model_arguments,
     progress_printer,
@@ -35,7 +35,8 @@ def main(args: argparse.Namespace) -> int:
     """Compute the basins and write their files."""
     from rimd_sim.analysis.peterka import basins, basins_table, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
-    from rimd_sim.core import RimdError, load_config
+    from rimd_sim.core.config import load_config
+    from rimd_sim.core.errors import RimdError
 
     try:
         config = load_config(args.config, {"gap": args.gap_mm * 1e-3})

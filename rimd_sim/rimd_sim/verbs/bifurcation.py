@@ -11,7 +11,7 @@ import sys
 
 from rimd_sim.cli import CommandError, count, positive_float
 
-from ._analysis_io import (
+from rimd_sim.verbs._analysis_io import (
     add_model_arguments,
     add_scheduler_argument,
     check_range,
@@ -40,7 +40,8 @@ def main(args: argparse.Namespace) -> int:
 
     from rimd_sim.analysis.bifurcation import bifurcation, branch_table
     from rimd_sim.analysis.plots import plot_bifurcation
-    from rimd_sim.core import RimdError, load_config
+    from rimd_sim.core.config import load_config
+    from rimd_sim.core.errors import RimdError
 
     if args.direction not in ("up", "down", "both"):
         raise CommandError(f"--direction {args.direction!r} refused: must be up, down or both")

@@ -13,7 +13,7 @@ import sys
 
 from rimd_sim.cli import CommandError, count, gap_mm
 
-from ._analysis_io import (
+from rimd_sim.verbs._analysis_io import (
     add_map_arguments,
     add_model_arguments,
     check_range,
@@ -51,7 +51,8 @@ def main(args: argparse.Namespace) -> int:
         save_peterka_npz,
     )
     from rimd_sim.analysis.plots import plot_peterka
-    from rimd_sim.core import RimdError, load_config
+    from rimd_sim.core.config import load_config
+    from rimd_sim.core.errors import RimdError
 
     check_range("gap", args.gap_min_mm, args.gap_max_mm, allow_zero=True, unit="-mm")
     check_range("f", args.f_min, args.f_max)

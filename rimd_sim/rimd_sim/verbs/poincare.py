@@ -12,7 +12,7 @@ import sys
 
 from rimd_sim.cli import CommandError, count, number, positive_float
 
-from ._analysis_io import add_model_arguments, check_positive, write_csv, write_summary
+from rimd_sim.verbs._analysis_io import add_model_arguments, check_positive, write_csv, write_summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,7 +41,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics import classify, constant_frequency, nondimensional
     from rimd_sim.analysis.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.plots import plot_poincare
-    from rimd_sim.core import RimdError, load_config
+    from rimd_sim.core.config import load_config
+    from rimd_sim.core.errors import RimdError
     from rimd_sim.core.model import TRUTH_FIELDS, RigModel
 
     if args.frequency is not None and args.ratio is not None:

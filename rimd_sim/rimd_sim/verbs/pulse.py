@@ -29,9 +29,10 @@ def main(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rimd_sim.analysis.pulse import plot_pulse, pulse
-    from rimd_sim.core import RimdError, load_config
+    from rimd_sim.core.config import load_config
+    from rimd_sim.core.errors import RimdError
 
-    from ._analysis_io import write_summary
+    from rimd_sim.verbs._analysis_io import write_summary
 
     try:
         result = pulse(load_config(args.config), args.velocity, rate=args.rate)

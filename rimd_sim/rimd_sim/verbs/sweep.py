@@ -12,9 +12,10 @@ import sys
 import numpy as np
 
 from rimd_sim.cli import CommandError, count
-from rimd_sim.core import ConfigError, load_config
+from rimd_sim.core.config import load_config
+from rimd_sim.core.errors import ConfigError
 
-from ._analysis_io import (
+from rimd_sim.verbs._analysis_io import (
     add_model_arguments,
     add_scheduler_argument,
     check_range,
