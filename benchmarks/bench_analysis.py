@@ -27,10 +27,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
 
-from rimd_sim.analysis.peterka import peterka  # noqa: E402
-from rimd_sim.analysis.sweep import sweep  # noqa: E402
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.model import RigModel
+from rimd_sim.analysis.dynamics.peterka import peterka  # noqa: E402
+from rimd_sim.analysis.dynamics.sweep import sweep  # noqa: E402
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import SimConfig
 
 
 def main() -> None:

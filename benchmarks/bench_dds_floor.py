@@ -5,7 +5,7 @@ channel blocks are CDR bytes encoded once, so this is only rclpy's ``publish`` a
 100 blocks/s, the four channel blocks (20, 20, 200 and 200 samples), a truth block (10 samples of 10
 arrays and 10 flags) and a motor state, on 6 reliable topics of depth 110: 600 messages/s, 0.49 MB/s.
 Subscriber processes take them as the rig's recorder and Rerun bridge do (raw subscriptions taken every
-20 ms by ``rimd_sim.nodes._run.PolledSubscriptions``, events executor) and do nothing with them. The same
+20 ms by ``rimd_sim.ros.nodes._run.PolledSubscriptions``, events executor) and do nothing with them. The same
 Fast DDS profile as the nodes (``rimd_sim/nodes/fastdds_profiles.xml``), a ROS domain of its own, localhost.
 
 Printed: for 0, 1 and 2 subscribers (the rig has two, the recorder and the bridge), the CPU of the publisher
@@ -50,7 +50,7 @@ def publisher(seconds: float, subscribers: int) -> None:
     from rclpy.serialization import serialize_message
 
     from rimd_msgs.msg import MotorState, RigState, SampleBlock
-    from rimd_sim.recording.cdr import SampleBlockEncoder
+    from rimd_sim.io.cdr import SampleBlockEncoder
 
     rclpy.init()
     node = rclpy.create_node("bench_dds_floor_pub")
@@ -87,7 +87,7 @@ def subscriber(seconds: float) -> None:
     from rclpy.experimental import EventsExecutor
 
     from rimd_msgs.msg import MotorState, RigState, SampleBlock
-    from rimd_sim.nodes._run import PolledSubscriptions, PollingNode
+    from rimd_sim.ros.nodes._run import PolledSubscriptions, PollingNode
 
     class Sink(PollingNode):
         def __init__(self) -> None:
@@ -144,12 +144,12 @@ def main() -> None:
         subscriber(args.seconds)
         return
     sys.path.insert(0, str(REPO / "tests"))
-    import rimd_sim.nodes
+    import rimd_sim.ros.nodes
     from harness.domains import lease_domain_id
 
     lease = lease_domain_id()
     env = dict(os.environ, ROS_DOMAIN_ID=str(lease.domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(Path(rimd_sim.nodes.__file__).with_name("fastdds_profiles.xml")))
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(Path(rimd_sim.ros.nodes.__file__).with_name("fastdds_profiles.xml")))
     try:
         print(f"bench_dds_floor: 600 messages/s (the default rig's), {args.seconds:g} s per case, "
               f"ROS_DOMAIN_ID {lease.domain_id}")

@@ -35,10 +35,10 @@ VARIANTS = {
 
 def core(seconds: float) -> dict[str, float]:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rimd_sim"))
-    from rimd_sim.core.config import SimConfig
-    from rimd_sim.core.capture import CaptureConfig
-    from rimd_sim.core.faults import parse_fault_entry
-    from rimd_sim.core.simulator import RigSimulator
+    from rimd_sim.instruments.faults import parse_fault_entry
+    from rimd_sim.instruments.rig_simulator import RigSimulator
+    from rimd_sim.settings.capture import CaptureConfig
+    from rimd_sim.settings.config import SimConfig
 
     cfg = SimConfig().with_parameters({"motor.initial_frequency": 3.75})
     out = {}

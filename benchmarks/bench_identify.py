@@ -100,8 +100,8 @@ def _header() -> str:
 
 
 def battery(args: argparse.Namespace, work: Path) -> None:
-    from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.analysis.identification.design import identification_steps
+    from rimd_sim.settings.config import SimConfig
 
     rigs = draw_rigs(args.rigs)
     print(f"battery: {len(rigs)} rigs (seed 24), 6 steps of {DWELL:g} s each, recorded "
@@ -115,7 +115,7 @@ def battery(args: argparse.Namespace, work: Path) -> None:
     clean: dict[int, dict] = {}
     factory = None
     if not args.core:   # each rig in lockstep with the experiment's recorder, on a ROS domain of its own
-        from rimd_sim.testing import RigFactory
+        from rimd_sim.ros.testing import RigFactory
 
         factory = RigFactory(work)
     try:
@@ -167,8 +167,8 @@ def _core_case(i: int, rig: dict, work: Path, case: str, schedule: Schedule) -> 
 
 def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
     """Each rig with a force dropout over an impact, block loss and a stuck laser, against its clean answer."""
-    from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.analysis.identification.design import identification_steps
+    from rimd_sim.settings.config import SimConfig
 
     print(f"\nfaults (in the core): a 0.3 s force dropout over an impact near 40 s, block loss 30 % on the RIMD laser "
           f"30-33 s, the cart laser stuck 20-20.5 s; the answer against the clean one; {_load()}")
@@ -198,8 +198,8 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
 
 def captures(rigs: list[dict], work: Path) -> None:
     """Each rig with the 1 MHz triggered captures: the contact's parameters against the truth."""
-    from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.analysis.identification.design import identification_steps
+    from rimd_sim.settings.config import SimConfig
 
     print(f"\ncaptures (in the core, 1 MHz): the contact's parameters against the truth; {_load()}")
     print("rig        m %        k %        c %  k and c within 0.5 %")
@@ -220,8 +220,8 @@ def captures(rigs: list[dict], work: Path) -> None:
 
 def timing(work: Path) -> None:
     """The default rig, 60 s of 6 steps, identified in a new process (must show 6: <= 60 s on an idle machine)."""
-    from rimd_sim.analysis.design import identification_steps
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.analysis.identification.design import identification_steps
+    from rimd_sim.settings.config import SimConfig
 
     design = identification_steps(SimConfig(), dwell=DWELL, settle=3.0)
     recording = work / "default.mcap"

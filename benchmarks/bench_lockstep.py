@@ -1,6 +1,6 @@
 """How fast the rig runs in lockstep with its recorder and Rerun bridge, against the open-loop rig, in one run.
 
-Two rigs, one after the other, each the product's own bring-up (``rimd_sim.bringup``, as ``rimd rig`` starts
+Two rigs, one after the other, each the product's own bring-up (``rimd_sim.ros.bringup``, as ``rimd rig`` starts
 it) with the default configuration, the recorder (into a temporary directory) and the Rerun bridge (sink
 ``save``, an .rrd in the same directory), on a ROS domain of its own:
 
@@ -42,8 +42,8 @@ def cpu_seconds(pid: int) -> float:
 
 def loss(recording: Path) -> dict[str, str]:
     """Per channel: 'complete from 0' or what is missing."""
-    from rimd_sim.recording.cdr import block_span
-    from rimd_sim.recording.reader import open_recording
+    from rimd_sim.io.cdr import block_span
+    from rimd_sim.io.reader import open_recording
 
     out = {}
     rec = open_recording(recording)
@@ -59,9 +59,9 @@ def loss(recording: Path) -> dict[str, str]:
 
 
 def run(mode: str, seconds: float, warmup: float, base: Path, window: float | None = None) -> dict:
-    from rimd_sim.bringup import Rig, plan_rig
-    from rimd_sim.rigclient import RigClient
-    from rimd_sim.testing import lease_domain_id, ros_environment
+    from rimd_sim.ros.bringup import Rig, plan_rig
+    from rimd_sim.ros.clients.rig import RigClient
+    from rimd_sim.ros.testing import lease_domain_id, ros_environment
 
     run_dir = Path(tempfile.mkdtemp(prefix=f"{mode}_{window}_", dir=base))   # a recording of its own
     sim = {} if window is None or mode != "lockstep" else {"lockstep.window": window}

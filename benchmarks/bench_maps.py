@@ -44,8 +44,8 @@ import numpy as np  # noqa: E402
 
 from rimd_sim.analysis import peterka as pk  # noqa: E402
 from rimd_sim.analysis.executor import run_tasks  # noqa: E402
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.model import RigModel
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import SimConfig
 
 
 def load() -> str:
@@ -198,7 +198,7 @@ def dask_scaling(config, size):
 
 
 def single_trajectory(config):
-    from rimd_sim.analysis.sweep import sweep
+    from rimd_sim.analysis.dynamics.sweep import sweep
 
     print(f"\n5. rimd sweep --workers 1 (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300 cycles from rest), {load()}")
     cfg = config.with_parameters({"gap": 1e-3})

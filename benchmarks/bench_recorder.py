@@ -28,8 +28,8 @@ from _nodes import start, stop  # benchmarks/_nodes.py
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from rimd_sim.recording.cdr import block_span
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.cdr import block_span
+from rimd_sim.io.reader import open_recording
 
 BLOCK_TOPICS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
                 "/rig/truth")

@@ -39,7 +39,7 @@ def replay(path: Path, rate: float, env: dict[str, str]) -> None:
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     import rimd_msgs.msg
-    from rimd_sim.recording.reader import open_recording
+    from rimd_sim.io.reader import open_recording
 
     recorded: dict[str, list[int]] = {}
     for msg in open_recording(path).messages():

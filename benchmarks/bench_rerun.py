@@ -104,7 +104,7 @@ def live(seconds: float, sink: str, tmp: Path, batch: int) -> None:
 def offline(seconds: float, tmp: Path) -> None:
     sys.path.insert(0, str(REPO / "tests"))
     from harness.rig_mcap import write_rig_mcap
-    from rimd_sim.verbs.rerun import convert
+    from rimd_sim.cli.verbs.rerun import convert
     from rimd_sim.viz.sinks import SinkSpec
 
     rec = write_rig_mcap(tmp / "rec.mcap", seconds=seconds)

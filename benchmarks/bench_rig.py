@@ -41,7 +41,7 @@ GOAL_RIG_PERCENT = 25.0
 
 def traffic(path: Path, seconds_of_data: float) -> dict:
     """Messages and serialized bytes per topic of the recording, and their rates over ``seconds_of_data``."""
-    from rimd_sim.recording.reader import open_recording
+    from rimd_sim.io.reader import open_recording
 
     counts: dict[str, list[int]] = {}
     for msg in open_recording(path).messages():
@@ -111,9 +111,8 @@ def main() -> None:
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0:
         parser.error("--seconds and --period must be positive, --warmup not negative")
 
-    from rimd_sim.core.config import load_config
-    from rimd_sim.core.config import find_config_file
-    from rimd_sim.recording.reader import RecordingError
+    from rimd_sim.io.reader import RecordingError
+    from rimd_sim.settings.config import find_config_file, load_config
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate
     with soak.RigRun.open("bench_rig_", args.keep) as run:

@@ -81,7 +81,7 @@ EVENTS_TOPIC = "/rig/impact/events"
 MOTOR_TOPIC = "/rig/motor/state"
 DIAG_TOPIC = "/diagnostics"
 
-#: ``python -m rimd_sim.nodes._entry NAME`` of the rig's children -> name in the report, in report order.
+#: ``python -m rimd_sim.ros.nodes._entry NAME`` of the rig's children -> name in the report, in report order.
 NODES = {"simulator": "simulator", "recorder": "recorder", "rerun": "rerun bridge"}
 PARENT = "rimd rig (parent)"
 RERUN_SERVER = "rerun server"
@@ -148,8 +148,8 @@ def rig_processes(rig_pid: int) -> dict[str, int]:
             argv = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0")
         except OSError:
             continue
-        if "rimd_sim.nodes._entry" in argv:
-            entry = argv[argv.index("rimd_sim.nodes._entry") + 1]
+        if "rimd_sim.ros.nodes._entry" in argv:
+            entry = argv[argv.index("rimd_sim.ros.nodes._entry") + 1]
             found[NODES.get(entry, entry)] = pid
         elif "--serve-web" in argv:
             found[RERUN_SERVER] = pid
@@ -272,7 +272,7 @@ def wait_running(rig: subprocess.Popen, log: Path, timeout: float) -> bool:
 
 def stop_rig(rig: subprocess.Popen, procs: dict[str, int]) -> int:
     """SIGINT to ``rimd rig`` (it stops its nodes: simulator first, recorder last); return its exit status."""
-    from rimd_sim.bringup import stop_process
+    from rimd_sim.ros.bringup import stop_process
 
     stop_process(rig, ((signal.SIGINT, 120.0), (signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)),
                  on_timeout=lambda sig: print(f"bench_soak: rimd rig did not stop on {signal.Signals(sig).name}",
@@ -399,8 +399,8 @@ def analyse_recording(path: Path, block_rate: float) -> dict:
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
-    from rimd_sim.recording.cdr import block_span
-    from rimd_sim.recording.reader import open_recording
+    from rimd_sim.io.cdr import block_span
+    from rimd_sim.io.reader import open_recording
 
     start = time.monotonic()
     recording = open_recording(path)
@@ -499,7 +499,7 @@ def rig_names(procs: dict) -> list[str]:
 
 
 def rerun_memory_limit() -> str:
-    from rimd_sim.core.config import find_config_file, read_ros_parameters
+    from rimd_sim.settings.config import find_config_file, read_ros_parameters
 
     try:
         return str(read_ros_parameters(find_config_file("rimd.yaml"), node="rimd_rerun").get("memory_limit", "?"))
@@ -644,8 +644,7 @@ def main() -> None:
         parser.error("--minutes and --period must be positive")
     seconds = args.minutes * 60.0
 
-    from rimd_sim.core.config import load_config
-    from rimd_sim.core.config import find_config_file
+    from rimd_sim.settings.config import find_config_file, load_config
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate
     with RigRun.open("bench_soak_", args.keep) as run:
@@ -670,7 +669,7 @@ def main() -> None:
                                 "from_sample_0": from_sample_0, "tmp": str(tmp)}}
         result["processes"] = {name: process_figures(s) for name, s in series.items()}
         result["logs"] = log_reports((tmp / "rig.log").read_text(errors="replace"))
-        from rimd_sim.recording.reader import RecordingError
+        from rimd_sim.io.reader import RecordingError
 
         try:
             result["recording"] = analyse_recording(tmp / "rec", block_rate)

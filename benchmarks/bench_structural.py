@@ -34,9 +34,12 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_core import time_simulator  # noqa: E402
 
-from rimd_sim.core.config import SimConfig, load_config
-from rimd_sim.core.model import RigModel
-from rimd_sim.core.config import find_config_file  # noqa: E402
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import (
+    SimConfig,
+    find_config_file,  # noqa: E402
+    load_config,
+)
 
 POINTS = [(0.0, 3.75), (0.0, 5.5), (0.0, 7.25), (1.0e-3, 3.0), (2.4e-3, 5.25)]
 

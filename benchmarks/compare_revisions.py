@@ -48,9 +48,9 @@ IDENTITY_PROBE = r"""
 import hashlib, json, math, sys
 from fractions import Fraction
 import numpy as np
-from rimd_sim.core import RigModel, SimConfig, load_config
-from rimd_sim.core.config import find_config_file
-from rimd_sim.core.simulator import RigSimulator
+from rimd_sim.model.rig_model import RigModel, SimConfig, load_config
+from rimd_sim.settings.config import find_config_file
+from rimd_sim.instruments.rig_simulator import RigSimulator
 
 only = set(sys.argv[1:])
 out = {}
@@ -104,7 +104,7 @@ for label, cfg in (("rigid", rigid), ("two_mass", two)):
         out[name] = commands(at(cfg, 3.75), 6)
 name = "rigid RigSimulator with the triggered capture (1 MHz), 3 s"
 if want(name):
-    from rimd_sim.core.capture import CaptureConfig
+    from rimd_sim.settings.capture import CaptureConfig
     sim = RigSimulator(at(rigid, 3.75), capture=CaptureConfig(enabled=True))
     b = sim.advance(3)
     out[name] = digest(b.impacts, [(c.number, c.trigger_index, c.force, c.acceleration) for c in b.captures],
@@ -121,14 +121,14 @@ if want(name):
     b = sim.advance(6)
     out[name] = digest(b.impacts, *[c.samples for c in b.channels.values()])
 
-from rimd_sim.analysis.pulse import pulse
+from rimd_sim.analysis.dynamics.pulse import pulse
 for label, cfg, v in (("rigid", rigid, 0.07), ("two_mass", two, 0.066), ("two_mass", two, 0.3)):
     name = f"{label} pulse {v} m/s"
     if want(name):
         r = pulse(cfg, v)
         out[name] = digest(json.dumps(r.summary, sort_keys=True), r.force, r.acceleration)
 
-from rimd_sim.analysis.dynamics import steady_orbit
+from rimd_sim.analysis.dynamics.steady import steady_orbit
 for label, cfg in (("rigid", rigid), ("two_mass", two)):
     for gap, f in [(0.0, 3.75), (1.0e-3, 4.6), (2.4e-3, 5.25)]:
         name = f"{label} steady_orbit gap {gap * 1e3:g} mm {f} Hz"
@@ -136,8 +136,8 @@ for label, cfg in (("rigid", rigid), ("two_mass", two)):
             o = steady_orbit(cfg.with_parameters({"gap": gap}), f, transient_cycles=60, measure_cycles=24)
             out[name] = digest(o.label, o.u, o.v, o.theta, o.theta_dot, o.peak_forces)
 
-from rimd_sim.analysis.sweep import sweep
-from rimd_sim.analysis.bifurcation import bifurcation
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.analysis.dynamics.bifurcation import bifurcation
 for label, cfg in (("rigid", rigid), ("two_mass", two)):
     name = f"{label} sweep up gap 2.4 mm"
     if want(name):
@@ -148,7 +148,7 @@ for label, cfg in (("rigid", rigid), ("two_mass", two)):
         br, _, _ = bifurcation(cfg, [4.6, 4.8, 5.0], "both", transient_cycles=30, sample_cycles=12, workers=1)
         out[name] = digest([(b.direction, [(p.frequency_hz, p.label, p.u) for p in b.points]) for b in br])
 
-from rimd_sim.analysis.peterka import basins, peterka
+from rimd_sim.analysis.dynamics.peterka import basins, peterka
 name = "rigid peterka 3 x 6"
 if want(name):
     r = peterka(rigid, [0.0, 1.2e-3, 2.4e-3], np.linspace(3.0, 8.0, 6), transient_cycles=60, measure_cycles=36,
@@ -159,7 +159,7 @@ if want(name):
     r = basins(rigid.with_parameters({"gap": 2.4e-3}), 5.25, (-0.1, 0.02), (-1.0, 1.0), size=(4, 3), workers=1)
     out[name] = digest(r.labels.tolist(), r.cycles)
 
-from rimd_sim.analysis.lyapunov import largest_lyapunov
+from rimd_sim.analysis.dynamics.lyapunov import largest_lyapunov
 for gap, f in [(1.0e-3, 4.6), (0.0, 3.75)]:
     name = f"rigid largest_lyapunov gap {gap * 1e3:g} mm {f} Hz"
     if want(name):
@@ -173,9 +173,9 @@ COMPILE_PROBE = r"""
 import time
 t0 = time.perf_counter()
 import numpy as np
-from rimd_sim.core import SimConfig, load_config
-from rimd_sim.core.config import find_config_file
-from rimd_sim.core.simulator import RigSimulator
+from rimd_sim.settings.config import SimConfig, load_config
+from rimd_sim.settings.config import find_config_file
+from rimd_sim.instruments.rig_simulator import RigSimulator
 steps = [("import", time.perf_counter() - t0)]
 def timed(name, fn):
     t = time.perf_counter()
@@ -185,7 +185,7 @@ cfg = SimConfig().with_parameters({"motor.initial_frequency": 3.75, "motor.initi
 timed("rigid RigSimulator (driver, instruments), 1 s", lambda: RigSimulator(cfg, strobe=True).advance(1))
 two = load_config(find_config_file("structural.yaml"))
 timed("two_mass RigSimulator (driver), 1 s", lambda: RigSimulator(two, strobe=True).advance(1))
-from rimd_sim.analysis.peterka import peterka
+from rimd_sim.analysis.dynamics.peterka import peterka
 timed("rigid ensemble (a 1 x 1 Peterka map)", lambda: peterka(SimConfig(), [0.0], [3.75], transient_cycles=30,
       measure_cycles=12, workers=1))
 try:

@@ -3,7 +3,7 @@
 Executables (console scripts) are installed to ``lib/rimd_sim/`` (see setup.cfg) so that a full ROS 2
 install can ``ros2 run rimd_sim <name>`` them; ``env.sh`` also puts that directory on ``PATH`` for the
 ``rimd`` command. A node added later only needs a line in ``NODE_EXECUTABLES`` below, for example
-``"rimd_simulator = rimd_sim.nodes._entry:simulator"``.
+``"rimd_simulator = rimd_sim.ros.nodes._entry:simulator"``.
 """
 
 from __future__ import annotations
@@ -36,17 +36,17 @@ def _config_files() -> list[str]:
 
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
 NODE_EXECUTABLES: list[str] = [
-    "rimd_simulator = rimd_sim.nodes._entry:simulator",
-    "rimd_recorder = rimd_sim.nodes._entry:recorder",
-    "rimd_replay = rimd_sim.nodes._entry:replay",
-    "rimd_rerun = rimd_sim.nodes._entry:rerun",
+    "rimd_simulator = rimd_sim.ros.nodes._entry:simulator",
+    "rimd_recorder = rimd_sim.ros.nodes._entry:recorder",
+    "rimd_replay = rimd_sim.ros.nodes._entry:replay",
+    "rimd_rerun = rimd_sim.ros.nodes._entry:rerun",
 ]
 
 setup(
     name=PACKAGE_NAME,
     version=_read_version(),
     packages=find_packages(exclude=["test", "tests"]),
-    package_data={"rimd_sim.nodes": ["fastdds_profiles.xml"]},
+    package_data={"rimd_sim.ros.nodes": ["fastdds_profiles.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),
@@ -63,7 +63,7 @@ setup(
             "rimd = rimd_sim.cli:main",
             *NODE_EXECUTABLES,
         ],
-        # The rimd_rig fixture for users' own test suites (rimd_sim/testing.py, docs/testing.md).
-        "pytest11": ["rimd_sim = rimd_sim.testing"],
+        # The rimd_rig fixture for users' own test suites (rimd_sim/ros/testing.py, docs/testing.md).
+        "pytest11": ["rimd_sim = rimd_sim.ros.testing"],
     },
 )

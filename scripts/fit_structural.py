@@ -19,10 +19,9 @@ import math
 import numpy as np
 from scipy.optimize import minimize
 
-from rimd_sim.analysis.pulse import pulse
-from rimd_sim.core.config import load_config
-from rimd_sim.core.model import RigModel
-from rimd_sim.core.config import find_config_file
+from rimd_sim.analysis.dynamics.pulse import pulse
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import find_config_file, load_config
 
 TARGETS = {"F_A": 82.4, "F_B": 120.0, "ratio": 50.0 / 80.0}
 #: Restitution of one impact of the paper's single-mass model (k, c of Table 2, m = 0.15 kg): J / (m v) - 1.

@@ -4,10 +4,10 @@
 Every parameter table (name, default, type, rule, description) and every ``rimd`` verb's options table
 (option, default, help) in ``README.md`` and ``docs/*.md`` is generated here from its single source:
 
-- the simulator's parameters: ``rimd_sim.core.config.PARAMETERS`` (type, rule, description) and
+- the simulator's parameters: ``rimd_sim.settings.config.PARAMETERS`` (type, rule, description) and
   ``SimConfig().to_parameters()`` (defaults);
-- the recorder's: ``rimd_sim.recording.settings.PARAMETERS`` (and the rules that module checks);
-- the replay's: ``rimd_sim.nodes.replay.PARAMETERS``; the Rerun bridge's: ``rimd_sim.nodes.rerun_bridge.PARAMETERS``;
+- the recorder's: ``rimd_sim.settings.recording.PARAMETERS`` (and the rules that module checks);
+- the replay's: ``rimd_sim.ros.nodes.replay.PARAMETERS``; the Rerun bridge's: ``rimd_sim.ros.nodes.rerun_bridge.PARAMETERS``;
 - the verbs: ``rimd_sim.cli.VERBS`` and each verb's argparse parser (``add_arguments``).
 
 A generated section sits between two markers in a page::
@@ -128,7 +128,7 @@ def _type_name(value: Any) -> str:
 
 
 def parameter_table(table: Mapping[str, Any], *, skip: Callable[[str], bool] = lambda name: False) -> str:
-    """A node's parameters as a table, from their one declaration (rimd_sim.core.params.Param)."""
+    """A node's parameters as a table, from their one declaration (rimd_sim.settings.params.Param)."""
     rows = [[f"`{name}`", _value(p.default), _cell(p.kind), _cell(p.unit or "—"), _cell(p.rule),
              _cell(p.description + (" (read at start)" if p.read_only else ""))]
             for name, p in table.items() if not skip(name)]
@@ -137,7 +137,7 @@ def parameter_table(table: Mapping[str, Any], *, skip: Callable[[str], bool] = l
 
 def render_parameters() -> str:
     """The simulator's parameters other than the channels'."""
-    from rimd_sim.core.config import PARAMETERS
+    from rimd_sim.settings.config import PARAMETERS
 
     return parameter_table(PARAMETERS, skip=lambda name: _channel_key(name) is not None)
 
@@ -151,7 +151,7 @@ def _channel_key(name: str) -> tuple[str, str] | None:
 
 def render_channel_parameters() -> str:
     """The channels' parameters: one row per field, the default of each channel in its own column."""
-    from rimd_sim.core.config import PARAMETERS as specs
+    from rimd_sim.settings.config import PARAMETERS as specs
 
     channels: list[str] = []
     fields: dict[str, Any] = {}
@@ -176,22 +176,22 @@ def render_channel_parameters() -> str:
 
 def render_node_parameters() -> str:
     """The simulator node's own parameters: start, fault scenario, capture, lockstep (read at start)."""
-    from rimd_sim.core.config import NODE_PARAMETERS
+    from rimd_sim.settings.config import NODE_PARAMETERS
 
     return parameter_table(NODE_PARAMETERS)
 
 
 def render_recorder_parameters() -> str:
-    """The recorder's parameters (rimd_sim.recording.settings)."""
-    from rimd_sim.recording.settings import PARAMETERS
+    """The recorder's parameters (rimd_sim.settings.recording)."""
+    from rimd_sim.settings.recording import PARAMETERS
 
     return parameter_table(PARAMETERS)
 
 
 def render_replay_parameters() -> str:
-    """The replay's parameters (rimd_sim.recording.player.ReplaySettings)."""
-    from rimd_sim.core.params import parameters
-    from rimd_sim.recording.player import ReplaySettings
+    """The replay's parameters (rimd_sim.runtime.replay.ReplaySettings)."""
+    from rimd_sim.runtime.replay import ReplaySettings
+    from rimd_sim.settings.params import parameters
 
     return parameter_table(parameters(ReplaySettings))
 

@@ -137,7 +137,7 @@ def test_json_outputs_are_strict_json(tmp_path):
 
     import numpy as np
 
-    from rimd_sim.verbs._analysis_io import write_json, write_summary
+    from rimd_sim.cli.verbs._analysis_io import write_json, write_summary
 
     data = {"nan": math.nan, "pair": (np.float64(np.inf), np.int64(3)), "array": np.array([1.5, np.nan]),
             "minus_inf": -math.inf, "nested": {"x": [np.float32(0.5), None, "text", True]}}

@@ -1,4 +1,4 @@
-"""``rimd analyze`` on bad input, and the pure routines of ``rimd_sim.analysis.recorded`` on known signals."""
+"""``rimd analyze`` on bad input, and the pure routines of ``rimd_sim.analysis.recordings.recorded`` on known signals."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rimd_sim.analysis import recorded as rec
+from rimd_sim.analysis.recordings import recorded as rec
 
 
 def _rimd(*args: str) -> subprocess.CompletedProcess[str]:
@@ -95,8 +95,8 @@ def test_steps_discard_ramp_and_settle_and_poincare_times_are_phase_zero():
 
 
 def test_onset_fit_recovers_the_spring_dashpot_peak_at_every_sampling_phase():
-    from rimd_sim.analysis.contact_pulse import PulseSamples, pulse_of, pulse_peaks
-    from rimd_sim.analysis.recorded import pulse_model
+    from rimd_sim.analysis.recordings.contact_pulse import PulseSamples, pulse_of, pulse_peaks
+    from rimd_sim.analysis.recordings.recorded import pulse_model
 
     model = pulse_model({"rimd_rig_parameters": {"contact.model": "spring_dashpot", "mass": "0.15",
                                                  "contact.stiffness": "5.5e6", "contact.damping": "1200.0"}})

@@ -402,7 +402,7 @@ def _simulator(ros_processes: Any, *args: str) -> Any:
 
 def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_executor):
     from rimd_msgs.srv import Perturb, SetMotorFrequency
-    from rimd_sim.core.config import CONTACT_LAWS, NODE_PARAMETERS, PARAMETERS
+    from rimd_sim.settings.config import CONTACT_LAWS, NODE_PARAMETERS, PARAMETERS
 
     rig = _simulator(ros_processes)
     node, motor, alive = _watch_motor(ros_executor, rig, "the rig")
@@ -536,8 +536,8 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
 
     # Faults (issue 12): every wrong field of /rig/inject_fault is refused naming it; nothing is scheduled.
     from rimd_msgs.srv import InjectFault
-    from rimd_sim.core.config import CHANNEL_NAMES
-    from rimd_sim.core.faults import FAULT_KINDS
+    from rimd_sim.instruments.faults import FAULT_KINDS
+    from rimd_sim.settings.config import CHANNEL_NAMES
 
     inject = node.create_client(InjectFault, "/rig/inject_fault")
     not_finite = st.sampled_from([math.nan, math.inf, -math.inf])
@@ -589,7 +589,7 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
 def test_recorder_refuses_bad_input_and_keeps_recording(ros_processes, ros_executor, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from rimd_sim.recording.settings import PARAMETERS
+    from rimd_sim.settings.recording import PARAMETERS
 
     recorder = ros_processes.start_node("rimd_recorder", "--ros-args", "-p", f"output_dir:={tmp_path / 'rec'}",
                                         "-p", "flush_interval:=0.5", "-p", "topics:=['/rig/motor/state']")
@@ -671,7 +671,7 @@ def test_recorder_refuses_bad_input_and_keeps_recording(ros_processes, ros_execu
 def test_replay_refuses_bad_input_and_keeps_replaying(ros_processes, ros_executor, tmp_path):
     from harness.rig_mcap import write_rig_mcap
     from rimd_msgs.srv import Burst, PlayNext, Seek, SetRate
-    from rimd_sim.nodes.replay import PARAMETERS, ReplayError, check_parameters
+    from rimd_sim.ros.nodes.replay import PARAMETERS, ReplayError, check_parameters
 
     with pytest.raises(ReplayError, match="^file: no recording given"):   # the one rule only the node knows
         check_parameters({})

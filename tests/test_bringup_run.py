@@ -1,4 +1,4 @@
-"""``Rig.run`` and ``stop_process`` (rimd_sim.bringup), the loop and the stop of ``rimd rig`` and ``rimd replay``.
+"""``Rig.run`` and ``stop_process`` (rimd_sim.ros.bringup), the loop and the stop of ``rimd rig`` and ``rimd replay``.
 
 On real child processes. Hypotheses: a process that exits by itself ends the run with status 1 and one line on
 stderr naming the verb, the process and its status, after the announcement; the process named ``ends_itself``
@@ -15,7 +15,7 @@ import sys
 import pytest
 
 from harness.rig_mcap import write_rig_mcap
-from rimd_sim.bringup import PlannedNode, Rig, RigPlan, stop_process
+from rimd_sim.ros.bringup import PlannedNode, Rig, RigPlan, stop_process
 
 pytestmark = pytest.mark.process   # child processes (no ROS)
 

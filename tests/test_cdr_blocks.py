@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 
 from rimd_msgs.msg import RigState, SampleBlock
-from rimd_sim.recording.cdr import (
+from rimd_sim.io.cdr import (
     BLOCK_ARRAYS,
     SampleBlockEncoder,
     block_span,
@@ -182,7 +182,7 @@ def test_progress_reports_encode_as_rclpy_serializes_them(consumer, instance, do
     from builtin_interfaces.msg import Time
 
     from rimd_msgs.msg import ConsumerProgress
-    from rimd_sim.client import encode_progress
+    from rimd_sim.ros.clients.progress import encode_progress
 
     names = sorted(topics)
     reference = ConsumerProgress(consumer=consumer, instance=instance, leaving=leaving, topics=names, node=node,

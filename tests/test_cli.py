@@ -103,7 +103,7 @@ def test_command_error_prints_one_line_and_exits_1(monkeypatch, capsys):
     def failing_main(args):
         raise cli.CommandError("gap must be >= 0 m, got -1")
 
-    monkeypatch.setattr("rimd_sim.verbs.info.main", failing_main)
+    monkeypatch.setattr("rimd_sim.cli.verbs.info.main", failing_main)
     assert cli.main(["info"]) == 1
     assert capsys.readouterr().err == "rimd info: gap must be >= 0 m, got -1\n"
 

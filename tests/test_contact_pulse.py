@@ -1,7 +1,7 @@
-"""The one spring-dashpot pulse of the analyses (rimd_sim.analysis.contact_pulse) against the core's integrator.
+"""The one spring-dashpot pulse of the analyses (rimd_sim.analysis.recordings.contact_pulse) against the core's integrator.
 
 Hypotheses, each against an independent reference (the simulator's event-exact Filippov integrator, sampled at
-1 MHz by ``rimd_sim.analysis.pulse.pulse``, the library of ``rimd pulse``):
+1 MHz by ``rimd_sim.analysis.dynamics.pulse.pulse``, the library of ``rimd pulse``):
 
 * the closed-form pulse (underdamped, near critical, overdamped contact) is the force the core computes, and its
   release (closed form, then Newton) is the core's contact duration;
@@ -19,9 +19,9 @@ import math
 import numpy as np
 import pytest
 
-from rimd_sim.analysis.contact_pulse import PulseSamples, fit_pulses, pulse_of, pulse_peaks
-from rimd_sim.analysis.pulse import pulse
-from rimd_sim.core.config import SimConfig
+from rimd_sim.analysis.dynamics.pulse import pulse
+from rimd_sim.analysis.recordings.contact_pulse import PulseSamples, fit_pulses, pulse_of, pulse_peaks
+from rimd_sim.settings.config import SimConfig
 
 #: (mass kg, stiffness N/m, damping N s/m): contact damping ratios c / 2 sqrt(k m) of 0.09, 0.66 (the paper's),
 #: 1.0 and 5.3 (the battery's corners).

@@ -1,4 +1,4 @@
-"""The reference DAQ client (rimd_sim.examples.daq_client) and the pytest plugin users test their DAQ with.
+"""The reference DAQ client (rimd_sim.ros.examples.daq_client) and the pytest plugin users test their DAQ with.
 
 Hypotheses:
 
@@ -22,7 +22,7 @@ import sys
 import numpy as np
 import pytest
 
-from rimd_sim.examples.daq_client import Continuity, PeakDetector
+from rimd_sim.ros.examples.daq_client import Continuity, PeakDetector
 
 pytestmark = pytest.mark.ros
 
@@ -63,7 +63,7 @@ def test_my_daq_names_the_faults_and_loses_nothing(rimd_rig, tmp_path):
         {"channel": "impact_force", "kind": "dropout", "start": 2.0, "duration": 0.3},
         {"channel": "impact_force", "kind": "offset", "start": 3.0, "duration": 1.0, "magnitude": 40.0}])
     report_file = tmp_path / "report.json"
-    subprocess.run([sys.executable, "-m", "rimd_sim.examples.daq_client", "--lockstep", "daq", "--until", "5",
+    subprocess.run([sys.executable, "-m", "rimd_sim.ros.examples.daq_client", "--lockstep", "daq", "--until", "5",
                     "--json", str(report_file)], env=rig.env, check=True, timeout=180)
     report = json.loads(report_file.read_text())
     force = report["channels"]["impact_force"]
@@ -79,8 +79,8 @@ def test_my_daq_names_the_faults_and_loses_nothing(rimd_rig, tmp_path):
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import ImpactEvent
-    from rimd_sim.recording.cdr import read_block
-    from rimd_sim.recording.reader import open_recording
+    from rimd_sim.io.cdr import read_block
+    from rimd_sim.io.reader import open_recording
 
     assert rig.stop() == 0
     recording = open_recording(rig.recording)

@@ -33,8 +33,8 @@ def _ns(stamp) -> int:  # noqa: ANN001
 def test_sample_blocks_and_the_motor_service_across_processes(ros_processes, ros_executor):
     import rclpy
 
-    from rimd_sim.core.config import SimConfig
-    from rimd_sim.core.simulator import RigSimulator
+    from rimd_sim.instruments.rig_simulator import RigSimulator
+    from rimd_sim.settings.config import SimConfig
 
     config = SimConfig().with_parameters({"gap": 0.0})
     # Paused, at 4x (stamps are simulation time): nothing is published before the subscription matched.
@@ -102,7 +102,7 @@ def test_another_domain_hears_nothing(ros_processes, ros_executor):
     for as long, hears nothing."""
     import rclpy
 
-    from rimd_sim.rigclient import RigClient
+    from rimd_sim.ros.clients.rig import RigClient
 
     with lease_domain_id() as other:
         rig = ros_processes.start_node("rimd_simulator", name="other_domain_rig",

@@ -1,4 +1,4 @@
-"""Experiment design for identification (rimd_sim.analysis.design, ``rimd experiment --for-identification``).
+"""Experiment design for identification (rimd_sim.analysis.identification.design, ``rimd experiment --for-identification``).
 
 Hypotheses:
 
@@ -16,9 +16,9 @@ import argparse
 
 import pytest
 
-from rimd_sim.analysis.design import DesignError, identification_steps
-from rimd_sim.analysis.sweep import sweep
-from rimd_sim.core.config import SimConfig
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.analysis.identification.design import DesignError, identification_steps
+from rimd_sim.settings.config import SimConfig
 
 
 def test_default_rig_gets_six_steady_band_a_steps_around_the_papers_resonance():
@@ -47,7 +47,7 @@ def test_a_rig_that_never_reaches_its_gap_is_refused_in_one_line():
 
 
 def _experiment_args(*argv: str) -> argparse.Namespace:
-    from rimd_sim.verbs import experiment
+    from rimd_sim.cli.verbs import experiment
 
     parser = argparse.ArgumentParser()
     experiment.add_arguments(parser)
@@ -55,7 +55,7 @@ def _experiment_args(*argv: str) -> argparse.Namespace:
 
 
 def test_experiment_schedules_the_design(capsys):
-    from rimd_sim.verbs.experiment import plan
+    from rimd_sim.cli.verbs.experiment import plan
 
     chosen = plan(_experiment_args("--for-identification", "--dwell", "10", "--settle", "3", "--ramp-rate", "2"))
     design = identification_steps(SimConfig(), dwell=10.0, settle=3.0, ramp_rate=2.0)
@@ -65,7 +65,7 @@ def test_experiment_schedules_the_design(capsys):
 
 def test_experiment_refuses_the_design_with_frequencies():
     from rimd_sim.cli import CommandError
-    from rimd_sim.verbs.experiment import plan
+    from rimd_sim.cli.verbs.experiment import plan
 
     with pytest.raises(CommandError, match="--for-identification chooses the frequencies"):
         plan(_experiment_args("--for-identification", "--frequencies", "3.0"))

@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimd_sim.analysis.dynamics import CHAOTIC, NO_IMPACT, classify, steady_orbit
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.config import find_config_file, load_config
+from rimd_sim.analysis.dynamics.steady import CHAOTIC, NO_IMPACT, classify, steady_orbit
+from rimd_sim.errors import ConfigError
+from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
 
 def test_classify_finds_the_smallest_period_and_counts_impacts():

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from harness.outputs import read_json
-from rimd_sim.analysis.sweep import sweep
-from rimd_sim.experiment import RECORDER_NODE
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.ros.clients.experiment import RECORDER_NODE
 
 pytestmark = pytest.mark.ros
 
@@ -61,8 +61,8 @@ def _assert_recording_is_the_core_run(recording: Path, config, freqs: list[float
     """The recorded force channel and events equal the core's offline run of the schedule, sample for sample."""
     from fractions import Fraction
 
-    from rimd_sim.analysis import recorded as rec
-    from rimd_sim.core.simulator import RigSimulator
+    from rimd_sim.analysis.recordings import recorded as rec
+    from rimd_sim.instruments.rig_simulator import RigSimulator
 
     data = rec.load(recording)
     force = data.channels[rec.FORCE]

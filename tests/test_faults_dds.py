@@ -27,7 +27,7 @@ import pytest
 from harness import daq_client
 from harness import fault_scenario as sc
 from harness.processes import ProcessManager
-from rimd_sim.testing import RigFactory
+from rimd_sim.ros.testing import RigFactory
 
 pytestmark = [pytest.mark.ros]
 
@@ -108,7 +108,7 @@ def _blocks(messages, *, raw: bool = False):  # noqa: ANN001
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import SampleBlock
-    from rimd_sim.analysis.faultscan import Block
+    from rimd_sim.analysis.recordings.faultscan import Block
 
     out = []
     for data, _arrival, _wall in messages:
@@ -131,8 +131,8 @@ def _events(messages):  # noqa: ANN001
 
 @pytest.mark.timeout(300)
 def test_every_fault_kind_is_detected_from_the_stream_and_ends_the_others_untouched(fault_runs):
-    from rimd_sim.analysis.faultscan import drift_fit, drift_window, impact_times, scan_channel
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.analysis.recordings.faultscan import drift_fit, drift_window, impact_times, scan_channel
+    from rimd_sim.settings.config import SimConfig
 
     base, faulted = fault_runs["baseline"], fault_runs["faulted"]
     # The truth from /rig/faults: a start and an end per fault, at the stated times.
@@ -225,8 +225,8 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import SampleBlock
-    from rimd_sim.analysis.faultscan import Block, scan_channel
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.analysis.recordings.faultscan import Block, scan_channel
+    from rimd_sim.settings.config import SimConfig
 
     blocks = []
     for d, _now, wall_ns in data[FORCE]:
@@ -391,7 +391,7 @@ def test_triggered_capture_at_1_mhz_gives_the_peak_force_within_half_a_percent(f
 def test_analyze_reports_the_faults_seen_in_the_recording_and_the_captures(fault_runs, capsys):
     """``rimd analyze`` of the faulted run's recording: /rig/faults beside what the data alone shows, the
     clock drift from the impacts on two channels, and the captures against the 20 kHz channel's peaks."""
-    from rimd_sim.verbs.analyze import analyze, print_report
+    from rimd_sim.cli.verbs.analyze import analyze, print_report
 
     summary = analyze(fault_runs["recording"], fault_runs["recording"].parent / "analysis")
     report = summary["faults"]
@@ -420,8 +420,8 @@ def test_analyze_reports_the_faults_seen_in_the_recording_and_the_captures(fault
     # The captures against the 20 kHz channel, in the run without faults (with them, the channel's own
     # faults, offset, gain, drift, make it disagree, as they should; the scope is separate hardware).
     # (the report alone: the whole analysis, figures included, takes ~10 s more on this machine)
-    from rimd_sim.analysis import recorded as rec
-    from rimd_sim.analysis.faultreport import fault_report, format_fault_report
+    from rimd_sim.analysis.recordings import recorded as rec
+    from rimd_sim.analysis.recordings.faultreport import fault_report, format_fault_report
 
     data = rec.load(fault_runs["recording_baseline"])
     detected = rec.detect_impacts(data.channels[rec.FORCE])

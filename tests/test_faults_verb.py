@@ -55,8 +55,8 @@ def test_faults_verb_schedules_a_scenario_and_the_rig_publishes_it(tmp_path, ros
     ("faults:\n  - a: b: c\n", "is not valid YAML: {path}:2:9: mapping values are not allowed here"),
 ])
 def test_faults_verb_refuses_a_malformed_scenario_before_sending_anything(tmp_path, text, expected):
-    from rimd_sim.core.errors import RimdError
-    from rimd_sim.verbs.faults import load_scenario
+    from rimd_sim.cli.verbs.faults import load_scenario
+    from rimd_sim.errors import RimdError
 
     path = tmp_path / "s.yaml"
     path.write_text(text)

@@ -59,7 +59,7 @@ def test_fit_table_on_table_1(tmp_path):
         assert abs(residual / table - relative) <= 0.02, (f, residual)
     assert summary["misfit"] == pytest.approx(float(np.sum(_residuals(rows) ** 2)), rel=1e-9)
     # The residuals are those of the fitted set, which loads as a parameter file.
-    from rimd_sim.core.config import load_config
+    from rimd_sim.settings.config import load_config
     fitted = load_config(tmp_path / "fitted.yaml")
     assert fitted.rig.damping_ratio == summary["fitted"]["damping_ratio"]
     assert "7.25" in out and "fitted:" in out

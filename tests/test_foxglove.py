@@ -161,7 +161,7 @@ def test_bad_addresses_and_a_taken_port_are_refused_in_one_line():
 
 
 def test_rig_foxglove_starts_the_bridge_with_foxglove_only_when_asked(repo_root, tmp_path):
-    from rimd_sim.bringup import plan_rig
+    from rimd_sim.ros.bringup import plan_rig
 
     config = Path(repo_root) / "config" / "rimd.yaml"
 
@@ -189,7 +189,7 @@ def test_foxglove_s_timeline_drives_a_replay(ros_processes, ros_executor, tmp_pa
     from harness.rig_mcap import write_rig_mcap
     from harness.ros import call_service, spin_until
     from rimd_msgs.srv import GetRate, GetReplayState, IsPaused, PlayNext, Seek, SetRate
-    from rimd_sim.recording.reader import open_recording
+    from rimd_sim.io.reader import open_recording
 
     path = tmp_path / "rig.mcap"
     write_rig_mcap(path, seconds=2.0)
@@ -280,7 +280,7 @@ def test_foxglove_s_timeline_drives_a_replay(ros_processes, ros_executor, tmp_pa
 
 def test_rimd_replay_plans_the_replay_and_the_bridge_pointed_at_it(tmp_path, capsys):
     from rimd_sim import cli
-    from rimd_sim.bringup import plan_replay
+    from rimd_sim.ros.bringup import plan_replay
 
     path = tmp_path / "rig.mcap"
     path.write_bytes(b"")   # the plan only checks that the recording is there; the replay node reads it

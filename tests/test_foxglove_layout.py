@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from rimd_sim.recording.msgdefs import message_definition, service_definitions
+from rimd_sim.io.msgdefs import message_definition, service_definitions
 
 LAYOUT = "config/foxglove/rig_layout.json"
 TOPICS = {"/rig/cart/displacement": "rimd_msgs/msg/SampleBlock", "/rig/rimd/displacement": "rimd_msgs/msg/SampleBlock",

@@ -48,7 +48,7 @@ from hypothesis import strategies as st
 
 from harness.outputs import read_json
 from harness.rig_mcap import write_rig_mcap
-from rimd_sim.recording.reader import RecordingError, open_recording
+from rimd_sim.io.reader import RecordingError, open_recording
 
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK, DATA_END, MESSAGE = 0x06, 0x0F, 0x05
@@ -182,8 +182,8 @@ def _rerecord(core: Path, out: Path, *, until_s: float, chunk_size: int, foreign
     """
     from mcap.reader import make_reader
 
-    from rimd_sim.recording.bag import BagWriter, TopicInfo, qos_profile_dict
-    from rimd_sim.recording.msgdefs import MessageDefinition
+    from rimd_sim.io.bag import BagWriter, TopicInfo, qos_profile_dict
+    from rimd_sim.io.msgdefs import MessageDefinition
 
     bag = BagWriter(out, chunk_size=chunk_size, compression=compression,
                     metadata={"rimd_recording": {"software": "test_fuzz_recordings"}})

@@ -2,7 +2,7 @@
 
 The rigs are drawn by ``tests/harness/ident_rigs.py`` (the battery of ``benchmarks/bench_identify.py`` runs 14;
 these are a few well-chosen ones); the steps are those ``rimd experiment --for-identification`` picks for the rig
-(rimd_sim.analysis.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the measured channels.
+(rimd_sim.analysis.identification.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the measured channels.
 Hypotheses (issue 24):
 
 * a rig like the issue's "second rig" (every value changed, an overdamped contact, a 1.1 mm gap), run as the
@@ -30,8 +30,8 @@ import pytest
 
 from harness.ident_rigs import Schedule, draw_rigs, impact_near, record_through_rig, write_core_recording
 from harness.outputs import read_json
-from rimd_sim.analysis.design import identification_steps
-from rimd_sim.core.config import SimConfig
+from rimd_sim.analysis.identification.design import identification_steps
+from rimd_sim.settings.config import SimConfig
 
 #: The issue's "second rig": every value off the defaults, an overdamped contact (c / 2 sqrt(k m) = 1.66).
 SECOND_RIG = draw_rigs(14)[0]
@@ -69,7 +69,7 @@ def _covered(report: dict, truth: dict) -> int:
 
 def _kick_time(rig: dict, freqs: list[float], near: float, start: float) -> float:
     """A stamp near ``near`` far from any impact (the core's run of the rig from rest; the test knows the rig)."""
-    from rimd_sim.core.model import RigModel
+    from rimd_sim.model.rig_model import RigModel
 
     config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
                                           "motor.initial_setpoint": freqs[0]})
@@ -105,14 +105,14 @@ def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd
     assert _covered(report, SECOND_RIG) >= 6, "\n".join(lines)
     assert report["residuals"]["converged"]
     # the kick, in free flight during the first step (recording times count from the earliest stamp)
-    from rimd_sim.analysis.recorded import load
+    from rimd_sim.analysis.recordings.recorded import load
 
     origin = load(recording).origin_ns * 1e-9
     (kick,) = report["kicks"]
     assert abs(kick["time_s"] + origin - kick_at) < 2e-3, (kick, kick_at, origin)
     assert kick["velocity_m_s"] == pytest.approx(-0.03, rel=0.05)
     # identified.yaml runs as it is: the core loads it, the simulator node applies it (namespace /rig)
-    from rimd_sim.core.config import load_config
+    from rimd_sim.settings.config import load_config
 
     loaded = load_config(out / "identified.yaml")
     assert loaded.rig.mass == pytest.approx(report["estimates"]["mass"]["value"])
@@ -147,7 +147,7 @@ def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd
 
 @pytest.mark.slow
 def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp_path):
-    from rimd_sim.analysis.identify import identify
+    from rimd_sim.analysis.identification.identify import identify
 
     rig = SECOND_RIG
     design = identification_steps(SimConfig().with_parameters(rig), steps=4, dwell=6.0, settle=2.0)
@@ -191,7 +191,7 @@ def test_the_pulse_release_of_a_grazing_impact_is_a_root_and_moves_continuously(
     """
     import numpy as np
 
-    from rimd_sim.analysis.contact_pulse import RELEASE_HORIZON, SpringDashpotPulse, pulse_of
+    from rimd_sim.analysis.recordings.contact_pulse import RELEASE_HORIZON, SpringDashpotPulse, pulse_of
 
     base = pulse_of(0.08, 1e7, 3000.0, sigma_free=0.05 * 4 * math.pi)
     closed = base.release()
@@ -211,7 +211,7 @@ def test_the_pulse_release_of_a_grazing_impact_is_a_root_and_moves_continuously(
 
 @pytest.mark.slow
 def test_captures_pin_a_short_contact_within_half_a_percent(tmp_path):
-    from rimd_sim.analysis.identify import identify
+    from rimd_sim.analysis.identification.identify import identify
 
     rig = SHORT_CONTACT
     design = identification_steps(SimConfig().with_parameters(rig), steps=3, dwell=5.0, settle=2.0)

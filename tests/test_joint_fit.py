@@ -1,4 +1,4 @@
-"""The joint fit of ``rimd identify`` (rimd_sim.analysis.joint_fit.JointFit) on a short recording of a known rig.
+"""The joint fit of ``rimd identify`` (rimd_sim.analysis.identification.joint_fit.JointFit) on a short recording of a known rig.
 
 The recording is the core's run of a rig that differs from the defaults (battery rig 5 of
 ``tests/harness/ident_rigs.py``), two motor steps of 5 s, instrument noise on, written as the recorder writes it;
@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 
 from harness.ident_rigs import Schedule, draw_rigs, write_core_recording
-from rimd_sim.analysis import ident_local as loc
-from rimd_sim.analysis import recorded as rec
-from rimd_sim.analysis.identify import local_stages
-from rimd_sim.core.config import SimConfig
+from rimd_sim.analysis.identification import local as loc
+from rimd_sim.analysis.identification.identify import local_stages
+from rimd_sim.analysis.recordings import recorded as rec
+from rimd_sim.settings.config import SimConfig
 
 RIG = draw_rigs(14)[5]
 
@@ -37,7 +37,7 @@ def prepared(tmp_path_factory):
 
 
 def _fit(prepared):  # noqa: ANN001, ANN202
-    from rimd_sim.analysis.joint_fit import JointFit
+    from rimd_sim.analysis.identification.joint_fit import JointFit
 
     return JointFit(SimConfig(), list(prepared.estimates), {}, prepared.segments, prepared.obs)
 
@@ -105,7 +105,7 @@ def test_the_fit_converges_back_to_the_truth_from_5_percent_off(prepared):
     runs = fit.run(result.x)
     r = fit.residuals(result.x, runs)
     cov = fit.covariance(fit.jacobian(result.x, runs, r), r)
-    from rimd_sim.analysis.joint_fit import SCALES
+    from rimd_sim.analysis.identification.joint_fit import SCALES
 
     for i, p in enumerate(fit.names):
         se = float(np.sqrt(cov[i, i])) * SCALES[p]

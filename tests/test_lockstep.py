@@ -1,7 +1,7 @@
 """Lockstep end to end (issue 23): the rig runs exactly as fast as its slowest consumer and loses nothing.
 
 Each rig here is the product's own bring-up in lockstep, through the pytest plugin users get
-(``rimd_sim.testing``, fixture ``rimd_rig``), with its consumers in other processes over DDS.
+(``rimd_sim.ros.testing``, fixture ``rimd_rig``), with its consumers in other processes over DDS.
 
 Hypotheses:
 
@@ -30,8 +30,8 @@ from pathlib import Path
 
 import pytest
 
-from rimd_sim.recording.cdr import block_span, header_stamp
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.cdr import block_span, header_stamp
+from rimd_sim.io.reader import open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(240)]
 
@@ -103,7 +103,7 @@ def test_a_scripted_run_is_bit_identical_whatever_the_load(rimd_rig, tmp_path):
     quiet = _scripted_run(rimd_rig, tmp_path, "quiet", busy=False, seed=1)
     loaded = _scripted_run(rimd_rig, tmp_path, "loaded", busy=True, seed=2)
     end = 2_600_000_000   # what both runs covered for sure (the client stops at 2.6 s; the rig stops soon after)
-    from rimd_sim.recording.cdr import header_stamp
+    from rimd_sim.io.cdr import header_stamp
 
     def content(path: Path) -> dict[str, list[bytes]]:
         out: dict[str, list[bytes]] = {}

@@ -6,10 +6,9 @@ import math
 
 import pytest
 
-from rimd_sim.analysis.lyapunov import CHAOS_THRESHOLD, is_chaotic, largest_lyapunov
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.config import find_config_file, load_config
+from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, is_chaotic, largest_lyapunov
+from rimd_sim.errors import ConfigError
+from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
 LINEAR = {"gap": 0.03, "amplitude": 1e-4}  # the hammer never reaches the stop; theta ~ 1e-3: linear
 

@@ -28,10 +28,10 @@ import pytest
 import rimd_sim
 from harness.outputs import read_json
 from rimd_sim import cli
-from rimd_sim.analysis.dynamics import steady_orbit
-from rimd_sim.core.config import load_config
-from rimd_sim.core.ensemble import StopRule, run_cells
-from rimd_sim.core.model import model_for
+from rimd_sim.analysis.dynamics.steady import steady_orbit
+from rimd_sim.model.ensemble import StopRule, run_cells
+from rimd_sim.model.rig_model import model_for
+from rimd_sim.settings.config import load_config
 
 SRC = str(Path(rimd_sim.__file__).resolve().parent.parent)
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -179,7 +179,7 @@ def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path
     assert (remote / "peterka.csv").read_bytes() == (local / "peterka.csv").read_bytes()
     assert read_json(remote / "summary.json")["where"] == cluster.address
 
-    from rimd_sim.analysis.peterka import peterka, peterka_table
+    from rimd_sim.analysis.dynamics.peterka import peterka, peterka_table
 
     config = load_config(None)
     gaps = np.linspace(0, 2.4, 6) * 1e-3
@@ -253,7 +253,7 @@ def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path, monkeypat
     from matplotlib.figure import Figure
     from matplotlib.image import imread
 
-    from rimd_sim.analysis.peterka import PeterkaResult, save_peterka_npz
+    from rimd_sim.analysis.dynamics.peterka import PeterkaResult, save_peterka_npz
     from rimd_sim.analysis.plots import plot_peterka
 
     rows, cols = 600, 700

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.reader import open_recording
 
 pytestmark = pytest.mark.ros
 
@@ -139,7 +139,7 @@ def test_the_nodes_use_the_fast_dds_profile_with_a_short_heartbeat(tmp_path):
     import sys
     import xml.etree.ElementTree as ET
 
-    code = "import os, rimd_sim.nodes._entry; print(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'])"
+    code = "import os, rimd_sim.ros.nodes._entry; print(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'])"
     env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
     path = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60,
                           check=True).stdout.strip()

@@ -1,4 +1,4 @@
-"""Every parameter of every node against its one declaration (rimd_sim.core.params), without ROS: the rule sweep.
+"""Every parameter of every node against its one declaration (rimd_sim.settings.params), without ROS: the rule sweep.
 
 Hypotheses, for each parameter of the simulator (its configuration and its node settings), the recorder, the
 replay and the Rerun bridge, with the cases generated from the declaration itself (type, bounds, choices, the
@@ -26,12 +26,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rimd_sim.core.config import NODE_PARAMETERS
-from rimd_sim.core.config import PARAMETERS as SIMULATOR
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.params import Param, build, param, parameters
-from rimd_sim.recording.player import ReplaySettings
-from rimd_sim.recording.settings import PARAMETERS as RECORDER
+from rimd_sim.errors import ConfigError
+from rimd_sim.runtime.replay import ReplaySettings
+from rimd_sim.settings.config import NODE_PARAMETERS
+from rimd_sim.settings.config import PARAMETERS as SIMULATOR
+from rimd_sim.settings.params import Param, build, param, parameters
+from rimd_sim.settings.recording import PARAMETERS as RECORDER
 from rimd_sim.viz.bridge_settings import PARAMETERS as BRIDGE
 
 TABLES = {"simulator": {**SIMULATOR, **NODE_PARAMETERS}, "recorder": RECORDER,
@@ -119,8 +119,8 @@ def test_the_sweep_covers_every_node_and_enough_parameters():
 
 def test_adding_a_parameter_is_one_edit(rclpy_context, tmp_path, monkeypatch):
     """A field declared with param() in the recorder's settings class, and nothing else."""
-    import rimd_sim.nodes.recorder as recorder_module
-    from rimd_sim.recording.settings import RecorderSettings
+    import rimd_sim.ros.nodes.recorder as recorder_module
+    from rimd_sim.settings.recording import RecorderSettings
 
     extended = dataclasses.make_dataclass(
         "ExtendedRecorderSettings",

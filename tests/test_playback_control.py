@@ -1,5 +1,5 @@
 """Foxglove's timeline driving a replay (issue 27), in-process: the mapping and the state machine of
-rimd_sim.viz.playback over the replay's real player (rimd_sim.recording.player) on a fake clock, no ROS.
+rimd_sim.runtime.playback_control over the replay's real player (rimd_sim.runtime.replay) on a fake clock, no ROS.
 
 Hypotheses:
 
@@ -29,11 +29,9 @@ import pytest
 from harness.clock import FakeClock
 from harness.foxglove_client import FoxgloveClient
 from harness.rig_mcap import write_rig_mcap
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.params import build
-from rimd_sim.recording.player import Player, PlayerState, ReplaySettings
-from rimd_sim.recording.reader import open_recording
-from rimd_sim.viz.playback import (
+from rimd_sim.errors import ConfigError
+from rimd_sim.io.reader import open_recording
+from rimd_sim.runtime.playback_control import (
     MAX_EXTRAPOLATION_S,
     PlaybackControl,
     PlaybackRequest,
@@ -41,13 +39,15 @@ from rimd_sim.viz.playback import (
     plan,
     requested_speed,
 )
+from rimd_sim.runtime.replay import Player, PlayerState, ReplaySettings
+from rimd_sim.settings.params import build
 
 S = 1_000_000_000
 NAME = "/rimd_replay"
 
 
 class PlayerControls:
-    """The player's controls as the replay node's services answer them (rimd_sim/nodes/replay.py)."""
+    """The player's controls as the replay node's services answer them (rimd_sim/ros/nodes/replay.py)."""
 
     def __init__(self, player: Player) -> None:
         self.player = player

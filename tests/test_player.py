@@ -1,4 +1,4 @@
-"""The replay's player (rimd_sim.recording.player), without ROS and without waiting: a fake clock.
+"""The replay's player (rimd_sim.runtime.replay), without ROS and without waiting: a fake clock.
 
 Hypotheses, each the behaviour of rosbag2's player: messages leave in log-time order when due at the rate;
 ``seek`` lands on the first message recorded at or after the time and refuses a time outside the part played;
@@ -16,12 +16,12 @@ import pytest
 
 from harness.clock import FakeClock
 from harness.rig_mcap import write_rig_mcap
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.pacing import Hold, Wait
-from rimd_sim.core.params import build
-from rimd_sim.recording.cdr import header_stamp
-from rimd_sim.recording.player import Finished, Paused, Player, ReplaySettings
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.errors import ConfigError
+from rimd_sim.io.cdr import header_stamp
+from rimd_sim.io.reader import open_recording
+from rimd_sim.runtime.pacing import Hold, Wait
+from rimd_sim.runtime.replay import Finished, Paused, Player, ReplaySettings
+from rimd_sim.settings.params import build
 
 S = 1_000_000_000
 

@@ -25,8 +25,8 @@ import yaml
 
 from harness.rig import Diagnostics, RawCollector, start_rig, trigger, wait_until_delivered, wait_until_matched
 from harness.ros import spin_until
-from rimd_sim.recording.bag import BagWriter, qos_profile_dict
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.bag import BagWriter, qos_profile_dict
+from rimd_sim.io.reader import open_recording
 
 pytestmark = pytest.mark.ros
 

@@ -15,8 +15,8 @@ import pytest
 from harness.bags import read_with_mcap_ros2, read_with_rosbags
 from harness.rig import BLOCK_TOPICS, RIG_TOPICS, Diagnostics, record_rig, start_rig, trigger
 from harness.ros import spin_until
-from rimd_sim.recording.cdr import block_span
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.cdr import block_span
+from rimd_sim.io.reader import open_recording
 
 pytestmark = pytest.mark.ros
 

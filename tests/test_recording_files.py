@@ -15,11 +15,11 @@ import yaml
 from mcap.reader import make_reader
 
 from harness.bags import read_with_mcap_ros2, read_with_rosbags
-from rimd_sim.recording.bag import BagWriter, qos_profile_dict
-from rimd_sim.recording.cdr import block_span
-from rimd_sim.recording.msgdefs import MessageDefinitionError, message_definition
-from rimd_sim.recording.reader import RecordingError, open_recording
-from rimd_sim.recording.session import LossCounter
+from rimd_sim.io.bag import BagWriter, qos_profile_dict
+from rimd_sim.io.cdr import block_span
+from rimd_sim.io.msgdefs import MessageDefinitionError, message_definition
+from rimd_sim.io.reader import RecordingError, open_recording
+from rimd_sim.runtime.recorder import LossCounter
 
 BLOCK = "rimd_msgs/msg/SampleBlock"
 EVENT = "rimd_msgs/msg/ImpactEvent"

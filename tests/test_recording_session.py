@@ -1,4 +1,4 @@
-"""The recorder's session (rimd_sim.recording.session) without ROS, without root, without a real full disk.
+"""The recorder's session (rimd_sim.runtime.recorder) without ROS, without root, without a real full disk.
 
 Hypotheses: messages are written in the order they came and read back bit for bit by an independent reader;
 gaps in ``first_index`` are counted as lost samples; a full queue drops and counts; how far each topic is
@@ -20,9 +20,9 @@ from rclpy.serialization import serialize_message
 
 from harness.clock import FakeClock
 from rimd_msgs.msg import SampleBlock
-from rimd_sim.recording.bag import BagWriter, qos_profile_dict
-from rimd_sim.recording.reader import open_recording
-from rimd_sim.recording.session import RecordingSession
+from rimd_sim.io.bag import BagWriter, qos_profile_dict
+from rimd_sim.io.reader import open_recording
+from rimd_sim.runtime.recorder import RecordingSession
 
 TOPIC = "/rig/cart/displacement"
 BLOCK = "rimd_msgs/msg/SampleBlock"

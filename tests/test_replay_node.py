@@ -18,8 +18,8 @@ from harness.domains import lease_domain_id
 from harness.processes import ProcessManager
 from harness.rig import RIG_TOPICS, Diagnostics, RawCollector, trigger
 from harness.ros import call_service, spin_until
-from rimd_sim.recording.reader import open_recording
-from rimd_sim.rigclient import RigClient
+from rimd_sim.io.reader import open_recording
+from rimd_sim.ros.clients.rig import RigClient
 
 pytestmark = pytest.mark.ros
 
@@ -180,8 +180,8 @@ def test_garbage_and_unknown_types_are_named(ros_processes, tmp_path, recording)
     assert "garbage.mcap is not an MCAP file" in bad.output() and "Traceback" not in bad.output()
 
     # A recording with a type this machine does not have (as from another lab's package).
-    from rimd_sim.recording.bag import BagWriter, TopicInfo, qos_profile_dict
-    from rimd_sim.recording.msgdefs import MessageDefinition
+    from rimd_sim.io.bag import BagWriter, TopicInfo, qos_profile_dict
+    from rimd_sim.io.msgdefs import MessageDefinition
 
     unknown_dir = tmp_path / "unknown"
     shutil.copytree(recording, unknown_dir)

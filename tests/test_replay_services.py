@@ -20,8 +20,8 @@ from builtin_interfaces.msg import Time
 from harness.rig import RawCollector
 from harness.rig_mcap import write_rig_mcap
 from harness.ros import call_service, spin_until
-from rimd_sim.recording.cdr import header_stamp
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.cdr import header_stamp
+from rimd_sim.io.reader import open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 

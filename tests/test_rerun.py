@@ -333,6 +333,6 @@ def test_sample_times_are_the_simulators_stamps_exactly():
 def test_mapping_and_offline_path_import_without_ros():
     code = ("import sys; sys.modules['rclpy'] = None; sys.modules['rimd_msgs'] = None\n"
             "import rimd_sim.viz.rerun_map, rimd_sim.viz.sinks, rimd_sim.viz.mcap_source, rimd_sim.viz.rrd_data\n"
-            "import rimd_sim.verbs.rerun\n")
+            "import rimd_sim.cli.verbs.rerun\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr

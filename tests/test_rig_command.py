@@ -7,8 +7,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from harness.ros import spin_until
 from rimd_msgs.msg import MotorState
-from rimd_sim.recording.cdr import block_span
-from rimd_sim.recording.reader import open_recording
+from rimd_sim.io.cdr import block_span
+from rimd_sim.io.reader import open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 

@@ -21,8 +21,8 @@ from rosgraph_msgs.msg import Clock
 from harness.ros import call_service, spin_until
 from rimd_msgs.msg import ImpactEvent, MotorState, SampleBlock
 from rimd_msgs.srv import SetMotorFrequency
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.model import RigModel
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import SimConfig
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 

@@ -4,7 +4,7 @@ the Peterka and basins maps (their ensemble path) and the Lyapunov exponent.
 Hypotheses, and where the expected values come from:
 
 * The analyses integrate the model the configuration selects (``structure.model``, the registry
-  ``rimd_sim.core.model.MODELS``), not the paper's: their numbers are the two-mass model's, which differ from the
+  ``rimd_sim.model.rig_model.MODELS``), not the paper's: their numbers are the two-mass model's, which differ from the
   rigid model's (the force sensor reads the force through its mount), and every path gives the same trajectory
   as ``RigModel`` with that configuration (the ensemble integrates it with the same driver, bit for bit).
 * Classes from rest are the structural preset's Table 1 (tests/core/test_structural.py, impacts per cycle
@@ -25,15 +25,14 @@ import pytest
 
 from harness.outputs import read_json
 from rimd_sim import cli
-from rimd_sim.analysis.bifurcation import bifurcation
-from rimd_sim.analysis.dynamics import steady_orbit
-from rimd_sim.analysis.lyapunov import largest_lyapunov
-from rimd_sim.analysis.peterka import basins, peterka
-from rimd_sim.analysis.sweep import sweep
-from rimd_sim.core.config import load_config
-from rimd_sim.core.config import find_config_file
-from rimd_sim.core.ensemble import StopRule, run_cells
-from rimd_sim.core.model import model_for
+from rimd_sim.analysis.dynamics.lyapunov import largest_lyapunov
+from rimd_sim.analysis.dynamics.peterka import basins, peterka
+from rimd_sim.analysis.dynamics.steady import steady_orbit
+from rimd_sim.analysis.dynamics.bifurcation import bifurcation
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.model.ensemble import StopRule, run_cells
+from rimd_sim.model.rig_model import model_for
+from rimd_sim.settings.config import find_config_file, load_config
 
 
 @pytest.fixture(scope="module")

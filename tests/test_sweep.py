@@ -10,8 +10,8 @@ from core import reference
 
 from harness.outputs import read_json
 from rimd_sim import cli
-from rimd_sim.analysis.sweep import sweep
-from rimd_sim.core.config import SimConfig
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.settings.config import SimConfig
 
 
 @pytest.mark.process

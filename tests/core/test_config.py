@@ -8,9 +8,8 @@ import math
 
 import pytest
 
-from rimd_sim.core.config import SimConfig, load_config
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.config import PARAMETERS, find_config_file, read_ros_parameters
+from rimd_sim.errors import ConfigError
+from rimd_sim.settings.config import PARAMETERS, SimConfig, find_config_file, load_config, read_ros_parameters
 
 
 def test_default_yaml_equals_code_defaults():
@@ -148,7 +147,7 @@ def test_every_parameter_round_trips():
 
 def test_every_default_obeys_its_own_rule():
     """The declaration is consistent: each default passes the rule declared with it."""
-    from rimd_sim.core.config import NODE_PARAMETERS
+    from rimd_sim.settings.config import NODE_PARAMETERS
 
     for table in (PARAMETERS, NODE_PARAMETERS):
         for name, p in table.items():
@@ -173,7 +172,7 @@ def test_yaml_errors_name_the_file_line_and_column(tmp_path):
 def test_a_relative_config_is_found_from_anywhere(tmp_path, monkeypatch):
     """`rimd rig --config config/paper_model.yaml` typed outside the repository finds the shipped preset; a file
     found nowhere is refused saying where it was looked for (issue 22)."""
-    from rimd_sim.core.files import resolve_config
+    from rimd_sim.settings.yaml_file import resolve_config
 
     monkeypatch.chdir(tmp_path)
     assert resolve_config("config/paper_model.yaml") == find_config_file("paper_model.yaml")

@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 
 import rimd_sim
-import rimd_sim.core.kernel as kernel
-import rimd_sim.core.rigid as rigid
-from rimd_sim.core.config import STRUCTURE_MODELS
-from rimd_sim.core.model import MODELS
+import rimd_sim.model.kernel as kernel
+import rimd_sim.model.rigid as rigid
+from rimd_sim.model.rig_model import MODELS
+from rimd_sim.settings.config import STRUCTURE_MODELS
 
 SRC = Path(rimd_sim.__file__).resolve().parent.parent
 
@@ -30,9 +30,10 @@ SRC = Path(rimd_sim.__file__).resolve().parent.parent
 PROBE = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from rimd_sim.core import kernel as k, load_config
-    from rimd_sim.core.config import find_config_file
-    from rimd_sim.core.model import MODELS
+    from rimd_sim.settings.config import load_config
+    from rimd_sim.model import kernel as k
+    from rimd_sim.settings.config import find_config_file
+    from rimd_sim.model.rig_model import MODELS
     cfg = load_config(find_config_file("structural.yaml"))
     out = {}
     for name in sys.argv[1:]:
@@ -123,9 +124,9 @@ def test_the_registry_holds_every_structure_model():
 def test_a_running_model_keeps_its_model_and_its_modes_count():
     """RigModel refuses to be reconfigured to another model (its state would not fit), and a start whose modes do
     not fit the model, each with a message naming what was wrong."""
-    from rimd_sim.core.config import SimConfig
-    from rimd_sim.core.errors import CommandError, ConfigError
-    from rimd_sim.core.model import RigModel
+    from rimd_sim.errors import CommandError, ConfigError
+    from rimd_sim.model.rig_model import RigModel
+    from rimd_sim.settings.config import SimConfig
 
     model = RigModel(SimConfig(), channels=False, truth=False)
     with pytest.raises(CommandError, match=r"structure.model cannot change while the model runs \(rigid to two_mass\)"):
@@ -146,8 +147,8 @@ def test_a_copied_model_continues_exactly_as_the_original_and_alone(name):
 
     import numpy as np
 
-    from rimd_sim.core.config import SimConfig
-    from rimd_sim.core.model import RigModel
+    from rimd_sim.model.rig_model import RigModel
+    from rimd_sim.settings.config import SimConfig
 
     config = SimConfig().with_parameters({"structure.model": name})
     original = RigModel(config)

@@ -7,11 +7,11 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.errors import CommandError, ConfigError
-from rimd_sim.core.capture import CaptureConfig
-from rimd_sim.core.faults import parse_fault_entry
-from rimd_sim.core.simulator import RigSimulator
+from rimd_sim.errors import CommandError, ConfigError
+from rimd_sim.instruments.faults import parse_fault_entry
+from rimd_sim.instruments.rig_simulator import RigSimulator
+from rimd_sim.settings.capture import CaptureConfig
+from rimd_sim.settings.config import SimConfig
 
 CFG = SimConfig().with_parameters({"seed": 5, "motor.initial_frequency": 3.75})
 SCENARIO = [("impact_force", "spike", 0.2, 0.3, 500.0), ("impact_force", "delay", 0.25, 0.2, 0.05),
@@ -100,7 +100,7 @@ def test_capture_acceleration_outside_contact_is_close_to_the_full_1_mhz_evaluat
     """The fast acceleration is evaluated in contact only and interpolated from the 20 kHz channel outside:
     within 0.5 m/s^2 (noise of 0.05 included) of evaluating the model at every microsecond, where the
     contact reaches hundreds of m/s^2; the captured force peak within 0.5 % of the impact's."""
-    from rimd_sim.core.model import RigModel
+    from rimd_sim.model.rig_model import RigModel
 
     sim = RigSimulator(CFG, capture=CaptureConfig(enabled=True))
     captures, impacts = [], []
@@ -205,7 +205,7 @@ def test_clock_drift_100_ppm_over_600_s():
     by 60 ms (within one sample: 100e-6 * 600 s), and every block stays on the nominal grid. On the core: the
     drift is a property of the fault layer, not of the transport (the fault runs over DDS check that a drift
     reaches a client and a recording)."""
-    from rimd_sim.analysis.faultscan import drift_fit
+    from rimd_sim.analysis.recordings.faultscan import drift_fit
 
     rate = 20000.0
     config = SimConfig().with_parameters({"block_rate": 20.0, "motor.initial_frequency": 3.75,

@@ -1,4 +1,4 @@
-"""The pacing of the simulator and the replay (rimd_sim.core.pacing), on a fake clock: no wall time is waited.
+"""The pacing of the simulator and the replay (rimd_sim.runtime.pacing), on a fake clock: no wall time is waited.
 
 Hypotheses: the schedule makes data time t due at ``anchor + t / factor`` and lets a late publisher catch up;
 factor 0 sets no limit; in lockstep a block ending at t goes only once every consumer has finished with
@@ -13,9 +13,10 @@ from __future__ import annotations
 import pytest
 
 from harness.clock import FakeClock
-from rimd_sim.core.errors import ConfigError
-from rimd_sim.core.pacing import Go, Hold, Lockstep, LockstepSettings, Pacer, Schedule, Wait
-from rimd_sim.core.params import build
+from rimd_sim.errors import ConfigError
+from rimd_sim.runtime.pacing import Go, Hold, Lockstep, Pacer, Schedule, Wait
+from rimd_sim.settings.lockstep import LockstepSettings
+from rimd_sim.settings.params import build
 
 MS = 1_000_000
 S = 1_000_000_000

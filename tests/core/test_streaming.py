@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rimd_sim.core.config import SimConfig
-from rimd_sim.core.errors import CommandError, ConfigError
-from rimd_sim.core.model import RigModel
-from rimd_sim.core.simulator import RigSimulator
+from rimd_sim.errors import CommandError, ConfigError
+from rimd_sim.instruments.rig_simulator import RigSimulator
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import SimConfig
 
 CORE_SRC = str(Path(__file__).resolve().parents[2] / "rimd_sim")
 
@@ -211,9 +211,9 @@ def test_core_never_imports_rclpy():
                 if name.split('.')[0] in ('rclpy', 'rimd_msgs', 'std_msgs'):
                     raise ImportError('blocked: ' + name)
         sys.meta_path.insert(0, Block())
-        import rimd_sim.core as core
-        from rimd_sim.core.simulator import RigSimulator
-        out = RigSimulator(core.SimConfig()).advance(0.1)
+        from rimd_sim.settings.config import SimConfig
+        from rimd_sim.instruments.rig_simulator import RigSimulator
+        out = RigSimulator(SimConfig()).advance(0.1)
         assert 'rclpy' not in sys.modules
         print('ok', len(out.channels['impact_force'].samples))
     """)
@@ -226,7 +226,7 @@ def test_pure_python_kernel_agrees_with_compiled():
     """RIMD_NO_JIT=1 runs the same kernel source as plain Python: same impacts to 1e-12 relative."""
     code = """
         import json
-        from rimd_sim.core import RigModel, SimConfig
+        from rimd_sim.model.rig_model import RigModel, SimConfig
         cfg = SimConfig().with_parameters({'motor.initial_frequency': 3.75, 'motor.initial_setpoint': 3.75,
                                            'initial.theta': -0.05})
         out = RigModel(cfg, channels=False, truth=False).advance(0.6)
@@ -244,7 +244,7 @@ def test_instrument_filter_equals_scipy_sosfilt_across_blocks():
     """The compiled biquad cascade gives scipy.signal.sosfilt's output, block after block."""
     from scipy import signal
 
-    from rimd_sim.core.sensors import _sos_filter
+    from rimd_sim.instruments.sensors import _sos_filter
 
     sos = np.vstack([signal.butter(2, 3000, fs=20000, output="sos"),
                      signal.butter(1, 0.5, "highpass", fs=20000, output="sos")])

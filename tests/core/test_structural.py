@@ -19,13 +19,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import rimd_sim
-from rimd_sim.analysis.pulse import LEAD_GAP, force_peaks, pulse, ring_frequency
-from rimd_sim.core.config import SimConfig, load_config
-from rimd_sim.core.errors import CommandError, ConfigError
-from rimd_sim.core.model import RigModel
-from rimd_sim.core.config import find_config_file
-from rimd_sim.core.model import MODELS
-from rimd_sim.core.simulator import RigSimulator
+from rimd_sim.analysis.dynamics.pulse import LEAD_GAP, force_peaks, pulse, ring_frequency
+from rimd_sim.errors import CommandError, ConfigError
+from rimd_sim.instruments.rig_simulator import RigSimulator
+from rimd_sim.model.rig_model import MODELS, RigModel
+from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
 
 def at_frequency(cfg: SimConfig, f: float, **params) -> SimConfig:
@@ -107,9 +105,9 @@ def test_pure_python_driver_agrees_with_compiled():
     the same acceleration samples to 1e-12 relative."""
     code = textwrap.dedent("""
         import json
-        from rimd_sim.analysis.pulse import pulse
-        from rimd_sim.core import load_config
-        from rimd_sim.core.config import find_config_file
+        from rimd_sim.analysis.dynamics.pulse import pulse
+        from rimd_sim.settings.config import load_config
+        from rimd_sim.settings.config import find_config_file
         r = pulse(load_config(find_config_file("structural.yaml")), 0.066, rate=2e5, span=0.003)
         print(json.dumps({"summary": r.summary, "acc": r.acceleration.tolist()}))
     """)
@@ -246,7 +244,7 @@ def test_impactor_heavier_than_the_hammer_is_refused():
 def reference_impact_duration(cfg: SimConfig, velocity: float, span: float = 3e-3) -> float:
     """The duration of one impact of the two-mass model, from an independent integration.
 
-    Written from the equations of docs/physics.md ("Structural model"), sharing no code with rimd_sim.core: the
+    Written from the equations of docs/physics.md ("Structural model"), sharing no code with rimd_sim.model: the
     cart at rest, the pendulum (theta), the link's extension u and the sensor's top s, spring-dashpot contact on
     delta = l sin(theta) + (m2/m) u - s - gap; scipy's solve_ivp (DOP853, rtol 1e-11) with the Filippov switches
     as terminal directed events (contact while the law's force is >= 0 and delta > 0; after a release with

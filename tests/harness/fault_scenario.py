@@ -1,6 +1,6 @@
 """The fault scenario of the fault tests: every sensor fault kind on the force channel, one after another.
 
-Each entry: (kind, start s, duration s, magnitude, the finding of :mod:`rimd_sim.analysis.faultscan` that
+Each entry: (kind, start s, duration s, magnitude, the finding of :mod:`rimd_sim.analysis.recordings.faultscan` that
 shows it). The clock drift comes last: its clock offset stays after it ends.
 """
 

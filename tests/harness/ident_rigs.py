@@ -5,7 +5,7 @@
   hidden rig's parameters, in lockstep with ``rimd experiment``'s recorder, which records the stepped schedule;
   then the rig resumed. The one place the tests and the battery record through the rig.
 * :func:`write_core_recording`: the same schedule run by the physics core in this process and written as the
-  recorder writes it (rosbag2 MCAP through :class:`rimd_sim.recording.bag.McapFile`, the simulator node's
+  recorder writes it (rosbag2 MCAP through :class:`rimd_sim.io.bag.McapFile`, the simulator node's
   messages: the channels' blocks after the block-level faults, impact events, motor states, ``/rig/faults``,
   the triggered captures, the rig's parameters as metadata). For the cases where the point is the
   identification, not the wiring (faults, captures, many rigs): ``tests/test_experiment.py`` shows that a
@@ -87,7 +87,7 @@ class Written:
 
 def rig_config(params: Mapping[str, float], schedule: Schedule):  # noqa: ANN201 - SimConfig
     """The simulator's configuration for ``params`` (flat names over the defaults) run under ``schedule``."""
-    from rimd_sim.core.config import SimConfig
+    from rimd_sim.settings.config import SimConfig
 
     f0 = schedule.frequencies[0]
     return SimConfig().with_parameters({**params, "motor.initial_frequency": f0, "motor.initial_setpoint": f0,
@@ -99,11 +99,11 @@ def write_core_recording(path: Path, params: Mapping[str, float], schedule: Sche
     from rclpy.serialization import serialize_message
 
     from rimd_msgs.msg import Capture, FaultEvent, ImpactEvent, MotorState
-    from rimd_sim.core.capture import CaptureConfig
-    from rimd_sim.core.simulator import RigSimulator
-    from rimd_sim.recording.bag import McapFile, TopicInfo
-    from rimd_sim.recording.cdr import SampleBlockEncoder
-    from rimd_sim.recording.msgdefs import message_definition
+    from rimd_sim.instruments.rig_simulator import RigSimulator
+    from rimd_sim.io.bag import McapFile, TopicInfo
+    from rimd_sim.io.cdr import SampleBlockEncoder
+    from rimd_sim.io.msgdefs import message_definition
+    from rimd_sim.settings.capture import CaptureConfig
 
     config = rig_config(params, schedule)
     sim = RigSimulator(config, truth=False, capture=CaptureConfig(enabled=schedule.capture))
@@ -191,14 +191,14 @@ def record_through_rig(rigs, out: Path, params: Mapping[str, float], schedule: S
                        timeout: float = 240.0) -> Path:
     """Record ``schedule`` on the running rig ``params`` as a user would; return the recording directory.
 
-    ``rigs``: a :class:`rimd_sim.testing.RigFactory` (the tests' ``rimd_rig`` fixture). The simulator node starts
+    ``rigs``: a :class:`rimd_sim.ros.testing.RigFactory` (the tests' ``rimd_rig`` fixture). The simulator node starts
     paused from rest with the hidden rig's parameters, in lockstep with ``rimd experiment``'s recorder (as fast as
     it records, nothing lost however loaded the machine); ``rimd experiment --start`` schedules the steps (its
     recorder joins before the rig runs); the kicks go through ``/rig/perturb`` on their stamps; then
     ``/rig/resume``. Faults ride in the rig's ``faults`` list; captures through ``capture.enabled``.
     """
     from harness.processes import ProcessManager
-    from rimd_sim.experiment import RECORDER_NODE
+    from rimd_sim.ros.clients.experiment import RECORDER_NODE
 
     f0 = schedule.frequencies[0]
     parameters = {**params, "start_paused": True, "motor.initial_frequency": f0, "motor.initial_setpoint": f0}
@@ -232,8 +232,8 @@ def impact_near(rig: Mapping[str, float], freqs: Sequence[float], near: float, d
                 start: float = 2.0) -> float:
     """The start (s) of the impact nearest ``near`` in the core's run of ``rig`` on the experiment's timeline (from
     rest at ``freqs[0]``, step ``k`` from ``start + k * dwell``, ramps at 2 Hz/s): where to put a fault over one."""
-    from rimd_sim.core.config import SimConfig
-    from rimd_sim.core.model import RigModel
+    from rimd_sim.model.rig_model import RigModel
+    from rimd_sim.settings.config import SimConfig
 
     config = SimConfig().with_parameters({**rig, "motor.initial_frequency": freqs[0],
                                           "motor.initial_setpoint": freqs[0]})

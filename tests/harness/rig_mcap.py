@@ -2,7 +2,7 @@
 
 The file is what a recorder writes: profile ``ros2``, ``ros2msg`` schemas with the full definitions of the
 installed ``rimd_msgs`` (dependencies included), ``cdr`` messages on the ``/rig/...`` topics, log time =
-the message stamp. The data are the core's own output (:class:`rimd_sim.core.simulator.RigSimulator`), in
+the message stamp. The data are the core's own output (:class:`rimd_sim.instruments.rig_simulator.RigSimulator`), in
 100 blocks per second as the simulator node publishes them. Used until a recording made by
 ``rimd_recorder`` is available to the tests: :func:`write_rig_mcap` returns what it wrote, so a test can
 compare a conversion with it either way.
@@ -55,8 +55,8 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75,
     """
     from mcap_ros2.writer import Writer
 
-    from rimd_sim.core.config import SimConfig
-    from rimd_sim.core.simulator import RigSimulator
+    from rimd_sim.instruments.rig_simulator import RigSimulator
+    from rimd_sim.settings.config import SimConfig
 
     config = SimConfig().with_parameters({"motor.initial_frequency": frequency_hz,
                                           "motor.initial_setpoint": frequency_hz, **(overrides or {})})

@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from rimd_sim.core.errors import RimdError
+from rimd_sim.errors import RimdError
 
 __all__ = ["CONNECT_TIMEOUT_S", "ENV_SCHEDULER", "SchedulerError", "TaskRunner", "open_executor", "run_tasks"]
 

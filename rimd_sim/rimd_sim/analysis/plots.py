@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from rimd_sim.analysis.sweep import SweepResult  # noqa: E402
+from rimd_sim.analysis.dynamics.sweep import SweepResult  # noqa: E402
 
 
 def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa: ANN001
@@ -290,7 +290,7 @@ def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: P
 def plot_recorded_channels(channels: dict, windows, path: Path, title: str = "", bins: int = 1500) -> int:  # noqa: ANN001
     """The recorded channels over time (envelope of each time bin: min to max), left-out windows shaded.
 
-    ``channels``: label -> :class:`~rimd_sim.analysis.recorded.Channel` (its ``topic`` selects its windows).
+    ``channels``: label -> :class:`~rimd_sim.analysis.recordings.recorded.Channel` (its ``topic`` selects its windows).
     Returns the number of windows drawn (over all panels).
     """
     n = max(1, len(channels))

@@ -1,4 +1,4 @@
-"""Parameters of the Rerun bridge node (``rimd_rerun``), declared once (:mod:`rimd_sim.core.params`), without rclpy.
+"""Parameters of the Rerun bridge node (``rimd_rerun``), declared once (:mod:`rimd_sim.settings.params`), without rclpy.
 
 Every parameter is read at start (the sinks are opened once). ``rimd rig`` reads ``enabled`` and the
 ``foxglove.*`` keys of the bridge's section to plan the bring-up.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from rimd_sim.core.params import Param, param, parameters
+from rimd_sim.settings.params import Param, param, parameters
 from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT
 from rimd_sim.viz.sinks import SINKS
 

@@ -3,7 +3,7 @@
 What a Foxglove client (the Foxglove app, or any client of the protocol) gets from :class:`FoxgloveSink`:
 
 * **Channels.** Each rig topic is advertised as a channel of message encoding ``cdr`` with its ``ros2msg``
-  schema: the full ``.msg`` text and every message it depends on (:func:`rimd_sim.recording.msgdefs.
+  schema: the full ``.msg`` text and every message it depends on (:func:`rimd_sim.io.msgdefs.
   message_definition`, the layout rosbag2 and foxglove_bridge use). :meth:`FoxgloveSink.log` passes the
   serialized bytes through as received: nothing is decoded or re-encoded.
 * **Time.** ``Capability.Time``: :meth:`FoxgloveSink.broadcast_time` tells the clients the rig's current time
@@ -18,7 +18,7 @@ What a Foxglove client (the Foxglove app, or any client of the protocol) gets fr
   target nodes' own parameter services). A set that the node refuses is answered with the value in force and
   a status message of level error naming the parameter and the node's reason, which Foxglove shows.
 * **Playback control** (a replay driven from Foxglove's timeline). Given a :class:`PlaybackHandler`
-  (:class:`rimd_sim.viz.playback.PlaybackControl`), :meth:`FoxgloveSink.set_playback_range` (re)starts the
+  (:class:`rimd_sim.runtime.playback_control.PlaybackControl`), :meth:`FoxgloveSink.set_playback_range` (re)starts the
   server with the recording's time range, which advertises ``Capability.PlaybackControl`` (the range is fixed
   for the life of an SDK server: a new range restarts it on the same port, and the clients reconnect); each
   client request goes to the handler, whose state goes back (the SDK broadcasts it, with the request id) and
@@ -42,8 +42,8 @@ import foxglove
 from foxglove import MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema, StatusLevel
 from foxglove.websocket import Capability, PlaybackCommand, PlaybackState, PlaybackStatus, ServerListener
 
-from rimd_sim.recording.msgdefs import MessageDefinitionError, message_definition, service_definitions
-from rimd_sim.viz.playback import PlaybackReport, PlaybackRequest
+from rimd_sim.io.msgdefs import MessageDefinitionError, message_definition, service_definitions
+from rimd_sim.runtime.playback_control import PlaybackReport, PlaybackRequest
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "FoxgloveError", "FoxgloveSink", "ForwardedService", "ParameterBackend",
            "ParameterEntry", "PlaybackHandler", "ServiceBackend", "ServiceCallError", "check_address",

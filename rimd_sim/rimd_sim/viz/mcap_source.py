@@ -1,6 +1,6 @@
 """Rig messages from a ROS 2 MCAP recording (profile ``ros2``, ``ros2msg`` schemas, ``cdr``), without ROS.
 
-The files are read by the damage-tolerant reader (:mod:`rimd_sim.recording.reader`): a truncated or damaged
+The files are read by the damage-tolerant reader (:mod:`rimd_sim.io.reader`): a truncated or damaged
 file gives every message before the damage (chunks checked against their CRC, so never altered bytes), and
 what was lost is reported in :class:`RecordingInfo`. Decoding is ``mcap_ros2``'s, from the full message
 definitions stored in the file, so a recording of any build of ``rimd_msgs`` with the same fields reads the
@@ -63,7 +63,7 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
     from mcap.records import Schema
     from mcap_ros2.decoder import DecoderFactory
 
-    from rimd_sim.recording.reader import RecordingError, open_recording
+    from rimd_sim.io.reader import RecordingError, open_recording
 
     path = Path(path)
     info = info if info is not None else RecordingInfo({}, {})

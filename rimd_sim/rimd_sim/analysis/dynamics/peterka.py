@@ -1,0 +1,380 @@
+"""Peterka maps (gap/A0 x Omega/omega) and basins of attraction (theta0 x theta_dot0) of the steady motions.
+
+Peterka map (the paper's Fig. 12 left)
+--------------------------------------
+Each cell (gap, frequency) is classified (:func:`rimd_sim.analysis.dynamics.steady.steady_orbit`) from three
+initial conditions, the motor at phase 0 and constant frequency:
+
+* ``rest``: the hammer at rest (the Table 1 protocol);
+* ``kick``: the hammer at rest position with a relative velocity ``omega_n (gap + 2 A0)``, enough to reach
+  the stop in free flight (the paper's "energy inserted", Fig. 12 right);
+* ``continued``: the final state of the neighbouring cell at the next lower frequency, as an upward sweep.
+
+The cell's class is the one from rest; a cell where the three classes differ is marked as holding coexisting
+attractors. Each trajectory stops as soon as its motion is known (the rule of
+:mod:`rimd_sim.model.ensemble`: a period n <= 12 repeated to 1e-4 over max(24, 4 n) cycles, after at least 30
+cycles) or at the cap, ``transient_cycles + measure_cycles`` (default 120 + 72, twice the fixed length the
+map used before early stopping), where its last ``measure_cycles`` are classified. One gap row is one task:
+its 3 x frequencies trajectories run in one compiled call (the ``continued`` start runs along the row); the
+tasks go through the executor seam (:mod:`rimd_sim.analysis.executor`): a local process pool on all cores,
+or a Dask cluster.
+
+Basins of attraction
+--------------------
+At one (gap, frequency), a grid of initial conditions ``(theta0, theta_dot0)`` (hammer not inside the stop)
+each classified the same way; one grid row per task in the pool.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rimd_sim.analysis.dynamics.steady import check_frequencies, check_frequency, steady_orbit
+from rimd_sim.analysis.executor import run_tasks
+from rimd_sim.errors import ConfigError, IntegrationError
+from rimd_sim.model.ensemble import StopRule, run_cells
+from rimd_sim.model.rig_model import model_for
+from rimd_sim.settings.config import SimConfig
+
+__all__ = ["BasinsResult", "PeterkaResult", "START_NAMES", "basins", "peterka"]
+
+START_NAMES = ("rest", "kick", "continued")
+FAILED = "integration failed"
+
+
+@dataclass(frozen=True)
+class PeterkaResult:
+    """A Peterka map.
+
+    Attributes:
+        gaps_mm: Gaps (mm), one per row.
+        frequencies_hz: Motor frequencies (Hz), one per column.
+        gap_ratio: ``gap / A0`` per row.
+        frequency_ratio: ``Omega / omega_n`` per column.
+        labels: Class per start, shape ``(len(START_NAMES), rows, columns)`` (strings).
+        wall_seconds: Wall time (s).
+        workers: Processes (or Dask worker threads) used.
+        cycles_per_start: Transient + measured cycles of each run: the cap when stopping early.
+        cycles: Cycles each trajectory ran, same shape as ``labels`` (cap + 1 where it ran to the cap).
+        early_stop: Whether trajectories stopped when their motion was known.
+        where: ``local`` or the Dask scheduler's address.
+    """
+
+    gaps_mm: np.ndarray
+    frequencies_hz: np.ndarray
+    gap_ratio: np.ndarray
+    frequency_ratio: np.ndarray
+    labels: np.ndarray
+    wall_seconds: float
+    workers: int
+    cycles_per_start: int
+    cycles: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
+    early_stop: bool = False
+    where: str = "local"
+
+    @property
+    def primary(self) -> np.ndarray:
+        """The class from rest, per cell."""
+        return self.labels[0]
+
+    @property
+    def coexisting(self) -> np.ndarray:
+        """Cells where the starts end on different classes."""
+        return np.any(self.labels != self.labels[:1], axis=0)
+
+    def class_counts(self) -> dict[str, int]:
+        """Cells per class (from rest)."""
+        return dict(Counter(self.primary.ravel().tolist()).most_common())
+
+
+def _classify(config: SimConfig, f: float, theta0: float, theta_dot0: float, transient: int, measure: int):
+    try:
+        orbit = steady_orbit(config, f, theta0=theta0, theta_dot0=theta_dot0, transient_cycles=transient,
+                             measure_cycles=measure)
+    except IntegrationError:
+        return FAILED, (0.0, 0.0)
+    return orbit.label, orbit.final_state
+
+
+def _row(args: tuple[SimConfig, float, list[float], int, int, int]) -> list[tuple[str, str, str]]:
+    """One gap row through :func:`steady_orbit`: one ``RigModel`` per trajectory, a fixed length.
+
+    The path before the ensemble kernel, kept as the reference of the benchmark.
+    """
+    base, gap, freqs, transient, measure, continued_transient = args
+    cfg = base.with_parameters({"gap": gap})
+    rig = cfg.rig
+    kick = rig.omega_n * (gap + 2.0 * rig.amplitude) / rig.length  # rad/s
+    out = []
+    state = (0.0, 0.0)
+    for f in freqs:
+        rest, final = _classify(cfg, f, 0.0, 0.0, transient, measure)
+        kicked, _ = _classify(cfg, f, 0.0, kick, transient, measure)
+        cont, state = _classify(cfg, f, state[0], state[1], continued_transient, measure)
+        if cont == FAILED:
+            state = final
+        out.append((rest, kicked, cont))
+    return out
+
+
+def _row_ensemble(args: tuple[str, np.ndarray, float, np.ndarray, StopRule, StopRule]):
+    """One gap row in two compiled calls: rest and kick starts, then the continuation along the row.
+
+    Returns ``(labels, cycles)``: per start, the class and the cycles run of each frequency.
+    """
+    model, p, kick, freqs, rule, continued_rule = args
+    nf = len(freqs)
+    zeros = np.zeros(nf)
+    both = run_cells(model, p[None, :], np.zeros(2 * nf, dtype=np.int64), np.concatenate([freqs, freqs]),
+                     np.zeros(2 * nf), np.concatenate([zeros, np.full(nf, kick)]), rule)
+    chain = np.ones(nf, dtype=bool)
+    chain[0] = False
+    cont = run_cells(model, p[None, :], np.zeros(nf, dtype=np.int64), freqs, zeros, zeros, continued_rule,
+                     chain=chain, fallback=(both.final[:nf, 0].copy(), both.final[:nf, 1].copy()))
+    labels = both.labels()
+    return ([labels[:nf], labels[nf:], cont.labels()],
+            [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()])
+
+
+def _check_cycles(transient: int, measure: int) -> None:
+    if transient < 0 or measure < 6:
+        raise ConfigError("cycles", (transient, measure), "need transient_cycles >= 0 and measure_cycles >= 6")
+
+
+def stop_rule(transient_cycles: int, measure_cycles: int, early_stop: bool) -> StopRule:
+    """The rule of :mod:`rimd_sim.model.ensemble` with the cap ``transient + measure`` cycles."""
+    return StopRule(max_cycles=transient_cycles + measure_cycles, measure_cycles=measure_cycles, early=early_stop,
+                    min_cycles=min(30, transient_cycles + measure_cycles))
+
+
+def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int = 120, measure_cycles: int = 72,
+            continued_transient_cycles: int = 60, early_stop: bool = True, workers: int | None = None,
+            scheduler: str | None = None, progress=None) -> PeterkaResult:
+    """Classify every (gap, frequency) cell from three starts (module docstring).
+
+    Args:
+        config: Rig configuration (mass, damping, contact, ...); gap and motor replaced per cell.
+        gaps_m: Gaps (m), each >= 0.
+        frequencies_hz: Motor frequencies (Hz), each > 0 and <= the motor maximum; run in increasing order.
+        transient_cycles: Cycles dropped before measuring at the cap (starts ``rest`` and ``kick``).
+        measure_cycles: Cycles classified at the cap (periods up to a third of it are found, at most 12).
+        continued_transient_cycles: Transient of the ``continued`` start at its cap (it begins near an
+            attractor).
+        early_stop: Stop each trajectory when its motion is known (False: every one runs to the cap, the
+            fixed-length run).
+        workers: Local processes (default: all cores).
+        scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
+        progress: Optional callable ``progress(rows_done, rows)``.
+
+    Raises:
+        ConfigError: For a bad gap, frequency or cycle count.
+        SchedulerError: For an unusable scheduler.
+    """
+    gaps = [float(g) for g in gaps_m]
+    if not gaps or any(not (math.isfinite(g) and g >= 0) for g in gaps):
+        raise ConfigError("gaps", gaps, "must be non-empty, each finite and >= 0 m")
+    freqs = sorted(check_frequencies(config, frequencies_hz))
+    _check_cycles(transient_cycles, measure_cycles)
+    _check_cycles(continued_transient_cycles, measure_cycles)
+    start = time.perf_counter()
+    rule = stop_rule(transient_cycles, measure_cycles, early_stop)
+    continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop)
+    rig = config.rig
+    jobs = []
+    for g in gaps:
+        cfg = config.with_parameters({"gap": g})
+        kick = rig.omega_n * (g + 2.0 * rig.amplitude) / rig.length  # rad/s
+        model = model_for(cfg)
+        jobs.append((model.name, model.params(cfg), kick, np.array(freqs), rule, continued_rule))
+    rows, n, where = run_tasks(_row_ensemble, jobs, workers=workers, scheduler=scheduler, progress=progress)
+    labels = np.array([r[0] for r in rows], dtype=object).transpose(1, 0, 2)
+    cycles = np.array([r[1] for r in rows], dtype=np.int64).transpose(1, 0, 2)
+    return PeterkaResult(np.array(gaps) * 1e3, np.array(freqs), np.array(gaps) / rig.amplitude,
+                         np.array(freqs) / rig.natural_frequency, labels, time.perf_counter() - start, n,
+                         transient_cycles + measure_cycles, cycles, early_stop, where)
+
+
+def peterka_table(result: PeterkaResult) -> list[dict]:
+    """CSV rows, one per cell."""
+    rows = []
+    for i, g in enumerate(result.gaps_mm):
+        for j, f in enumerate(result.frequencies_hz):
+            row = {"gap_mm": float(g), "gap_ratio": float(result.gap_ratio[i]), "frequency_hz": float(f),
+                   "frequency_ratio": float(result.frequency_ratio[j])}
+            row.update({f"class_{name}": result.labels[k, i, j] for k, name in enumerate(START_NAMES)})
+            row["coexisting"] = bool(result.coexisting[i, j])
+            rows.append(row)
+    return rows
+
+
+def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, measure_cycles: int, *,
+                 long_factor: int = 10) -> dict:
+    """Where an early-stopped map and a fixed-length map (same grid) disagree, and which is right.
+
+    Returns the agreement per start and every differing cell with both classes; for the ``rest`` and ``kick``
+    starts, also the class of a run ``long_factor`` times the cap (its last ``measure`` cycles), the verdict.
+    The ``continued`` start depends on its neighbour's final state, which differs between the two maps, so it
+    gets no long run.
+    """
+    rig = config.rig
+    cells = []
+    agreement = []
+    for k, name in enumerate(START_NAMES):
+        differ = early.labels[k] != fixed.labels[k]
+        agreement.append(float(1.0 - differ.mean()))
+        for i, j in zip(*np.nonzero(differ), strict=True):
+            cell = {"start": name, "gap_mm": float(early.gaps_mm[i]), "frequency_hz": float(early.frequencies_hz[j]),
+                    "early_stop": early.labels[k, i, j], "fixed_length": fixed.labels[k, i, j],
+                    "early_stop_cycles": int(early.cycles[k, i, j]), "long_run": None}
+            if name != "continued":
+                cfg = config.with_parameters({"gap": early.gaps_mm[i] * 1e-3})
+                kick = rig.omega_n * (cfg.rig.gap + 2.0 * rig.amplitude) / rig.length if name == "kick" else 0.0
+                cap = long_factor * fixed.cycles_per_start
+                model = model_for(cfg)
+                res = run_cells(model.name, model.params(cfg)[None, :], np.zeros(1, dtype=np.int64),
+                                np.array([early.frequencies_hz[j]]), np.zeros(1), np.array([kick]),
+                                StopRule(early=False, max_cycles=cap, measure_cycles=measure_cycles))
+                cell["long_run"] = res.labels()[0]
+                cell["long_run_cycles"] = cap
+            cells.append(cell)
+    return {"fixed_cycles": int(fixed.cycles_per_start), "agreement_from_rest": agreement[0],
+            "agreement_per_start": dict(zip(START_NAMES, agreement, strict=True)),
+            "fixed_wall_seconds": fixed.wall_seconds, "differing_cells": cells}
+
+
+def cycles_summary(cycles: np.ndarray, cap: int) -> dict:
+    """How long the trajectories ran: mean cycles per start, and the fraction stopped before the cap."""
+    if cycles.size == 0:
+        return {}
+    return {"mean": float(cycles.mean()), "cap": int(cap), "stopped_early": float((cycles <= cap).mean()),
+            "mean_per_start": [float(c.mean()) for c in cycles]}
+
+
+def save_peterka_npz(result: PeterkaResult, path) -> None:
+    """Write the map as arrays (compact for big maps), NumPy ``.npz``.
+
+    Arrays: ``classes`` (names), ``codes`` (start x gap x frequency, indices into ``classes``), ``starts``,
+    ``coexisting``, ``cycles``, ``gaps_mm``, ``frequencies_hz``, ``gap_ratio``, ``frequency_ratio``.
+    """
+    names = sorted(set(result.labels.ravel().tolist()))
+    index = {c: i for i, c in enumerate(names)}
+    codes = np.vectorize(index.__getitem__, otypes=[np.int16])(result.labels)
+    np.savez_compressed(path, classes=np.array(names), codes=codes, starts=np.array(START_NAMES),
+                        coexisting=result.coexisting, cycles=result.cycles.astype(np.int32),
+                        gaps_mm=result.gaps_mm, frequencies_hz=result.frequencies_hz, gap_ratio=result.gap_ratio,
+                        frequency_ratio=result.frequency_ratio)
+
+
+@dataclass(frozen=True)
+class BasinsResult:
+    """Classes over a grid of initial conditions at one parameter point.
+
+    Attributes:
+        gap_mm: Gap (mm).
+        frequency_hz: Motor frequency (Hz).
+        theta0: Initial angles (rad), one per column.
+        theta_dot0: Initial rates (rad/s), one per row.
+        labels: Class per initial condition, shape ``(rows, columns)``; ``inside the stop`` where the
+            hammer would start beyond the stop (not run).
+        wall_seconds: Wall time (s).
+        workers: Processes (or Dask worker threads) used.
+        cycles: Cycles each trajectory ran (0 where not run).
+        where: ``local`` or the Dask scheduler's address.
+    """
+
+    gap_mm: float
+    frequency_hz: float
+    theta0: np.ndarray
+    theta_dot0: np.ndarray
+    labels: np.ndarray
+    wall_seconds: float
+    workers: int
+    cycles: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
+    where: str = "local"
+
+    def class_counts(self) -> dict[str, int]:
+        """Initial conditions per class."""
+        return dict(Counter(self.labels.ravel().tolist()).most_common())
+
+
+INSIDE = "inside the stop"
+
+
+def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, StopRule]
+               ) -> tuple[list[str], list[int]]:
+    """One row of initial conditions (one rate, every angle) in one compiled call: ``(labels, cycles)``."""
+    model, p, f, thetas, theta_dot, limit, rule = args
+    run = np.flatnonzero(thetas <= limit)
+    labels = [INSIDE] * len(thetas)
+    cycles = [0] * len(thetas)
+    if len(run):
+        res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
+                        np.full(len(run), theta_dot), rule)
+        for j, label, c in zip(run.tolist(), res.labels(), res.cycles.tolist(), strict=True):
+            labels[j] = label
+            cycles[j] = c
+    return labels, cycles
+
+
+def default_basin_ranges(config: SimConfig) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Initial angles from ``-3 (gap + A0) / l`` to the stop, rates within ``+-3 omega_n (gap + A0) / l``."""
+    rig = config.rig
+    span = 3.0 * (rig.gap + rig.amplitude) / rig.length
+    return (-span, math.asin(min(1.0, rig.gap / rig.length))), (-span * rig.omega_n, span * rig.omega_n)
+
+
+def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, float],
+           theta_dot_range: tuple[float, float], size: tuple[int, int] = (40, 40), *, transient_cycles: int = 160,
+           measure_cycles: int = 72, early_stop: bool = True, workers: int | None = None,
+           scheduler: str | None = None, progress=None) -> BasinsResult:
+    """Classify the steady motion from each initial condition of a grid (module docstring).
+
+    Args:
+        config: Rig configuration with the gap in force.
+        frequency_hz: Motor frequency (Hz).
+        theta_range: ``(min, max)`` initial angle (rad).
+        theta_dot_range: ``(min, max)`` initial rate (rad/s).
+        size: Grid points ``(angles, rates)``, each >= 2.
+        transient_cycles: Cycles dropped before measuring at the cap.
+        measure_cycles: Cycles classified at the cap.
+        early_stop: Stop each trajectory when its motion is known (:mod:`rimd_sim.model.ensemble`).
+        workers: Local processes (default: all cores).
+        scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
+        progress: Optional callable ``progress(rows_done, rows)``.
+
+    Raises:
+        ConfigError: For a bad frequency, range, size or cycle count.
+        SchedulerError: For an unusable scheduler.
+    """
+    frequency_hz = check_frequency(config, frequency_hz)
+    for name, (lo, hi) in (("theta_range", theta_range), ("theta_dot_range", theta_dot_range)):
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ConfigError(name, (lo, hi), "must be finite with min < max")
+    if abs(theta_range[0]) > 1.5 or abs(theta_range[1]) > 1.5:
+        raise ConfigError("theta_range", theta_range, "must stay within +-1.5 rad")
+    if min(size) < 2 or max(size) > 2000:
+        raise ConfigError("size", size, "each must be in [2, 2000]")
+    _check_cycles(transient_cycles, measure_cycles)
+    start = time.perf_counter()
+    thetas = np.linspace(*theta_range, size[0])
+    rates = np.linspace(*theta_dot_range, size[1])
+    model = model_for(config)
+    p = model.params(config)
+    limit = math.asin(min(1.0, config.rig.gap / config.rig.length))
+    rule = stop_rule(transient_cycles, measure_cycles, early_stop)
+    jobs = [(model.name, p, frequency_hz, thetas, float(r), limit, rule) for r in rates]
+    rows, n, where = run_tasks(_basin_row, jobs, workers=workers, scheduler=scheduler, progress=progress)
+    return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates,
+                        np.array([r[0] for r in rows], dtype=object), time.perf_counter() - start, n,
+                        np.array([r[1] for r in rows], dtype=np.int64), where)
+
+
+def basins_table(result: BasinsResult) -> list[dict]:
+    """CSV rows, one per initial condition."""
+    return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j]}
+            for i, r in enumerate(result.theta_dot0) for j, th in enumerate(result.theta0)]

@@ -1,0 +1,191 @@
+"""Stepped frequency sweeps of the model: steady peak impact force and impacts per cycle versus frequency.
+
+The paper's protocol (section 2.1, Table 1) steps the motor frequency on a 0.25 Hz grid and reads the
+steady impact force at each step. Three directions:
+
+* ``rest``: every frequency starts from rest (the hammer at rest, the motor at that frequency from
+  t = 0), as in Table 1. Points are independent, so they run in a process pool on all cores.
+* ``up`` / ``down``: one continuous run; at each step the motor ramps to the next frequency (at
+  ``ramp_rate``) and the motion continues from the previous state, so hysteresis and coexisting
+  attractors show (the paper's Fig. 12 right). Sequential by nature.
+
+At each point the model runs ``cycles`` excitation cycles (after the ramp) and the steady state is read
+over the last ``measure_cycles``: the largest peak force and the number of impacts per cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+import numpy as np
+
+from rimd_sim.analysis.dynamics.steady import check_frequencies
+from rimd_sim.analysis.executor import run_tasks, scheduler_address
+from rimd_sim.errors import ConfigError
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import SimConfig
+
+__all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
+
+Direction = Literal["up", "down", "rest"]
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """Steady state at one frequency.
+
+    Attributes:
+        frequency_hz: Motor frequency (Hz).
+        frequency_ratio: Omega / omega_n.
+        peak_force_n: Largest peak impact force over the measured cycles (N); 0 without impact.
+        force_ratio: ``peak_force_n / (m g)``.
+        impacts_per_cycle: Impacts per excitation cycle over the measured cycles.
+        simulated_seconds: Simulated time spent on this point (s).
+    """
+
+    frequency_hz: float
+    frequency_ratio: float
+    peak_force_n: float
+    force_ratio: float
+    impacts_per_cycle: float
+    simulated_seconds: float
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """A sweep and its bands (see :func:`band_peak`)."""
+
+    gap_mm: float
+    direction: str
+    points: tuple[SweepPoint, ...]
+    band_a: SweepPoint | None
+    band_b: SweepPoint | None
+    simulated_seconds: float
+    wall_seconds: float
+    workers: int
+
+    def summary(self) -> dict:
+        """The ``summary.json`` content (SPEC section 7)."""
+        def band(p: SweepPoint | None) -> dict | None:
+            return None if p is None else {"frequency_hz": p.frequency_hz, "peak_force_n": p.peak_force_n,
+                                           "force_ratio": p.force_ratio}
+        return {"gap_mm": self.gap_mm, "direction": self.direction, "band_a": band(self.band_a),
+                "band_b": band(self.band_b), "points": len(self.points),
+                "simulated_seconds": self.simulated_seconds, "wall_seconds": self.wall_seconds,
+                "workers": self.workers}
+
+
+def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, tolerance: float = 0.03) -> SweepPoint | None:
+    """Point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B)."""
+    sel = [p for p in points if abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
+    return max(sel, key=lambda p: p.peak_force_n, default=None)
+
+
+def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[float, float]:
+    t_from = t_end - measure_cycles / f
+    last = [i for i in impacts if i.t_start >= t_from]
+    return max((i.peak_force for i in last), default=0.0), len(last) / measure_cycles
+
+
+def _point(cfg: SimConfig, f: float, peak: float, rate: float, seconds: float) -> SweepPoint:
+    rig = cfg.rig
+    return SweepPoint(f, f / rig.natural_frequency, peak, peak / (rig.mass * rig.gravity), rate, seconds)
+
+
+def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
+    base, f, cycles, measure_cycles = args
+    cfg = base.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
+    duration = cycles / f
+    impacts = RigModel(cfg, channels=False, truth=False).advance(duration).impacts
+    return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration)
+
+
+def _rest_chunk(jobs: list[tuple[SimConfig, float, int, int]]) -> list[SweepPoint]:
+    return [_from_rest(job) for job in jobs]
+
+
+def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=None) -> list[SweepPoint]:
+    """An up or down sweep: one run, the motor ramped from point to point."""
+    config, order, cycles, measure_cycles, ramp_rate = job
+    cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
+    model = RigModel(cfg, channels=False, truth=False)
+    points = []
+    for i, f in enumerate(order):
+        t0 = model.time
+        if i:
+            model.set_motor_frequency(f, ramp_rate)
+        ramp = abs(f - order[i - 1]) / ramp_rate if i else 0.0
+        out = model.advance(t0 + ramp + cycles / f)
+        t_end = float(model.time)
+        points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0)))
+        if progress:
+            progress(i + 1, len(order))
+    points.sort(key=lambda p: p.frequency_hz)
+    return points
+
+
+def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: Direction = "rest", *,
+          cycles: int = 150, measure_cycles: int = 50, ramp_rate: float = 2.0, workers: int | None = None,
+          scheduler: str | None = None, progress=None) -> SweepResult:
+    """Run a stepped sweep.
+
+    Args:
+        config: Rig configuration (gap, mass, contact, ...); its motor settings are replaced per point.
+        frequencies: Motor frequencies (Hz), in sweep order for ``up``/``down``.
+        direction: ``rest``, ``up`` or ``down``.
+        cycles: Excitation cycles simulated per point (after the ramp).
+        measure_cycles: Last cycles over which the steady state is read.
+        ramp_rate: Ramp between steps of an ``up``/``down`` sweep (Hz/s).
+        workers: Local processes for ``rest`` sweeps (default: all cores).
+        scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else local): ``rest`` points run
+            there as tasks, an ``up``/``down`` sweep as one task.
+        progress: Optional callable ``progress(done, total)``.
+
+    Raises:
+        ConfigError: For a bad direction, frequency or cycle count.
+    """
+    if direction not in ("up", "down", "rest"):
+        raise ConfigError("direction", direction, "must be up, down or rest")
+    freqs = check_frequencies(config, frequencies)
+    if not 0 < measure_cycles <= cycles:
+        raise ConfigError("measure_cycles", measure_cycles, f"must be > 0 and <= cycles = {cycles}")
+    start = time.perf_counter()
+    points: list[SweepPoint] = []
+    n_workers = 1
+    if direction == "rest":
+        # Chunks of points per task (interleaved, so each holds low and high frequencies): few enough that
+        # submitting them costs little, enough to balance the workers. On a cluster, one point per task.
+        local = scheduler_address(scheduler) is None
+        n_chunks = min(len(freqs), 4 * max(1, workers or os.cpu_count() or 1)) if local else len(freqs)
+        chunks = [list(range(len(freqs)))[i::n_chunks] for i in range(n_chunks)]
+        jobs = [[(config, freqs[i], cycles, measure_cycles) for i in chunk] for chunk in chunks]
+
+        def chunk_progress(done: int, total: int) -> None:
+            progress(min(len(freqs), round(done * len(freqs) / total)), len(freqs))
+
+        results, n_workers, _ = run_tasks(_rest_chunk, jobs, workers=workers, scheduler=scheduler,
+                                          progress=chunk_progress if progress else None)
+        by_index = {i: p for chunk, res in zip(chunks, results, strict=True) for i, p in zip(chunk, res, strict=True)}
+        points = [by_index[i] for i in range(len(freqs))]
+    else:
+        order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
+        job = (config, order, cycles, measure_cycles, ramp_rate)
+        if scheduler_address(scheduler) is None:
+            points = _continuous(job, progress)
+        else:
+            points = run_tasks(_continuous, [job], scheduler=scheduler, progress=progress and (
+                lambda d, t: progress(len(order), len(order))))[0][0]
+    pts = tuple(points)
+    return SweepResult(
+        gap_mm=config.rig.gap * 1e3, direction=direction, points=pts, band_a=band_peak(pts, 1.0),
+        band_b=band_peak(pts, 0.5), simulated_seconds=math.fsum(p.simulated_seconds for p in pts),
+        wall_seconds=time.perf_counter() - start, workers=n_workers)
+
+
+def points_table(result: SweepResult) -> list[dict]:
+    """Rows for a CSV file."""
+    return [asdict(p) for p in result.points]

@@ -1,0 +1,121 @@
+"""Files the analyses write: CSV tables, strict JSON, and parameter files built from a base file.
+
+Library code (no verb, no ROS): ``rimd analyze``, ``rimd identify``, ``rimd fit-table`` and the other analysis
+verbs write through these.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+__all__ = ["FileFormatError", "jsonable", "nest", "read_yaml", "write_csv", "write_json", "write_parameter_file",
+           "write_summary"]
+
+
+class FileFormatError(Exception):
+    """A file the analyses read is not what it must be (one line: the file, line and column, what is wrong)."""
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    """Write ``rows`` (dicts with the same keys) as CSV with a header."""
+    with open(path, "w", newline="") as fh:
+        if not rows:
+            return
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def jsonable(value):  # noqa: ANN001, ANN201 - any JSON-like tree
+    """``value`` as strict JSON data: NumPy scalars as Python numbers, tuples as lists, NaN and ±inf as null.
+
+    JSON has no NaN or infinity; Python's ``json`` would write the bare tokens ``NaN`` and ``Infinity``,
+    which jq, browsers and most JSON libraries refuse. A value that does not exist (the peak of a capture with
+    no sample, the phase of a step with no impact) is ``null``.
+    """
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [jsonable(v) for v in value.tolist()]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_json(path: Path, data) -> None:  # noqa: ANN001 - any JSON-like tree
+    """Write ``data`` to ``path`` as strict JSON (:func:`jsonable`), indented, with a final newline."""
+    path.write_text(json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
+
+
+def write_summary(out: Path, summary: dict) -> None:
+    """Write ``out/summary.json`` (strict JSON: :func:`jsonable`)."""
+    write_json(out / "summary.json", summary)
+
+
+def nest(flat: dict) -> dict:
+    """Dotted parameter names to nested mappings."""
+    tree: dict = {}
+    for key, value in flat.items():
+        node = tree
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    return tree
+
+
+def read_yaml(path: Path):  # noqa: ANN201 - the YAML document
+    """The YAML document of ``path``.
+
+    Raises:
+        FileFormatError: The file cannot be read, or is not YAML: the file, the line and column, the problem.
+    """
+    import yaml
+
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot be read: {exc.strerror}") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise FileFormatError(f"{path}{where}: not valid YAML: {problem}") from None
+
+
+def write_parameter_file(path: Path, base_path: Path, config, header: str) -> None:  # noqa: ANN001
+    """The base file with the simulator's section replaced by every value of ``config``.
+
+    The section is written as ``/**/rimd_simulator``: the node runs in namespace ``/rig`` and ROS applies a
+    section only to the fully qualified name or a wildcard (a plain ``rimd_simulator:`` key means
+    ``/rimd_simulator``, which the node is not); the core reads the same section.
+
+    Raises:
+        FileFormatError: The base file is not a YAML mapping (the file, line and column).
+    """
+    import yaml
+
+    from rimd_sim.settings.config import NODE_NAME
+
+    doc = read_yaml(base_path) or {}
+    if not isinstance(doc, dict):
+        raise FileFormatError(f"{base_path} line 1 column 1: a parameter file must be a mapping of node names, "
+                              f"not {type(doc).__name__}")
+    for section in (NODE_NAME, "/" + NODE_NAME, "/**/" + NODE_NAME):
+        doc.pop(section, None)
+    wildcard = doc.pop("/**", None)   # its simulator values are in the new section; other nodes keep it
+    if wildcard is not None:
+        doc["/**"] = wildcard
+    doc["/**/" + NODE_NAME] = {"ros__parameters": nest(config.to_parameters())}
+    path.write_text(header + yaml.safe_dump(doc, sort_keys=False))

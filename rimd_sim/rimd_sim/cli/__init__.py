@@ -1,0 +1,236 @@
+"""The ``rimd`` command: one console command with subcommands (verbs).
+
+Each verb is a module with ``add_arguments(parser)`` and ``main(args) -> int``, in the manner of the
+``ros2bag`` verbs, listed in :data:`VERBS`. A verb whose issue has not landed yet is listed with that issue
+and answers, on stderr, that it is not implemented, with exit status 2; it never prints fake output.
+
+Rules for verb modules: keep the module import light (import rclpy, numpy and friends inside ``main``),
+so that ``rimd --help`` stays fast and works even where a heavy dependency is broken; report a failure by
+raising :class:`CommandError` (one clear line, exit status 1).
+
+Exit status: 0 success, 1 failure (:class:`CommandError`), 2 usage error or not implemented yet,
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from rimd_sim import __version__
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+# The product's one exception family (rimd_sim.errors): a verb raises CommandError (or lets a library's
+# RimdError through) for a failure the user can act on; main() prints it as one line and exits 1.
+from rimd_sim.errors import CommandError, RimdError  # noqa: E402, F401 - CommandError: the verbs' import
+
+
+def number(option: str, unit: str = "", *, ge: float | None = None, gt: float | None = None,
+           le: float | None = None, lt: float | None = None, zero: str = "",
+           integer: bool = False) -> Callable[[str], float]:
+    """An argparse ``type`` for a numeric option: finite, within its bounds, refused naming the option as typed.
+
+    The bounds are in the option's own unit (``--gap-mm`` in mm), and so is the refusal:
+    ``--gap-mm 2400 refused: must be >= 0 and <= 50 mm``. ``zero``: 0 is also allowed and means that.
+    """
+    parts = [f"{op} {b:g}" for op, b in ((">=", ge), (">", gt), ("<=", le), ("<", lt)) if b is not None]
+    rule = ("must be " + (f"0 ({zero}) or " if zero else "") + " and ".join(parts) + (f" {unit}" if unit else "")
+            if parts else "must be a finite number")
+
+    def convert(text: str) -> float:
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} {text!r} refused: must be "
+                                             + ("an integer" if integer else "a number")) from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{option} {text} refused: must be finite; {rule}")
+        if zero and value == 0:
+            return value
+        if ((ge is not None and value < ge) or (gt is not None and value <= gt) or (le is not None and value > le)
+                or (lt is not None and value >= lt)):
+            raise argparse.ArgumentTypeError(f"{option} {text} refused: {rule}")
+        return value
+
+    convert.__name__ = "integer" if integer else "number"   # what argparse says for a value it cannot convert
+    convert.option, convert.rule = option, rule               # for the tests that sweep every verb's options
+    return convert
+
+
+def count(option: str, minimum: int = 1, maximum: int | None = None) -> Callable[[str], int]:
+    """An integer >= ``minimum`` (and <= ``maximum``), see :func:`number`."""
+    return number(option, ge=minimum, le=maximum, integer=True)
+
+
+def simulator_parameter(option: str, name: str, *, scale: float = 1.0,
+                        unit: str | None = None) -> Callable[[str], float]:
+    """An option that sets the simulator parameter ``name``, possibly in another unit (``--gap-mm``: ``gap`` in mm).
+
+    Its bounds are the parameter's own declaration (:mod:`rimd_sim.settings.config`), scaled, so the refusal names
+    the option as typed, in its unit: ``--gap-mm 2400 refused: must be >= 0 and <= 50 mm``.
+    """
+    from rimd_sim.settings.config import PARAMETERS
+
+    p = PARAMETERS[name]
+
+    def scaled(bound: float | None) -> float | None:
+        return None if bound is None else round(bound * scale, 12)
+
+    zero = p.zero if isinstance(p.zero, str) else ("" if not p.zero else "allowed")
+    return number(option, p.unit if unit is None else unit, ge=scaled(p.ge), gt=scaled(p.gt), le=scaled(p.le),
+                  lt=scaled(p.lt), zero=zero)
+
+
+def nonnegative_float(option: str, unit: str = "") -> Callable[[str], float]:
+    """A number >= 0 (see :func:`number`)."""
+    return number(option, unit, ge=0)
+
+
+def positive_float(option: str, unit: str = "") -> Callable[[str], float]:
+    """A number > 0 (see :func:`number`)."""
+    return number(option, unit, gt=0)
+
+
+def gap_mm(option: str = "--gap-mm") -> Callable[[str], float]:
+    """The gap in mm, within the bounds of the simulator's ``gap`` (see :func:`simulator_parameter`)."""
+    return simulator_parameter(option, "gap", scale=1e3, unit="mm")
+
+
+#: The simulator's real_time_factor as an option: 0 (as fast as possible) or within [0.001, 1e6].
+real_time_factor = number("--real-time-factor", zero="as fast as possible", ge=1e-3, le=1e6)
+
+
+@dataclass(frozen=True)
+class Verb:
+    """One subcommand of ``rimd``.
+
+    Attributes:
+        name: The subcommand, as typed (``rimd <name>``).
+        summary: One line for ``rimd --help``.
+        module: Import path of the module providing ``add_arguments`` and ``main``; None while the issue
+            that implements the verb has not landed.
+        issue: Number of the issue that implements the verb (when ``module`` is None).
+        issue_title: Title of that issue.
+    """
+
+    name: str
+    summary: str
+    module: str | None = None
+    issue: int | None = None
+    issue_title: str = ""
+
+
+_BRING_UP = (5, "Recorder, replay and bring-up")
+_SIMULATOR = (4, "Simulator node")
+
+VERBS: tuple[Verb, ...] = (
+    Verb("rig", "bring up the rig from config: recorder, Rerun bridge and simulator",
+         "rimd_sim.cli.verbs.rig"),
+    Verb("experiment", "stepped frequency sweep through /rig/set_motor_frequency, recorded",
+         "rimd_sim.cli.verbs.experiment"),
+    Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
+         "rimd_sim.cli.verbs.analyze"),
+    Verb("identify", "identify the rig's parameters from a recording: a twin of that rig", "rimd_sim.cli.verbs.identify"),
+    Verb("fit-table", "the parameter set that best reproduces a table of impact resonances (paper Table 1)",
+         "rimd_sim.cli.verbs.fit_table"),
+    Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
+         "rimd_sim.cli.verbs.sweep"),
+    Verb("bifurcation", "bifurcation diagram: stroboscopic l sin(theta)/A0 versus frequency ratio, up and down",
+         "rimd_sim.cli.verbs.bifurcation"),
+    Verb("peterka", "Peterka diagram: impact regimes (p impacts / n cycles) in the (frequency, gap) plane",
+         "rimd_sim.cli.verbs.peterka"),
+    Verb("poincare", "phase plane, Poincare map and largest Lyapunov exponent of the simulated motion",
+         "rimd_sim.cli.verbs.poincare"),
+    Verb("basins", "basins of attraction of coexisting motions over initial (theta, theta')",
+         "rimd_sim.cli.verbs.basins"),
+    Verb("pulse", "one impact at a given velocity: force and acceleration at 1 MHz, double peak and ringing",
+         "rimd_sim.cli.verbs.pulse"),
+    Verb("faults", "run a fault scenario (SCENARIO.yaml) against a running rig through /rig/inject_fault",
+         "rimd_sim.cli.verbs.faults"),
+    Verb("motor", "set the running rig's motor frequency (FREQ Hz) and print its answer", "rimd_sim.cli.verbs.motor"),
+    Verb("perturb", "add a velocity (V m/s) to the hammer of the running rig", "rimd_sim.cli.verbs.perturb"),
+    Verb("inject", "inject one fault (CHANNEL KIND) into the running rig, now, after S s or at a time",
+         "rimd_sim.cli.verbs.inject"),
+    Verb("pause", "pause the running rig (simulation time frozen)", "rimd_sim.cli.verbs.trigger"),
+    Verb("resume", "resume the paused rig", "rimd_sim.cli.verbs.trigger"),
+    Verb("reset", "put the hammer back to its initial state (a new run on /rig/session)", "rimd_sim.cli.verbs.trigger"),
+    Verb("clear-faults", "end every fault of the running rig and cancel the scheduled ones", "rimd_sim.cli.verbs.trigger"),
+    Verb("status", "a live view of the running rig: rates, indices, gaps, lateness, motor, faults, impacts",
+         "rimd_sim.cli.verbs.status"),
+    Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.cli.verbs.rerun"),
+    Verb("replay", "replay a recording (REC) on its topics, alone or driven from Foxglove's timeline (--foxglove)",
+         "rimd_sim.cli.verbs.replay"),
+    Verb("crop", "a time window of a recording (REC) as a new rosbag2 MCAP recording, like ros2 bag convert",
+         "rimd_sim.cli.verbs.crop"),
+    Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.cli.verbs.node"),
+    Verb("info", "print the version and facts about the environment", "rimd_sim.cli.verbs.info"),
+)
+
+
+def not_implemented_message(verb: Verb) -> str:
+    """Return the line a verb whose issue has not landed prints on stderr."""
+    return f"rimd {verb.name}: not implemented yet (issue {verb.issue}: {verb.issue_title})"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser of ``rimd`` with one sub-parser per verb."""
+    parser = argparse.ArgumentParser(
+        prog="rimd",
+        description="Digital twin of the RIMD vibro-impact test rig (ROS 2 Jazzy).",
+    )
+    parser.add_argument("--version", action="version", version=f"rimd {__version__}")
+    subparsers = parser.add_subparsers(dest="verb", metavar="<command>", title="commands")
+    for verb in VERBS:
+        if verb.module is None:
+            sub = subparsers.add_parser(
+                verb.name,
+                help=f"{verb.summary} [not implemented yet: issue {verb.issue}]",
+                description=f"{verb.summary}. {not_implemented_message(verb)}",
+            )
+            sub.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+            sub.set_defaults(_main=_not_implemented_main(verb))
+        else:
+            module = importlib.import_module(verb.module)
+            sub = subparsers.add_parser(verb.name, help=verb.summary, description=verb.summary)
+            module.add_arguments(sub)
+            sub.set_defaults(_main=module.main)
+    return parser
+
+
+def _not_implemented_main(verb: Verb):
+    def main(args: argparse.Namespace) -> int:
+        del args
+        print(not_implemented_message(verb), file=sys.stderr)
+        return EXIT_USAGE
+
+    return main
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``rimd`` with ``argv`` (default ``sys.argv[1:]``) and return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.verb is None:
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    try:
+        return int(args._main(args) or EXIT_OK)
+    except RimdError as error:
+        print(f"rimd {args.verb}: {error}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print(f"rimd {args.verb}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,58 @@
+"""``rimd analyze REC --out DIR``: analyse a recording alone (the library: :mod:`rimd_sim.analysis.recordings.report`).
+
+Writes into DIR the impact tables, the step table (``steps.csv``), the left-out windows, the Poincare points, the
+acceleration spectrum, the figures and ``summary.json``. A damaged recording is analysed as far as it is
+readable and the loss is reported; a file that is not a recording is refused in one line (exit 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rimd_sim.cli import nonnegative_float, positive_float
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of ``rimd analyze``."""
+    parser.add_argument("recording", type=Path, help="a recording directory or one .mcap file")
+    parser.add_argument("--out", type=Path, default=Path("analysis"), help="output directory (default: analysis)")
+    parser.add_argument("--settle", type=nonnegative_float("--settle", "s"), default=2.0,
+                        help="seconds discarded at the start of each dwell step, after the motor reached its "
+                             "setpoint (default 2.0)")
+    parser.add_argument("--threshold", type=positive_float("--threshold", "N"), default=2.0,
+                        help="force threshold (N) above which a run of force samples is one impact (default 2.0)")
+    parser.add_argument("--peak", choices=("onset-fit", "sample"), default="onset-fit",
+                        help="peak of each sampled impact: 'onset-fit' fits the spring-dashpot contact pulse "
+                             "(when the recording's rig parameters give that law) and reads its peak; 'sample' "
+                             "takes the largest sample (the paper's raw reading). Default onset-fit")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Parse, analyse, print the report."""
+    from rimd_sim.analysis.recordings.report import ReportError, analyze, format_report
+    from rimd_sim.cli import CommandError
+    from rimd_sim.io.reader import RecordingError
+    try:
+        summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold, peak=args.peak,
+                          log=lambda text: print(f"rimd analyze: {text}", file=sys.stderr, flush=True))
+    except (RecordingError, ReportError) as exc:
+        raise CommandError(str(exc)) from None
+    for line in format_report(summary):
+        print(line)
+    print(f"results in {args.out}")
+    return 0
+
+
+def __getattr__(name: str):  # noqa: ANN202 - the names this module held before issue 26, for old callers
+    """``analyze`` and ``print_report`` moved to :mod:`rimd_sim.analysis.recordings.report` (imported on first use)."""
+    if name == "analyze":
+        from rimd_sim.analysis.recordings.report import analyze
+
+        return analyze
+    if name == "print_report":
+        from rimd_sim.analysis.recordings.report import format_report
+
+        return lambda summary: print("\n".join(format_report(summary)))
+    raise AttributeError(name)

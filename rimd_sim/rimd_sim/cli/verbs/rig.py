@@ -1,0 +1,84 @@
+"""``rimd rig``: bring up the rig from a configuration file, like a launch file (library: rimd_sim.ros.bringup).
+
+The rig is the simulator, the recorder and the Rerun bridge (each when its config section has
+``enabled: true``), each a separate process. Open loop (default), the simulator starts paused and is resumed
+once every consumer subscribes; with ``--lockstep`` it waits for its consumers by itself and never runs ahead
+of the slowest. Ctrl-C (or ``--duration``) stops the nodes in reverse order (simulator first, recorder last).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from rimd_sim.cli import nonnegative_float, real_time_factor
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of ``rimd rig``."""
+    parser.add_argument("--config", type=Path, default=None,
+                        help="ROS parameter YAML of the rig (default: config/rimd.yaml); a relative path is looked "
+                             "up in the working directory, then in the shipped config directory")
+    parser.add_argument("--duration", type=nonnegative_float("--duration", "s"), default=0.0,
+                        help="stop after this many seconds of wall time (default 0: run until Ctrl-C)")
+    parser.add_argument("--output-dir", type=Path, default=None,
+                        help="record into this directory (default: the recorder's output_dir in the config)")
+    parser.add_argument("--no-record", action="store_true", help="do not start the recorder")
+    parser.add_argument("--no-rerun", action="store_true", help="do not start the Rerun bridge")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="serve the rig to Foxglove (ws://127.0.0.1:8765 by default; the bridge's foxglove.* "
+                             "parameters); with --no-rerun the bridge serves Foxglove only")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="lockstep: the simulator publishes time t only once the recorder, the bridge and every "
+                             "--consumer have finished with t - lockstep.window (nothing lost, whatever the load)")
+    parser.add_argument("--consumer", action="append", default=[], metavar="NAME",
+                        help="with --lockstep: one more consumer to wait for (the name your node reports progress "
+                             "under; repeatable)")
+    parser.add_argument("--real-time-factor", type=real_time_factor, default=None, metavar="F",
+                        help="the simulator's real_time_factor (0 = as fast as possible; in lockstep: a speed cap)")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Start the rig's nodes and wait; return non-zero if a node failed."""
+    from rimd_sim.cli import CommandError
+    from rimd_sim.ros.bringup import Rig, plan_rig
+
+    if args.consumer and not args.lockstep:
+        raise CommandError("--consumer is for --lockstep (the names the lockstep rig waits for)")
+    plan = plan_rig(args.config, output_dir=args.output_dir, record=not args.no_record, rerun=not args.no_rerun,
+                    foxglove=args.foxglove, lockstep=args.lockstep, consumers=args.consumer,
+                    real_time_factor=args.real_time_factor)
+    rig = Rig(plan)
+    config = plan.config
+
+    def announce() -> None:
+        if plan.foxglove_address:
+            print(f"rimd rig: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
+                  "WebSocket; layout: config/foxglove/rig_layout.json)", flush=True)
+        print(f"rimd rig: running {', '.join(plan.names)} with {plan.config_path} "
+              f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
+              f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
+              + (f"Recording into {plan.recording_dir}. " if plan.recording_dir else "Not recording. ")
+              + "Ctrl-C stops.", flush=True)
+        if plan.lockstep_consumers:
+            print(f"rimd rig: lockstep with {', '.join(plan.lockstep_consumers)} (window "
+                  f"{plan.lockstep_window:g} s of simulation time, speed cap {config.real_time_factor:g}x, "
+                  "0 = none): the rig waits for each of them from sample 0 and goes as fast as the slowest",
+                  flush=True)
+        elif any(n.consumer for n in plan.nodes):
+            if rig.resume_when_connected():
+                print("rimd rig: every consumer is connected; the rig runs from sample 0", flush=True)
+            elif rig.failed() is None:
+                print("rimd rig: the consumers did not all connect within 20 s; the rig runs anyway",
+                      file=sys.stderr, flush=True)
+
+    status = rig.run("rig", announce, duration=args.duration)
+    if plan.recording_dir:
+        print(f"rimd rig: stopped; the recording is in {plan.recording_dir} "
+              f"(replay: rimd replay {plan.recording_dir}, add --foxglove to drive it from Foxglove)", flush=True)
+    else:
+        print("rimd rig: stopped", flush=True)
+    return status
+

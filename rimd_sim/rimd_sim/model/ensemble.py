@@ -1,0 +1,375 @@
+"""Ensemble kernel: many constant-frequency trajectories in one compiled call, each stopped when its motion is known.
+
+The maps (``rimd peterka``, ``rimd basins``) classify thousands of trajectories. Driving each through
+:class:`~rimd_sim.model.rig_model.RigModel` costs Python bookkeeping per trajectory and a fixed number of cycles
+whether the motion settled after 20 cycles or never. This module runs a whole batch of cells (an array of
+frequencies and starts, one parameter vector per gap) inside numba, reusing the compiled driver of the model
+(:data:`rimd_sim.model.rig_model.MODELS`, any of them) unchanged (its ``advance``, one excitation cycle at a time:
+the integrator never shortens a step to land on a stop time, so the trajectory is bit-identical to a
+``RigModel`` run from the same start, however it is cut). The compiled loop is built once per model, at its
+first use, like the driver.
+
+Early stopping (the rule)
+-------------------------
+The stroboscopic point of cycle ``c`` is the state at ``t = c / f`` in the non-dimensional coordinates of
+:mod:`rimd_sim.analysis.dynamics.steady` (``u = l sin(theta) / A0``, ``v = l theta' cos(theta) / (A0 Omega)``),
+paired with the number of impacts that start in cycle ``c``. After each cycle, once at least ``min_cycles``
+cycles have run, the trajectory stops when, for some period ``n <= max_period`` (12),
+
+* every point of the last ``L = max(min_window, confirm * n)`` cycles lies within ``stop_tolerance`` (in
+  ``u`` and in ``v``) of the point of the same phase in the period just before them (cycle ``c - L - n`` +
+  ``(i - c + L + n) mod n``): not only one period back, so that a slow drift accumulates over the window and
+  is seen, and
+* the impact count of each of those cycles equals that of the same cycle of that first period.
+
+Defaults: ``min_cycles`` 30, ``min_window`` 24, ``confirm`` 4 (so a period-12 motion is seen 5 times, 60
+cycles), ``stop_tolerance = tolerance / 10`` = 1e-4. Why: a stable periodic motion converges geometrically,
+so once its points repeat to a tenth of the classification tolerance over 24 cycles (or 4 periods) the rest
+of the run only repeats them; a trajectory that merely passes near an unstable periodic orbit (a saddle)
+drifts away exponentially and does not hold a 1e-4 repetition over that many cycles; and a slowly decaying
+transient (light damping, or near a period doubling, where the points alternate about a fixed point and
+approach it slowly, so that points two cycles apart nearly repeat while the motion is still period 1) fails
+the comparison with the window's first period until it has decayed. The window is then classified with
+the rule of :func:`rimd_sim.analysis.dynamics.steady.classify` (smallest period within ``tolerance``, p impacts in n
+cycles), over the last ``L + n`` cycles.
+
+Otherwise the trajectory runs to the cap, ``max_cycles``, and the last ``measure_cycles`` cycles are classified
+as a fixed-length run would classify them (chaotic cells run to the cap; their Lyapunov check stays available
+through ``rimd poincare``). With the cap equal to a fixed run's length the capped cells get exactly that run's
+class.
+
+Codes returned per cell: ``period`` (0 for no impact or non-periodic), ``impacts`` p, ``kind`` (0 periodic or
+no impact, 1 non-periodic, 2 integration failed), ``cycles`` whose points were used (at most the cap when it
+stopped early, the cap + 1 when it ran to the cap), the final stroboscopic state ``(theta, theta_dot)`` and
+the step count. A cell starts with the model's own modes at rest (a continuation too: it goes on from the
+previous cell's ``(theta, theta_dot)``, as ``steady_orbit`` from an orbit's ``final_state``).
+"""
+
+from __future__ import annotations
+
+import math
+import types
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+import rimd_sim.model.kernel as k
+from rimd_sim.errors import ConfigError
+from rimd_sim.model.rig_model import MODELS
+
+__all__ = [
+    "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "EnsembleResult", "StopRule", "run_cells",
+]
+
+KIND_PERIODIC, KIND_CHAOTIC, KIND_FAILED = 0, 1, 2
+
+_jit = k._jit
+
+
+class StopRule:
+    """The early-stopping rule (module docstring) and the cap.
+
+    Attributes:
+        min_cycles: Cycles always run before a stop is considered.
+        max_cycles: The cap (cycles); 0 for none other than ``measure_cycles`` after ``min_cycles``.
+        measure_cycles: Cycles classified at the cap.
+        min_window: Shortest confirmation window (cycles).
+        confirm: Periods in the confirmation window (at least).
+        max_period: Longest period looked for (cycles).
+        tolerance: Classification tolerance (non-dimensional).
+        stop_tolerance: Repetition required to stop early (non-dimensional).
+        early: False runs every trajectory to the cap (a fixed-length run).
+    """
+
+    def __init__(self, *, min_cycles: int = 30, max_cycles: int = 192, measure_cycles: int = 72,
+                 min_window: int = 24, confirm: int = 4, max_period: int = 12, tolerance: float = 1e-3,
+                 stop_tolerance: float | None = None, early: bool = True) -> None:
+        self.min_cycles = int(min_cycles)
+        self.max_cycles = int(max_cycles)
+        self.measure_cycles = int(measure_cycles)
+        self.min_window = int(min_window)
+        self.confirm = int(confirm)
+        self.max_period = int(max_period)
+        self.tolerance = float(tolerance)
+        self.stop_tolerance = float(tolerance / 10.0 if stop_tolerance is None else stop_tolerance)
+        self.early = bool(early)
+
+    def vector(self) -> np.ndarray:
+        """The rule as the float vector the compiled loop reads."""
+        return np.array([self.min_cycles, self.max_cycles, self.measure_cycles, self.min_window, self.confirm,
+                         self.max_period, self.tolerance, self.stop_tolerance, 1.0 if self.early else 0.0])
+
+    def __repr__(self) -> str:  # noqa: D105
+        return (f"StopRule(min_cycles={self.min_cycles}, max_cycles={self.max_cycles}, "
+                f"measure_cycles={self.measure_cycles}, min_window={self.min_window}, confirm={self.confirm}, "
+                f"max_period={self.max_period}, tolerance={self.tolerance}, "
+                f"stop_tolerance={self.stop_tolerance}, early={self.early})")
+
+
+@dataclass(eq=False)
+class EnsembleResult:
+    """Per-cell outputs of :func:`run_cells` (arrays of one entry per cell; the codes of the module docstring)."""
+
+    period: np.ndarray
+    impacts: np.ndarray
+    kind: np.ndarray
+    cycles: np.ndarray
+    final: np.ndarray   # (theta, theta_dot) per cell
+    steps: np.ndarray
+
+    def labels(self) -> list[str]:
+        """The class labels of :mod:`rimd_sim.analysis.dynamics.steady` (``p/n``, ``no impact``, ...)."""
+        out = []
+        for period, p, kind in zip(self.period.tolist(), self.impacts.tolist(), self.kind.tolist(), strict=True):
+            if kind == KIND_FAILED:
+                out.append("integration failed")
+            elif kind == KIND_CHAOTIC:
+                out.append("chaotic/non-periodic" if p > 0 else "no impact")
+            else:
+                out.append("no impact" if p == 0 else f"{p}/{period}")
+        return out
+
+
+# ---- compiled loop, built once per model --------------------------------------------------------------------
+
+
+@_jit
+def _classify_window(u, v, counts, lo, hi, max_period, tol):
+    """:func:`rimd_sim.analysis.dynamics.steady.classify` over cycles ``lo .. hi - 1``: ``(period, impacts, kind)``."""
+    length = hi - lo
+    mp = max(1, min(max_period, length // 3))
+    total = 0
+    for i in range(lo, hi):
+        total += counts[i]
+    for n in range(1, mp + 1):
+        ok = True
+        for i in range(lo + n, hi):
+            if counts[i] != counts[i - n] or math.hypot(u[i] - u[i - n], v[i] - v[i - n]) > tol:
+                ok = False
+                break
+        if ok:
+            p = 0
+            for i in range(hi - n, hi):
+                p += counts[i]
+            return (0 if p == 0 else n), p, KIND_PERIODIC
+    if total == 0:
+        return 0, 0, KIND_PERIODIC
+    return 0, total, KIND_CHAOTIC
+
+
+@_jit
+def _settled(u, v, counts, c, max_period, min_window, confirm, stol):
+    """Smallest period ``n`` repeated over the confirmation window ending at cycle ``c - 1``, or 0; and ``L``."""
+    for n in range(1, max_period + 1):
+        length = max(min_window, confirm * n)
+        if length + n > c:
+            return 0, 0
+        ok = True
+        base = c - length - n  # first period of the window: every later point is compared with its phase there
+        for i in range(c - length, c):
+            r = base + (i - base) % n
+            if counts[i] != counts[r] or abs(u[i] - u[r]) > stol or abs(v[i] - v[r]) > stol:
+                ok = False
+                break
+        if ok:
+            return n, length
+    return 0, 0
+
+
+@cache
+def _loop(name: str) -> types.ModuleType:
+    """The compiled loop over the cells of model ``name``, built at its first use.
+
+    (:func:`rimd_sim.model.kernel.build_driver` says why the functions reach one another through a namespace.)
+    """
+    drv = MODELS[name].driver
+    n_state = drv.N_STATE
+    n_strobe = k.N_STROBE + drv.N_MODES
+    ns = k._namespace(drv.__name__ + "_ensemble", f"The loop over the cells of the {name!r} model.")
+    loop = ns
+    compiled = k.jit_for(f"_loop.{name}")
+
+    @compiled
+    def init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, h_first, imp_buf):
+        """The state of ``RigModel`` at t = 0: the motor at constant ``f``, the hammer at the given state.
+
+        The model's own modes start at rest.
+        """
+        for i in range(fs.shape[0]):
+            fs[i] = 0.0
+        for i in range(ist.shape[0]):
+            ist[i] = 0
+        for i in range(n_state):
+            ya[i] = 0.0
+        ya[0] = theta0
+        ya[1] = theta_dot0
+        for i in range(n_state):
+            yb[i] = ya[i]
+        fs[k.F_H] = min(1e-4, h_first)
+        fs[k.F_HFREE] = p[k.P_HMAX]
+        fs[k.F_HCONT] = p[k.P_HCONT0]
+        fs[k.F_VIMP] = p[k.P_VMIN]
+        fs[k.F_ZT0] = -1.0
+        fs[k.F_MW0] = f
+        fs[k.F_MWSET] = f
+        fs[k.F_MTEND] = np.inf
+        ist[k.I_MODE] = k.FREE
+        ist[k.I_NEEDF] = 1
+        ist[k.I_STRK] = 0
+        ist[k.I_IMPOUT] = 0
+        drv.resync(p, fs, ist, ya, yb, imp_buf)
+
+    @compiled
+    def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
+                ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out):
+        """One trajectory; returns ``(period, impacts, kind, cycles, theta, theta_dot, steps)``."""
+        min_cycles = int(rule[0])
+        cap = int(rule[1])
+        measure = int(rule[2])
+        min_window = int(rule[3])
+        confirm = int(rule[4])
+        max_period = int(rule[5])
+        tol = rule[6]
+        stol = rule[7]
+        early = rule[8] > 0.0
+        loop.init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, p[k.P_HMAX], imp_out)
+        length_l = p[k.P_L]
+        a0 = p[k.P_A0]
+        omega = 2.0 * math.pi * f
+        for i in range(cap + 2):
+            counts[i] = 0
+        # Point of cycle c: state at c / f (emitted once the integration passes it). Impacts of cycle c are final
+        # once the integration has passed (c + 1.5) / f (a contact lasts milliseconds), as in steady_orbit.
+        c_done = 0  # cycles 0 .. c_done - 1 have their point and impact count final
+        while True:
+            t_stop = (c_done + 1.5) / f
+            ist[k.I_IMPOUT] = 0
+            ist[k.I_STROUT] = 0
+            status = drv.advance(p, fs, ist, ya, yb, fa, Q, t_stop, ch_rate, ch_qty, ch_next, ch_stop, ch_base,
+                                 ch_out, 1.0, tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
+            for j in range(ist[k.I_STROUT]):
+                cyc = int(st_out[j, k.S_CYCLE])
+                if cyc <= cap + 1:
+                    th = st_out[j, k.S_THETA]
+                    om = st_out[j, k.S_OMEGA]
+                    th_s[cyc] = th
+                    om_s[cyc] = om
+                    u[cyc] = length_l * math.sin(th) / a0
+                    v[cyc] = length_l * om * math.cos(th) / (a0 * omega)
+            for j in range(ist[k.I_IMPOUT]):
+                cyc = int(imp_out[j, k.R_CYCLE])
+                if 0 <= cyc <= cap + 1:
+                    counts[cyc] += 1
+            if status == k.ST_STROBE_FULL or status == k.ST_IMPACTS_FULL:
+                continue
+            if status != k.ST_OK:
+                return (0, 0, KIND_FAILED, c_done, th_s[max(c_done - 1, 0)], om_s[max(c_done - 1, 0)],
+                        ist[k.I_NSTEP])
+            c_done += 1
+            if early and min_cycles <= c_done <= cap:
+                n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
+                if n > 0:
+                    period, imp, kind = _classify_window(u, v, counts, c_done - length - n, c_done, max_period, tol)
+                    return period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP]
+            if c_done > cap:
+                # The fixed-length window of RigModel-based runs (transient cap - measure cycles, then measure
+                # cycles): points and impacts of cycles cap - measure + 1 .. cap.
+                period, imp, kind = _classify_window(u, v, counts, cap - measure + 1, cap + 1, max_period, tol)
+                return period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP]
+
+    @compiled
+    def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f):
+        """Run every cell; ``chain[i]`` true starts cell ``i`` from the final state of cell ``i - 1``."""
+        cap = int(rule[1])
+        fs = np.zeros(k.N_FSTATE)
+        ist = np.zeros(k.N_ISTATE, dtype=np.int64)
+        ya = np.zeros(n_state)
+        yb = np.zeros(n_state)
+        fa = np.zeros(n_state)
+        Q = np.zeros((n_state, 4))
+        u = np.zeros(cap + 2)
+        v = np.zeros(cap + 2)
+        th_s = np.zeros(cap + 2)
+        om_s = np.zeros(cap + 2)
+        counts = np.zeros(cap + 2, dtype=np.int64)
+        imp_out = np.empty((256, k.N_RECORD))
+        st_out = np.empty((8, n_strobe))
+        ch_rate = np.zeros(0)
+        ch_qty = np.zeros(0, dtype=np.int64)
+        ch_next = np.zeros(0, dtype=np.int64)
+        ch_stop = np.zeros(0, dtype=np.int64)
+        ch_base = np.zeros(0, dtype=np.int64)
+        ch_out = np.zeros((0, 0))
+        tr_next = np.zeros(1, dtype=np.int64)
+        tr_stop = np.zeros(1, dtype=np.int64)
+        tr_base = np.zeros(1, dtype=np.int64)
+        tr_out = np.zeros((k.N_TRUTH, 0))
+        prev_th = 0.0
+        prev_om = 0.0
+        for i in range(freqs.shape[0]):
+            th0 = theta0[i]
+            om0 = theta_dot0[i]
+            if chain[i] and i > 0:
+                th0 = prev_th
+                om0 = prev_om
+            period, imp, kind, cycles, th_end, om_end, steps = loop.run_one(
+                params[gap_index[i]], freqs[i], th0, om0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts,
+                imp_out, st_out, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base,
+                tr_out)
+            out_i[i, 0] = period
+            out_i[i, 1] = imp
+            out_i[i, 2] = kind
+            out_i[i, 3] = cycles
+            out_i[i, 4] = steps
+            out_f[i, 0] = th_end
+            out_f[i, 1] = om_end
+            if kind == KIND_FAILED:
+                # A continuation goes on from the fallback state after a failure (the pool path: the final state
+                # from rest at the same frequency).
+                prev_th = fb_theta[i]
+                prev_om = fb_theta_dot[i]
+            else:
+                prev_th = th_end
+                prev_om = om_end
+
+    ns.init_cell = init_cell
+    ns.run_one = run_one
+    ns.run_cells = run_cells
+    return ns
+
+
+def run_cells(model: str, params: np.ndarray, gap_index, freqs, theta0, theta_dot0, rule: StopRule, chain=None,
+              fallback=None) -> EnsembleResult:
+    """Run a batch of cells of one model in one compiled call.
+
+    Args:
+        model: The model's name in :data:`rimd_sim.model.rig_model.MODELS` (``structure.model``).
+        params: The model's parameter vectors, one row per gap
+            (:meth:`rimd_sim.model.rig_model.PhysicsModel.params` of each configuration).
+        gap_index: Row of ``params`` per cell.
+        freqs: Motor frequency per cell (Hz, constant from t = 0, phase 0).
+        theta0: Initial angle per cell (rad).
+        theta_dot0: Initial rate per cell (rad/s).
+        rule: The stopping rule and cap.
+        chain: Per cell, start from the final state of the previous cell instead (a continuation); default none.
+        fallback: ``(theta, theta_dot)`` arrays: where a chained cell's predecessor failed, the state to go on
+            from (default: that cell's own start).
+    """
+    if model not in MODELS:
+        raise ConfigError("structure.model", model, f"must be one of {', '.join(MODELS)}")
+    freqs = np.ascontiguousarray(freqs, dtype=np.float64)
+    n = freqs.shape[0]
+    if chain is None:
+        chain = np.zeros(n, dtype=np.bool_)
+    fb_th, fb_om = (theta0, theta_dot0) if fallback is None else fallback
+    out_i = np.zeros((n, 5), dtype=np.int64)
+    out_f = np.zeros((n, 2))
+    _loop(model).run_cells(np.ascontiguousarray(params, dtype=np.float64),
+                           np.ascontiguousarray(gap_index, dtype=np.int64), freqs,
+                           np.ascontiguousarray(theta0, dtype=np.float64),
+                           np.ascontiguousarray(theta_dot0, dtype=np.float64),
+                           np.ascontiguousarray(chain, dtype=np.bool_),
+                           np.ascontiguousarray(fb_th, dtype=np.float64), np.ascontiguousarray(fb_om, dtype=np.float64),
+                           rule.vector(), out_i, out_f)
+    return EnsembleResult(out_i[:, 0], out_i[:, 1], out_i[:, 2], out_i[:, 3], out_f, out_i[:, 4])

@@ -1,1 +1,0 @@
-"""Recordings: rosbag2-compatible MCAP writing and reading (no rclpy), used by the recorder and replay nodes."""

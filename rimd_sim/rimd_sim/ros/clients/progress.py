@@ -1,0 +1,223 @@
+"""Helpers for a Python node that consumes the rig: report progress to a rig in lockstep, in one line.
+
+A rig (or a replay) in lockstep (``lockstep.enabled``, docs/rig.md "Pacing: lockstep") publishes data time
+``t`` only once every consumer it names has finished with the data up to ``t - lockstep.window``. A consumer
+tells it how far it is with ``rimd_msgs/msg/ConsumerProgress`` on ``/rig/progress``; in Python::
+
+    from rimd_sim.ros.clients.progress import ProgressReporter
+
+    class MyDaq(Node):
+        def __init__(self):
+            super().__init__("my_daq")
+            self.sub = self.create_subscription(SampleBlock, "/rig/impact/force", self.on_block, 100)
+            self.progress = ProgressReporter(self, "my_daq", subscriptions=[self.sub])   # the one line
+
+        def on_block(self, msg):
+            ...                                              # the work
+            self.progress.done(msg.header.stamp, self.sub)   # finished with this message
+
+What :class:`ProgressReporter` does for you:
+
+* it *joins* (reports "nothing taken yet") once every subscription you gave it has matched a publisher and a
+  lockstep publisher listens, so the rig waits for you before its first block and you miss none;
+* it reports per topic (the rig does not wait for you on a topic where you have everything published, a
+  fault's dropout for instance), at most every ``min_interval`` seconds, and again from a timer so that the
+  last report always goes out;
+* it joins again when a new run starts (``/rig/session``: the rig restarted, or a replay started a pass), with
+  a new ``instance`` for each process, so a restarted consumer resumes where the run stands.
+
+Clients in other languages publish the message themselves: it is documented field by field in
+``rimd_msgs/msg/ConsumerProgress.msg``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from rimd_msgs.msg import ConsumerProgress, RigSession
+from rimd_sim.io.cdr import CdrWriter
+
+__all__ = ["PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter"]
+
+#: Where lockstep publishers listen for progress, and where the rig names its runs.
+PROGRESS_TOPIC = "/rig/progress"
+SESSION_TOPIC = "/rig/session"
+
+#: QoS of the progress topic: reliable (a lost report would hold the run until the next one).
+PROGRESS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: QoS of the session topic: transient local (the current run reaches a late joiner).
+SESSION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def stamp_ns(stamp: Any) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time`` (or an integer, returned as is)."""
+    if isinstance(stamp, int):
+        return stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str, int] | None = None,
+                    leaving: bool = False, node: str = "") -> bytes:
+    """A serialized ``rimd_msgs/msg/ConsumerProgress`` (what ``serialize_message`` gives, tested), for a raw publish.
+
+    A consumer reports up to a few hundred times a second; rclpy's conversion of the message object (its arrays
+    of Time above all) cost the Rerun bridge half a millisecond a report.
+    """
+    names = sorted(topics) if topics else []
+    stamps = [divmod(topics[t], 1_000_000_000) for t in names] if topics else []
+    done = divmod(min(topics.values()) if topics else done_ns, 1_000_000_000)
+    w = CdrWriter().string(consumer).time(*done).strings(names).times(stamps).string(instance).boolean(leaving)
+    w.string(node)
+    return w.message()
+
+
+class ProgressReporter:
+    """Reports how far a consumer has finished, for rigs and replays in lockstep (see the module docstring).
+
+    Thread-safe: :meth:`done` may be called from any thread (the recorder calls it from its writer thread).
+
+    Args:
+        node: The consumer's node (the reporter creates a publisher, a subscription and a timer on it).
+        name: The consumer's name, as the rig's ``lockstep.consumers`` lists it (usually the node's name).
+        subscriptions: The subscriptions whose messages the consumer takes: it joins once each has matched a
+            publisher.
+        ready: A further condition to join (for consumers that subscribe over time, such as the recorder).
+        min_interval: Shortest time between two reports (s); the timer sends the last one.
+        topic: The progress topic.
+    """
+
+    def __init__(self, node: Node, name: str, *, subscriptions: Sequence[Any] = (),
+                 ready: Callable[[], bool] | None = None, min_interval: float = 0.005,
+                 topic: str = PROGRESS_TOPIC) -> None:
+        if not name or name != name.strip():
+            raise ValueError(f"ProgressReporter name {name!r} refused: must be a non-empty name without surrounding "
+                             "spaces (an entry of the rig's lockstep.consumers)")
+        self.name = name
+        self.instance = uuid.uuid4().hex
+        self._node = node
+        self._subscriptions = list(subscriptions)
+        self._ready = ready
+        self._min_interval = min_interval
+        self._lock = threading.Lock()
+        self._done: dict[str, int] = {}
+        self._overall: int | None = None
+        self._dirty = False
+        self._joined = False
+        self._left = False
+        self._last_sent = 0.0
+        self._run_id = ""
+        self.reports = 0
+        self._pub = node.create_publisher(ConsumerProgress, topic, PROGRESS_QOS)
+        node.create_subscription(RigSession, SESSION_TOPIC, self._on_session, SESSION_QOS)
+        self._timer = node.create_timer(0.02, self._tick)
+
+    @property
+    def joined(self) -> bool:
+        """Whether it has told a lockstep publisher that it is there."""
+        return self._joined
+
+    def add_subscription(self, subscription: Any) -> None:
+        """Take one more subscription into account (before the join: it must match a publisher first)."""
+        with self._lock:
+            self._subscriptions.append(subscription)
+
+    def done(self, stamp: Any, subscription: Any = None, *, topic: str | None = None) -> None:
+        """The consumer has finished with a message stamped ``stamp`` (a ``Time`` or integer nanoseconds).
+
+        Args:
+            stamp: The message's ``header.stamp``.
+            subscription: The subscription it came from (its topic is what the report names); or ``topic``.
+            topic: The full topic name, when no subscription is given. With neither, one report for all.
+        """
+        ns = stamp_ns(stamp)
+        name = topic if topic is not None else getattr(subscription, "topic_name", None)
+        with self._lock:
+            if name is None:
+                self._overall = ns if self._overall is None else max(self._overall, ns)
+            elif ns > self._done.get(name, -1):
+                self._done[name] = ns
+            self._dirty = True
+            due = self._joined and time.monotonic() - self._last_sent >= self._min_interval
+        if due:
+            self.flush()
+
+    def flush(self, *, join: bool = False) -> None:
+        """Send the current progress now (after the join; no-op before).
+
+        The join report names the topics taken, each done through zero (nothing taken yet), so that the publisher
+        waits until its writers have matched this node's readers of them before it goes on.
+        """
+        with self._lock:
+            if not self._joined:
+                return
+            done = {sub.topic_name: 0 for sub in self._subscriptions} if join else dict(self._done)
+            msg = encode_progress(self.name, self._overall or 0, self.instance, done,
+                                  node=self._node.get_fully_qualified_name())
+            self._dirty = False
+            self._last_sent = time.monotonic()
+            self.reports += 1
+        self._pub.publish(msg)
+
+    def leave(self, timeout: float = 1.0) -> bool:
+        """Say that the consumer stops cleanly: its progress so far, then its last report, ``leaving``.
+
+        A lockstep publisher then stops waiting for it (a consumer that just vanishes holds the run until
+        ``lockstep.timeout``). Call it once the consumer has finished with everything it will take. Waits (at
+        most ``timeout`` s) until the publishers acknowledged the report; returns whether they did.
+        """
+        with self._lock:
+            if not self._joined and self._pub.get_subscription_count() == 0:
+                return True   # nobody waits for it
+            joined = self._joined
+        if joined:
+            self.flush()
+        with self._lock:
+            self._joined, self._left = False, True   # no report after the leave (it would join again)
+            msg = encode_progress(self.name, 0, self.instance, leaving=True)
+        self._pub.publish(msg)
+        try:
+            return bool(self._pub.wait_for_all_acked(Duration(nanoseconds=round(timeout * 1e9))))
+        except Exception:  # noqa: BLE001 - the context is going down: best effort
+            return False
+
+    def _can_join(self) -> bool:
+        if self._pub.get_subscription_count() == 0:
+            return False   # no lockstep publisher listens (yet)
+        if any(sub.get_publisher_count() == 0 for sub in self._subscriptions):
+            return False   # a subscription has not matched its publisher: its first messages could be lost
+        return self._ready is None or bool(self._ready())
+
+    def _tick(self) -> None:
+        if self._left:
+            return
+        if not self._joined:
+            if self._can_join():
+                with self._lock:
+                    self._joined = True
+                    self._done.clear()
+                    self._overall = None
+                self.flush(join=True)
+            return
+        if self._dirty or time.monotonic() - self._last_sent > 1.0:
+            self.flush()       # the last report of a burst, or a heartbeat (which is no progress for the rig)
+
+    def _on_session(self, msg: RigSession) -> None:
+        """A new run (the rig restarted, or a replay started a pass): join it from scratch."""
+        if msg.run_id == self._run_id:
+            return
+        first = not self._run_id
+        self._run_id = msg.run_id
+        if first or msg.reason == "reset":
+            return   # a reset goes on with the same stamps: the progress stands
+        with self._lock:
+            self._joined = False
+            self.instance = uuid.uuid4().hex

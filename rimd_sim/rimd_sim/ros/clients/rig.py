@@ -1,0 +1,160 @@
+"""A client of a running rig: its services in one line each, from a program, a verb or a test.
+
+:class:`RigClient` owns a node in an rclpy context of its own (on the caller's ``ROS_DOMAIN_ID``, or on the
+domain given), so it never disturbs an rclpy the caller already uses. Each call waits (bounded) for the service
+and its answer and returns the rig's response; :class:`rimd_sim.errors.CommandError` says when there is
+no rig or no answer, naming the service and the domain. The one-shot verbs (``rimd motor``, ``rimd perturb``,
+``rimd inject``, ``rimd pause``...) and the pytest plugin's :class:`rimd_sim.ros.testing.RigHandle` stand on it.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from typing import Any
+
+from rimd_sim.errors import CommandError
+
+__all__ = ["RigClient", "TRIGGERS"]
+
+#: The rig's Trigger services, by the name users type.
+TRIGGERS = ("pause", "resume", "reset", "clear_faults")
+
+
+def _srv(name: str) -> Any:
+    def load() -> Any:
+        import std_srvs.srv
+
+        import rimd_msgs.srv
+
+        return getattr(rimd_msgs.srv, name, None) or getattr(std_srvs.srv, name)
+    return load
+
+
+#: The rig's services by name, their types loaded on use (rclpy's message modules are imported lazily).
+_SERVICE_TYPES = {"set_motor_frequency": _srv("SetMotorFrequency"), "perturb": _srv("Perturb"),
+                  "inject_fault": _srv("InjectFault"), **{name: _srv("Trigger") for name in TRIGGERS}}
+
+
+def stamp(seconds: float | None) -> Any:
+    """A ``builtin_interfaces/Time`` of ``seconds`` (zero for None: the next block boundary)."""
+    from builtin_interfaces.msg import Time
+
+    ns = 0 if seconds is None else round(seconds * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+class RigClient:
+    """The rig's services, called from a node of this client's own. A context manager; ``close`` is idempotent.
+
+    Args:
+        domain_id: The ROS domain (default: ``ROS_DOMAIN_ID``, else 0).
+        namespace: The rig's namespace (``/rig``).
+        timeout: Seconds to wait for a service and for its answer.
+        name: The client node's name.
+    """
+
+    def __init__(self, *, domain_id: int | None = None, namespace: str = "/rig", timeout: float = 10.0,
+                 name: str = "rimd_client") -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        self.namespace = namespace.rstrip("/")
+        self.timeout = timeout
+        self.domain_id = int(os.environ.get("ROS_DOMAIN_ID", "0") or 0) if domain_id is None else domain_id
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._clients: dict[str, Any] = {}
+
+    def __enter__(self) -> RigClient:
+        """The client."""
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Close the client."""
+        self.close()
+
+    def close(self) -> None:
+        """Destroy the node and shut the context down (idempotent)."""
+        if self.context is not None:
+            self.executor.shutdown()
+            self.node.destroy_node()
+            self.context.try_shutdown()
+            self.context = None
+
+    def spin_until(self, condition: Callable[[], bool], timeout: float) -> bool:
+        """Spin until ``condition()`` holds or ``timeout`` seconds passed; return the condition."""
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() >= deadline:
+                return condition()
+            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
+        return True
+
+    def _client(self, service: str, srv_type: Any) -> tuple[str, Any]:
+        name = service if service.startswith("/") else f"{self.namespace}/{service}"
+        client = self._clients.get(name)
+        if client is None:
+            client = self._clients[name] = self.node.create_client(srv_type, name)
+        if not self.spin_until(client.service_is_ready, self.timeout):
+            raise CommandError(f"no rig: service {name} not available after {self.timeout:g} s on ROS_DOMAIN_ID "
+                               f"{self.domain_id} (start it with `rimd rig`, on the same ROS_DOMAIN_ID)")
+        return name, client
+
+    def wait_for_service(self, service: str, srv_type: Any = None) -> None:
+        """Wait (bounded) until ``service`` is served (default type: the rig's service of that name).
+
+        Raises:
+            CommandError: No such service within the timeout (no rig), naming it and the domain.
+        """
+        if srv_type is None:
+            srv_type = _SERVICE_TYPES[service.rsplit("/", 1)[-1]]()
+        self._client(service, srv_type)
+
+    def call(self, service: str, srv_type: Any, request: Any) -> Any:
+        """Call ``service`` (relative names are in the rig's namespace) and return the response.
+
+        Raises:
+            CommandError: No such service within the timeout (no rig), or no answer within it.
+        """
+        name, client = self._client(service, srv_type)
+        future = client.call_async(request)
+        if not self.spin_until(future.done, self.timeout):
+            client.remove_pending_request(future)
+            raise CommandError(f"{name} did not answer within {self.timeout:g} s")
+        return future.result()
+
+    def motor(self, frequency_hz: float, ramp_rate: float = 0.0, at: float | None = None) -> Any:
+        """``set_motor_frequency``: ramp to ``frequency_hz`` (at stamp ``at`` s, else the next block boundary)."""
+        from rimd_msgs.srv import SetMotorFrequency
+
+        return self.call("set_motor_frequency", SetMotorFrequency, SetMotorFrequency.Request(
+            frequency_hz=float(frequency_hz), ramp_rate=float(ramp_rate), start_stamp=stamp(at)))
+
+    def perturb(self, velocity: float, at: float | None = None) -> Any:
+        """``perturb``: add ``velocity`` (m/s) to the hammer (at stamp ``at`` s)."""
+        from rimd_msgs.srv import Perturb
+
+        return self.call("perturb", Perturb, Perturb.Request(velocity=float(velocity), start_stamp=stamp(at)))
+
+    def inject(self, channel: str, kind: str, *, start: float = 0.0, after: float = 0.0, duration: float = 0.0,
+               magnitude: float = 0.0) -> Any:
+        """``inject_fault`` (docs/faults.md): at simulation time ``start``, or ``after`` s from now."""
+        from rimd_msgs.srv import InjectFault
+
+        return self.call("inject_fault", InjectFault, InjectFault.Request(
+            channel=channel, kind=kind, start=float(start), after=float(after), duration=float(duration),
+            magnitude=float(magnitude)))
+
+    def trigger(self, name: str) -> Any:
+        """One of the rig's Trigger services: ``pause``, ``resume``, ``reset``, ``clear_faults``."""
+        from std_srvs.srv import Trigger
+
+        if name not in TRIGGERS:
+            raise CommandError(f"{name!r} is not one of the rig's Trigger services ({', '.join(TRIGGERS)})")
+        return self.call(name, Trigger, Trigger.Request())

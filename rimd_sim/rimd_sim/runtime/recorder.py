@@ -1,0 +1,362 @@
+"""A recording session without ROS: a bag written on a thread of its own, loss counted, write errors reported.
+
+Messages are queued to a :class:`~rimd_sim.io.bag.BagWriter` on a writer thread, and the session tells
+how far each topic is written. The recorder node feeds it and reports it.
+
+* :meth:`RecordingSession.put` queues one serialized message (from any thread). A full queue (``queue_size``
+  messages) drops the newest message and counts it: nothing is ever dropped silently.
+* The writer thread wakes once per batch (it sleeps ``batch_delay`` after the first message of a batch, then
+  takes everything waiting), writes, counts the samples missing between consecutive blocks of a topic
+  (``first_index`` gaps, :class:`LossCounter`), closes a chunk at least every ``flush_interval`` seconds, and
+  tells ``on_written`` how far each topic has been written (the recorder's lockstep progress).
+* Write errors (disk full, file size limit, quota, I/O error) are the bag's to handle: the first one stops the
+  writing, never the session. It is logged once at ERROR naming the path and the system's reason, again every
+  ``reminder`` seconds while it lasts, and when the writing resumes after :meth:`split` (the retry). What a
+  full disk costs is counted per topic as *not written*.
+* Everything the writer does happens in order: :meth:`run_on_writer` runs a function after the messages queued
+  before it (``~/split``, ``~/stop``); :meth:`close` writes everything queued, finishes the file and returns.
+
+Time is read from ``clock`` (monotonic seconds) and the session's steps can be driven without the thread
+(:meth:`process`), so the tests need neither DDS, nor root, nor a real full disk
+(``tests/test_recording_session.py``).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from queue import Empty, SimpleQueue
+from typing import Any
+
+from rimd_sim.io.bag import BagWriter, FileInfo, WriteFailure
+from rimd_sim.io.cdr import BLOCK_TYPES, block_span
+from rimd_sim.io.msgdefs import MessageDefinitionError
+
+__all__ = ["LossCounter", "RecordingSession", "TopicLoss"]
+
+#: Log levels of the session's lines.
+INFO, WARNING, ERROR = "info", "warning", "error"
+
+
+class LossCounter:
+    """Counts, per topic, samples missing between consecutive blocks (gaps in ``first_index``).
+
+    The first block seen on a topic sets the start (a recorder started after the rig loses nothing). A block
+    that starts before the expected index (the rig was restarted, or replayed) restarts the count and is
+    counted in ``restarts``, not as loss.
+    """
+
+    def __init__(self) -> None:
+        self.expected: dict[str, int] = {}
+        self.first: dict[str, int] = {}
+        self.lost_samples: dict[str, int] = {}
+        self.lost_blocks: dict[str, int] = {}
+        self.restarts: dict[str, int] = {}
+
+    def observe(self, topic: str, first_index: int, count: int) -> int:
+        """Record one block; return the number of samples missing just before it."""
+        expected = self.expected.get(topic)
+        missing = 0
+        if expected is None:
+            self.first[topic] = first_index
+        elif first_index > expected:
+            missing = first_index - expected
+            self.lost_samples[topic] = self.lost_samples.get(topic, 0) + missing
+            self.lost_blocks[topic] = self.lost_blocks.get(topic, 0) + max(1, round(missing / max(count, 1)))
+        elif first_index < expected:
+            self.restarts[topic] = self.restarts.get(topic, 0) + 1
+        self.expected[topic] = first_index + count
+        return missing
+
+@dataclass(frozen=True)
+class TopicLoss:
+    """What one topic received, wrote and lost."""
+
+    received: int
+    written: int
+    lost_samples: int
+    lost_blocks: int
+    queue_dropped: int
+    not_written: int
+
+    @property
+    def lost(self) -> int:
+        """Messages or samples missing from the recording, whatever the cause."""
+        return self.lost_samples + self.queue_dropped + self.not_written
+
+
+class RecordingSession:
+    """A bag written on a thread of its own, fed from any thread. See the module docstring.
+
+    Args:
+        bag: Where the messages go.
+        queue_size: Messages waiting for the writer before new ones are dropped (and counted).
+        flush_interval: The chunk in progress is closed at least this often (s).
+        batch_delay: The writer waits this long after the first message of a batch (s).
+        reminder: While writing is stopped by an error, the log reminds of it this often (s).
+        log: ``log(level, line)``, level ``info``, ``warning`` or ``error``.
+        on_written: Called on the writer thread after each batch with the header stamp (ns) of the last
+            message written per topic, for the messages that have one.
+        clock: Monotonic seconds.
+    """
+
+    def __init__(self, bag: BagWriter, *, queue_size: int = 200_000, flush_interval: float = 1.0,
+                 batch_delay: float = 0.02, reminder: float = 30.0,
+                 log: Callable[[str, str], None] = lambda level, line: None,
+                 on_written: Callable[[dict[str, int]], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.bag = bag
+        self._queue_size = queue_size
+        self._flush_interval = flush_interval
+        self._batch_delay = batch_delay
+        self._reminder = reminder
+        self._log = log
+        self._on_written = on_written
+        self._clock = clock
+        # A SimpleQueue (C, thread-safe): the writer sleeps in get() until a message comes or a flush is due.
+        self._queue: SimpleQueue[tuple] = SimpleQueue()
+        self.types: dict[str, str] = {}
+        self.received: dict[str, int] = {}
+        self.dropped: dict[str, int] = {}
+        self.loss = LossCounter()
+        self._sequence: dict[str, int] = {}   # MCAP sequence number per topic (messages given to the writer)
+        self.write_errors = 0                 # unexpected exceptions (not OSError: the bag handles those)
+        self._reported: WriteFailure | None = None   # the bag's write error, once logged
+        self._reported_at = 0.0
+        self._retry_announced = False
+        self._last_flush = clock()
+        self._thread: threading.Thread | None = None
+
+    # -- feeding (any thread) ---------------------------------------------------------------------------------
+    def add_topic(self, topic: str, type_name: str, offered: Sequence[Mapping[str, Any]]) -> None:
+        """Declare a topic before its first message."""
+        self.types[topic] = type_name
+        self.received.setdefault(topic, 0)
+        self._queue.put(("topic", topic, type_name, offered))
+
+    def put(self, topic: str, data: bytes, log_time: int, publish_time: int = 0, stamp: int | None = None) -> bool:
+        """Queue one serialized message of a declared topic; False when the queue was full (counted)."""
+        self.received[topic] = self.received.get(topic, 0) + 1
+        if self._queue.qsize() >= self._queue_size:
+            self.dropped[topic] = self.dropped.get(topic, 0) + 1
+            return False
+        self._queue.put(("msg", topic, data, log_time, publish_time, stamp))
+        return True
+
+    def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
+        """Add a metadata record to the current and every later file."""
+        self._queue.put(("metadata", name, dict(values)))
+
+    def run_on_writer(self, function: Callable[[], Any], timeout: float = 10.0) -> Any:
+        """Run ``function`` on the writer, after the messages queued before it; return its result.
+
+        Raises:
+            TimeoutError: The writer did not get to it in time.
+        """
+        done, result = threading.Event(), []
+        self._queue.put(("call", function, done, result))
+        if self._thread is None:   # no thread: everything queued is processed here, in order
+            self.process()
+        elif not done.wait(timeout):
+            raise TimeoutError("the writer did not answer")
+        if isinstance(result[0], Exception):
+            raise result[0]
+        return result[0]
+
+    def split(self) -> FileInfo | None:
+        """Finish the current file (or clear a write error): the next message opens a new file."""
+        return self.run_on_writer(self.bag.split)
+
+    @property
+    def queued(self) -> int:
+        """Items waiting for the writer."""
+        return self._queue.qsize()
+
+    # -- the writer -------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the writer thread."""
+        self._thread = threading.Thread(target=self._loop, name="rimd_recorder_writer", daemon=True)
+        self._thread.start()
+
+    def close(self, timeout: float = 60.0) -> None:
+        """Write everything queued, finish the file and ``metadata.yaml``, stop the writer (idempotent)."""
+        if self._thread is None:
+            self.process()
+            self._safely(self.bag.close)
+            self._check_failure()
+            return
+        self._queue.put(("stop",))   # the last item: everything before it is written
+        self._thread.join(timeout)
+
+    def _loop(self) -> None:
+        queue = self._queue
+        batch: deque[tuple] = deque()
+        while True:
+            if not batch:
+                try:   # sleep until an item comes or the next flush is due (at most 1 s: failure reminders)
+                    wait = self._last_flush + self._flush_interval - self._clock()
+                    batch.append(queue.get(timeout=min(1.0, max(0.001, wait))))
+                except Empty:
+                    self._flush_if_due()
+                    continue
+                # Let the rest of the rig's block arrive, then take everything: one wake-up of this thread per
+                # batch instead of one per message (each wake-up is a thread switch and a GIL hand-over).
+                time.sleep(self._batch_delay)
+                while True:
+                    try:
+                        batch.append(queue.get_nowait())
+                    except Empty:
+                        break
+            if not self._handle_batch(batch):
+                break
+        self._safely(self.bag.close)
+        self._check_failure()
+
+    def process(self) -> bool:
+        """Handle every item waiting, on the calling thread; False once a stop was among them."""
+        batch: deque[tuple] = deque()
+        while True:
+            try:
+                batch.append(self._queue.get_nowait())
+            except Empty:
+                break
+        return self._handle_batch(batch)
+
+    def _handle_batch(self, batch: deque[tuple]) -> bool:
+        """Handle the items of ``batch`` (it is emptied); False at a stop."""
+        written: dict[str, int] = {}
+        running = True
+        while batch:
+            item = batch.popleft()
+            kind = item[0]
+            if kind == "stop":
+                batch.clear()
+                running = False
+                break
+            if kind == "msg":
+                self._write(item, written)
+            elif kind == "topic":
+                _, topic, type_name, offered = item
+                try:
+                    self.bag.add_topic(topic, type_name, offered)
+                except MessageDefinitionError as exc:
+                    self._log(ERROR, f"cannot record {topic}: {exc}")
+                    self.types[topic] = "?"
+            elif kind == "metadata":
+                self._safely(self.bag.add_metadata, item[1], item[2])
+            elif kind == "call":
+                _, function, done, result = item
+                try:
+                    result.append(function())
+                except Exception as exc:  # noqa: BLE001 - reported to the service caller
+                    result.append(exc)
+                done.set()
+            if self.bag.failure is not self._reported:   # a new write error, or cleared by a split
+                self._check_failure()
+        if written and self._on_written is not None:
+            self._on_written(written)
+        return running
+
+    def _write(self, item: tuple, written: dict[str, int]) -> None:
+        _, topic, data, log_time, publish_time, stamp = item
+        if self.types.get(topic) in BLOCK_TYPES:
+            try:
+                first, count = block_span(data)
+                missing = self.loss.observe(topic, first, count)
+                if missing:
+                    self._log(WARNING, f"{topic}: {missing} samples missing before index {first}")
+            except (ValueError, IndexError):
+                pass
+        sequence = self._sequence[topic] = self._sequence.get(topic, 0) + 1
+        # After a write error the bag only counts the message as not written (no I/O, no log line).
+        self._safely(self.bag.write, topic, data, log_time, publish_time, sequence)
+        if stamp is not None:
+            written[topic] = max(stamp, written.get(topic, stamp))
+        self._flush_if_due()
+
+    def _flush_if_due(self) -> None:
+        now = self._clock()
+        if now - self._last_flush >= self._flush_interval:
+            self._safely(self.bag.flush)
+            self._check_failure()
+            self._last_flush = now
+
+    def _safely(self, function: Callable[..., Any], *args: Any) -> None:
+        """Run a writer call; an unexpected exception is counted and logged (the first 5), never fatal.
+
+        Write errors of the disk (``OSError``) do not come here: the bag handles them (:meth:`_check_failure`).
+        """
+        try:
+            function(*args)
+        except Exception as exc:  # noqa: BLE001 - a bug must not kill the writer silently
+            self.write_errors += 1
+            if self.write_errors <= 5:
+                self._log(ERROR, f"writing the recording failed: {type(exc).__name__}: {exc}")
+
+    def not_written(self) -> int:
+        """Messages that write errors kept out of the files, in all."""
+        return sum(self.bag.not_written.values())
+
+    def _check_failure(self) -> None:
+        """Log a new write error of the bag once, remind of it, and log when writing resumes."""
+        bag, reported = self.bag, self._reported
+        failure = bag.failure
+        now = self._clock()
+        if failure is not None and failure is not reported:
+            self._reported, self._reported_at, self._retry_announced = failure, now, False
+            if failure.file is not None:
+                kept = (f"{failure.file.path.name} keeps the {failure.file.message_count} messages written before "
+                        "the error (it has no summary; it reads back up to there), "
+                        f"{failure.lost_in_chunk} messages of the chunk in progress are lost")
+            else:
+                kept = "no file was open (the new file held nothing and was deleted)"
+            self._log(ERROR, f"{failure.describe()}: recording stopped, the node keeps running; {kept}, and every "
+                             "message from now on is counted as not written. Free space, then call ~/split (or "
+                             "~/stop and ~/start) to record into a new file")
+        elif failure is None and reported is not None and bag.current_path is None:
+            if not self._retry_announced:   # ~/split or ~/stop cleared it
+                self._retry_announced = True
+                self._log(INFO, f"the {reported.headline} error is cleared: the next message recorded opens a new "
+                                "file")
+        elif failure is None and reported is not None:
+            self._reported, self._retry_announced = None, False
+            self._log(INFO, f"writing again after the {reported.headline}: recording into {bag.current_path} "
+                            f"({self.not_written()} messages not written in all)")
+        elif failure is not None and now - self._reported_at >= self._reminder:
+            self._reported_at = now
+            self._log(ERROR, f"still not recording ({failure.describe()}): {self.not_written()} messages not "
+                             "written so far; call ~/split once space is back")
+
+    # -- reporting --------------------------------------------------------------------------------------------
+    def loss_report(self) -> dict[str, TopicLoss]:
+        """Per topic: messages received, written, samples lost (first_index gaps), queue drops, not written."""
+        bag, loss = self.bag, self.loss
+        return {topic: TopicLoss(self.received.get(topic, 0), bag.written.get(topic, 0),
+                                 loss.lost_samples.get(topic, 0), loss.lost_blocks.get(topic, 0),
+                                 self.dropped.get(topic, 0), bag.not_written.get(topic, 0))
+                for topic in sorted(self.types)}
+
+    def summary(self) -> list[str]:
+        """The lines printed when the recording ends: files, write failures, loss per topic."""
+        bag = self.bag
+        files = [f for f in bag.files if f.finished or f.error]
+        lines = [f"recording finished: {len(files)} file(s) in {bag.output_dir}"]
+        for f in files:
+            lines.append(f"  {f.path.name}: {f.message_count} messages, {f.size} bytes" + (
+                f"; INCOMPLETE: {f.error}; no summary, it reads back up to there" if f.error else ""))
+        for failure in bag.failures:
+            lines.append(f"  WRITE FAILED: {failure.describe()}; {failure.lost_in_chunk} messages of the chunk in "
+                         "progress lost, the messages after it not written")
+        if bag.metadata_error is not None:
+            lines.append(f"  metadata.yaml not updated: {bag.metadata_error}")
+        cause = bag.failures[0].headline if bag.failures else "write error"
+        for topic, r in self.loss_report().items():
+            lines.append(f"  {topic}: {r.written} messages written; "
+                         + (f"LOSS: {r.lost_samples} samples missing (first_index gaps), "
+                            f"{r.queue_dropped} messages dropped (queue full)"
+                            + (f", {r.not_written} messages not written ({cause})" if r.not_written else "")
+                            if r.lost else "no loss"))
+        return lines
