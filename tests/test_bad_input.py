@@ -402,7 +402,8 @@ def _simulator(ros_processes: Any, *args: str) -> Any:
 
 def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_executor):
     from rimd_msgs.srv import Perturb, SetMotorFrequency
-    from rimd_sim.settings.config import CONTACT_LAWS, NODE_PARAMETERS, PARAMETERS
+    from rimd_sim.model.contact import CONTACT_LAWS
+    from rimd_sim.settings.config import NODE_PARAMETERS, PARAMETERS
 
     rig = _simulator(ros_processes)
     node, motor, alive = _watch_motor(ros_executor, rig, "the rig")

@@ -88,7 +88,7 @@ def test_an_edit_of_the_physics_is_not_served_from_the_cache(tmp_path):
     shutil.copytree(SRC.parent / "config", copy / "config")  # find_config_file looks in the parents' config/
     cache = tmp_path / "cache"
     before = probe(copy, cache, "rigid")["rigid"]
-    physics = copy / "rimd_sim" / "core" / "rigid.py"
+    physics = copy / "rimd_sim" / "model" / "rigid.py"
     text = physics.read_text()
     line = '    """The sensor is rigid: it reads the law\'s force."""\n    return force\n'
     assert text.count(line) == 1

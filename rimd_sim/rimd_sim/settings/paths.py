@@ -13,7 +13,7 @@ def source_root() -> Path | None:
     The checkout is recognised by ``<root>/rimd_sim/package.xml`` next to ``<root>/rimd_sim/rimd_sim``
     (this package, with symlinks resolved, as colcon --symlink-install and editable installs leave it).
     """
-    package_dir = Path(__file__).resolve().parent
+    package_dir = Path(__file__).resolve().parent.parent  # rimd_sim/ (this file is rimd_sim/settings/paths.py)
     root = package_dir.parent.parent
     if (package_dir.parent / "package.xml").is_file() and (root / "rimd_msgs").is_dir():
         return root

@@ -1,0 +1,7 @@
+"""``python -m rimd_sim.cli``: the ``rimd`` command (for a venv whose console script is not on PATH)."""
+
+import sys
+
+from rimd_sim.cli import main
+
+sys.exit(main())
