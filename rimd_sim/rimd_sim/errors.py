@@ -4,8 +4,8 @@ Every exception class the package defines derives from :class:`RimdError`: a rea
 the recording and analysis libraries, the bring-up, the nodes, the verbs). A node or the command line catches
 the whole family at its boundary and turns it into a refusal (``success = false`` with the message) or one
 clear line on stderr (``rimd_sim.cli.main``, the one place: ``rimd VERB: message``, exit status 1), without
-catching unrelated bugs. A library the package calls (mcap, mcap_ros2, rerun, the Foxglove SDK, Dask, PyYAML) is
-translated into the family where the package calls it, so a user sees only this family.
+catching unrelated bugs. A library's exception (mcap, mcap_ros2, rerun, the Foxglove SDK, Dask, PyYAML) is
+translated into the family where the package calls the library, so a user sees only this family.
 
 The tree: the general kinds are defined here; module-specific classes stay in their modules (named in the
 tree, with their module) and derive from one of these kinds::
