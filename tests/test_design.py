@@ -1,4 +1,6 @@
-"""Experiment design for identification (rimd_sim.analysis.identification.design, ``rimd experiment --for-identification``).
+"""Experiment design for identification.
+
+The library is rimd_sim.analysis.identification.design; the verb ``rimd experiment --for-identification``.
 
 Hypotheses:
 
