@@ -1,4 +1,6 @@
-"""Experiment design for identification (rimd_sim.analysis.identification.design, ``rimd experiment --for-identification``).
+"""Experiment design for identification.
+
+The library is rimd_sim.analysis.identification.design; the verb ``rimd experiment --for-identification``.
 
 Hypotheses:
 
@@ -64,8 +66,8 @@ def test_experiment_schedules_the_design(capsys):
 
 
 def test_experiment_refuses_the_design_with_frequencies():
-    from rimd_sim.cli import CommandError
     from rimd_sim.cli.verbs.experiment import plan
+    from rimd_sim.errors import RimdError
 
-    with pytest.raises(CommandError, match="--for-identification chooses the frequencies"):
+    with pytest.raises(RimdError, match="--for-identification chooses the frequencies"):
         plan(_experiment_args("--for-identification", "--frequencies", "3.0"))

@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from rimd_sim.errors import RimdError
+from rimd_sim.errors import UnavailableError
 
 __all__ = ["CONNECT_TIMEOUT_S", "ENV_SCHEDULER", "SchedulerError", "TaskRunner", "open_executor", "run_tasks"]
 
@@ -38,7 +38,7 @@ WORKER_TIMEOUT_S = 3.0
 _ADDRESS = re.compile(r"^(tcp|tls|ws|wss|inproc|ucx)://[^\s/]+(:\d+)?/?$")
 
 
-class SchedulerError(RimdError):
+class SchedulerError(UnavailableError):
     """The Dask scheduler named cannot be used (address, reason)."""
 
 

@@ -11,11 +11,13 @@ import json
 import math
 from pathlib import Path
 
+from rimd_sim.errors import InputError
+
 __all__ = ["FileFormatError", "jsonable", "nest", "read_yaml", "write_csv", "write_json", "write_parameter_file",
            "write_summary"]
 
 
-class FileFormatError(Exception):
+class FileFormatError(InputError):
     """A file the analyses read is not what it must be (one line: the file, line and column, what is wrong)."""
 
 
@@ -85,6 +87,8 @@ def read_yaml(path: Path):  # noqa: ANN201 - the YAML document
         text = Path(path).read_text()
     except OSError as exc:
         raise FileFormatError(f"{path}: cannot be read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{path}: not text (UTF-8): {exc.reason} at byte {exc.start}") from None
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as exc:

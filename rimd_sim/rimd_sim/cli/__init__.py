@@ -6,10 +6,13 @@ and answers, on stderr, that it is not implemented, with exit status 2; it never
 
 Rules for verb modules: keep the module import light (import rclpy, numpy and friends inside ``main``),
 so that ``rimd --help`` stays fast and works even where a heavy dependency is broken; report a failure by
-raising :class:`CommandError` (one clear line, exit status 1).
+raising :class:`CommandError`, and let the libraries' errors through: every error of the family
+(:mod:`rimd_sim.errors`) is rendered here, in :func:`main`, as one line (``rimd VERB: message``, exit status 1).
+A verb does not catch an error to re-raise it as another or to print it; it catches one only to add what only
+it knows (the option as typed, that the experiment itself ran).
 
-Exit status: 0 success, 1 failure (:class:`CommandError`), 2 usage error or not implemented yet,
-130 interrupted.
+Exit status: 0 success, 1 failure (any :class:`RimdError`, or an ``OSError`` such as an output directory that
+cannot be made, in one line naming the file), 2 usage error (argparse) or not implemented yet, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -32,6 +35,22 @@ EXIT_INTERRUPTED = 130
 # The product's one exception family (rimd_sim.errors): a verb raises CommandError (or lets a library's
 # RimdError through) for a failure the user can act on; main() prints it as one line and exits 1.
 from rimd_sim.errors import CommandError, RimdError  # noqa: E402, F401 - CommandError: the verbs' import
+
+
+def error_line(verb: str, error: BaseException) -> str:
+    """The one line ``rimd VERB`` prints on stderr for ``error`` (a :class:`RimdError` or an ``OSError``).
+
+    An ``OSError`` names its file and the system's reason (``/out/x: Not a directory``), without the errno.
+    A message of several lines is joined into one.
+    """
+    if isinstance(error, OSError) and error.strerror:
+        files = [str(f) for f in (error.filename, error.filename2) if f is not None]
+        text = ": ".join([" -> ".join(files), error.strerror] if files else [error.strerror])
+    else:
+        text = str(error) or type(error).__name__
+    if "\n" in text:
+        text = "; ".join(part.strip() for part in text.splitlines() if part.strip())
+    return f"rimd {verb}: {text}"
 
 
 def number(option: str, unit: str = "", *, ge: float | None = None, gt: float | None = None,
@@ -139,7 +158,8 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.cli.verbs.experiment"),
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
          "rimd_sim.cli.verbs.analyze"),
-    Verb("identify", "identify the rig's parameters from a recording: a twin of that rig", "rimd_sim.cli.verbs.identify"),
+    Verb("identify", "identify the rig's parameters from a recording: a twin of that rig",
+         "rimd_sim.cli.verbs.identify"),
     Verb("fit-table", "the parameter set that best reproduces a table of impact resonances (paper Table 1)",
          "rimd_sim.cli.verbs.fit_table"),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
@@ -163,7 +183,8 @@ VERBS: tuple[Verb, ...] = (
     Verb("pause", "pause the running rig (simulation time frozen)", "rimd_sim.cli.verbs.trigger"),
     Verb("resume", "resume the paused rig", "rimd_sim.cli.verbs.trigger"),
     Verb("reset", "put the hammer back to its initial state (a new run on /rig/session)", "rimd_sim.cli.verbs.trigger"),
-    Verb("clear-faults", "end every fault of the running rig and cancel the scheduled ones", "rimd_sim.cli.verbs.trigger"),
+    Verb("clear-faults", "end every fault of the running rig and cancel the scheduled ones",
+         "rimd_sim.cli.verbs.trigger"),
     Verb("status", "a live view of the running rig: rates, indices, gaps, lateness, motor, faults, impacts",
          "rimd_sim.cli.verbs.status"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.cli.verbs.rerun"),
@@ -224,8 +245,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     try:
         return int(args._main(args) or EXIT_OK)
-    except RimdError as error:
-        print(f"rimd {args.verb}: {error}", file=sys.stderr)
+    except (RimdError, OSError) as error:   # the one place errors become lines: no verb translates or prints them
+        print(error_line(args.verb, error), file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"rimd {args.verb}: interrupted", file=sys.stderr)

@@ -26,7 +26,7 @@ from rimd_sim.io.reader import RecordingError, open_recording
 __all__ = ["CropError", "CropResult", "crop"]
 
 
-class CropError(Exception):
+class CropError(RecordingError):
     """The crop cannot be done as asked; the message (one line) names the option, the value and the rule."""
 
 

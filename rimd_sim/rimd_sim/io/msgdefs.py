@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
+from rimd_sim.errors import UnavailableError
+
 SEPARATOR = "=" * 80
 
 PRIMITIVE_TYPES = frozenset({
@@ -35,7 +37,7 @@ PRIMITIVE_TYPES = frozenset({
 _TYPE_NAME = re.compile(r"^(?P<pkg>[A-Za-z][A-Za-z0-9_]*)/(?:msg/)?(?P<name>[A-Za-z][A-Za-z0-9_]*)$")
 
 
-class MessageDefinitionError(LookupError):
+class MessageDefinitionError(UnavailableError):
     """A message type's definition could not be found; the message names the type and where it looked."""
 
 

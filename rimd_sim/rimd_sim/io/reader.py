@@ -26,6 +26,11 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 
+from rimd_sim.errors import RecordingError
+
+__all__ = ["FileReport", "RecordedMessage", "RecordedTopic", "Recording", "RecordingError", "open_recording",
+           "recording_files"]
+
 _MAGIC = b"\x89MCAP0\r\n"
 #: Largest record (and decompressed chunk) accepted: a longer one is taken for a damaged length field.
 _RECORD_LIMIT = 1 << 30
@@ -40,10 +45,6 @@ _DATA_SECTION = {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE, Opcode.CHUNK, Op
 _SUMMARY_SECTION = {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS, Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX,
                     Opcode.METADATA_INDEX, Opcode.SUMMARY_OFFSET, Opcode.FOOTER}
 _TRUNCATED = "the file ends in the middle of a record: truncated, or the recorder did not finish it"
-
-
-class RecordingError(Exception):
-    """A recording cannot be read at all; the message names the file and the reason."""
 
 
 @dataclass(frozen=True)

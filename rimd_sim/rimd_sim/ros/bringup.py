@@ -98,11 +98,18 @@ _NODES = (("rimd_recorder", "recorder", True, "/"), ("rimd_rerun", "rerun", Fals
           ("rimd_simulator", "simulator", False, "/rig"))
 
 
-def _section(config_path: Path, name: str) -> dict | None:
+def _section(config_path: Path, doc: Any, name: str) -> dict | None:
+    """The flat parameters of node ``name`` in the file (document ``doc``), or None when it has no section for it.
+
+    Only a missing section means "none": a section that is not a mapping with ``ros__parameters`` is refused
+    (it used to be taken for a missing one, and the node ran with its defaults).
+    """
+    if not isinstance(doc, Mapping) or all(doc.get(key) is None for key in ("/**", f"/**/{name}", name, f"/{name}")):
+        return None
     try:
         return read_ros_parameters(config_path, node=name)
-    except ConfigError:
-        return None
+    except ConfigError as exc:
+        raise InputError(f"{config_path}, section {name}: {exc}") from None
 
 
 def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None = None, record: bool = True,
@@ -134,7 +141,9 @@ def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None 
     if real_time_factor is not None:
         sim["real_time_factor"] = float(real_time_factor)
     doc = read_yaml(config_path, what="config file")
-    sections = {name: _section(config_path, name) for name, *_ in _NODES}
+    if doc is not None and not isinstance(doc, Mapping):   # an empty file is the defaults; a text or a list is not
+        raise ConfigError("config file", str(config_path), "must be a mapping of node names to 'ros__parameters'")
+    sections = {name: _section(config_path, doc, name) for name, *_ in _NODES}
     plan: list[PlannedNode] = []
     recording_dir = foxglove_address = None
     started_consumers: list[str] = []

@@ -37,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from rimd_sim.errors import UnavailableError
 from rimd_sim.runtime.replay import PlayerState
 
 __all__ = ["MAX_EXTRAPOLATION_S", "PlaybackControl", "PlaybackReport", "PlaybackRequest", "ReplayControls",
@@ -46,7 +47,7 @@ __all__ = ["MAX_EXTRAPOLATION_S", "PlaybackControl", "PlaybackReport", "Playback
 MAX_EXTRAPOLATION_S = 0.5
 
 
-class ReplayUnavailable(Exception):
+class ReplayUnavailable(UnavailableError):
     """The replay did not answer (not running, or not in time); the message says which service and why."""
 
 

@@ -42,6 +42,7 @@ import foxglove
 from foxglove import MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema, StatusLevel
 from foxglove.websocket import Capability, PlaybackCommand, PlaybackState, PlaybackStatus, ServerListener
 
+from rimd_sim.errors import UnavailableError
 from rimd_sim.io.msgdefs import MessageDefinitionError, message_definition, service_definitions
 from rimd_sim.runtime.playback_control import PlaybackReport, PlaybackRequest
 
@@ -62,11 +63,11 @@ PARAMETER_KINDS = ("bool", "integer", "double", "string", "byte_array", "bool_ar
 _log = logging.getLogger(__name__)
 
 
-class FoxgloveError(Exception):
+class FoxgloveError(UnavailableError):
     """The Foxglove server cannot be set up as asked; the message names the parameter and the value."""
 
 
-class ServiceCallError(Exception):
+class ServiceCallError(UnavailableError):
     """A forwarded service call failed; the message (one line) goes back to the Foxglove client."""
 
 

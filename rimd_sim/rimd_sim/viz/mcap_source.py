@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rimd_sim.errors import RecordingError
 from rimd_sim.viz.rerun_map import CHANNELS, EVENTS_TOPIC, TOPICS, TRUTH_TOPIC
 
 __all__ = ["McapError", "RecordingInfo", "read_rig_messages"]
@@ -23,7 +24,7 @@ RIG_TYPES = {**{ch.topic: "rimd_msgs/msg/SampleBlock" for ch in CHANNELS},
              EVENTS_TOPIC: "rimd_msgs/msg/ImpactEvent", TRUTH_TOPIC: "rimd_msgs/msg/RigState"}
 
 
-class McapError(Exception):
+class McapError(RecordingError):
     """The file is missing, not an MCAP file, or holds no readable rig topic; one clear line."""
 
 

@@ -27,13 +27,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from rimd_sim.errors import UnavailableError
+
 __all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment", "spec_from_parameters"]
 
 SINKS = ("save", "spawn", "connect", "serve_web")
 APPLICATION_ID = "rimd_rig"
 
 
-class SinkError(Exception):
+class SinkError(UnavailableError):
     """The sink cannot be opened (bad name, unwritable path, viewer did not start); one clear line."""
 
 

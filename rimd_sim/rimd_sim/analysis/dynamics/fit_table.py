@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rimd_sim.errors import ConfigError, InputError
 from rimd_sim.model.rig_model import RigModel
 from rimd_sim.settings.config import SimConfig
 
@@ -40,7 +41,7 @@ SCALES = {"damping_ratio": 0.1, "mass": 0.1, "natural_frequency": 1.0, "amplitud
           "contact.stiffness": 1e6, "contact.damping": 1e3}
 
 
-class TableError(Exception):
+class TableError(InputError):
     """The table cannot be read or holds a bad entry (one line naming the row and the column)."""
 
 
@@ -64,6 +65,8 @@ def read_table(path: Path) -> tuple[list[TableEntry], float | None]:
             rows = list(csv.DictReader(fh))
     except OSError as exc:
         raise TableError(f"{path}: cannot be read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise TableError(f"{path}: not text (UTF-8): {exc.reason} at byte {exc.start}") from None
     need = {"gap_mm", "band", "frequency_hz"}
     if not rows or not need <= set(rows[0]):
         raise TableError(f"{path}: needs the columns {', '.join(sorted(need))} (optional peak_force_n)")
@@ -190,7 +193,7 @@ def fit_table(base: SimConfig, entries: list[TableEntry], parameters: tuple[str,
         try:
             least_squares(fun, x0, diff_step=0.03, max_nfev=max(1, (max_evaluations - 1) // (len(x0) + 1)),
                           bounds=(0.3 * x0, 3.0 * x0))   # within a factor 3 of the base: the map is not smooth
-        except ValueError:
+        except (ValueError, ConfigError):   # ConfigError: a step beyond a parameter's bounds ends the search
             pass
     candidates = [s for s in seen if s[1]] or seen
     best = min(candidates, key=lambda s: s[0])

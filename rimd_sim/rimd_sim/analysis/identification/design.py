@@ -35,6 +35,7 @@ from fractions import Fraction
 import numpy as np
 
 from rimd_sim.analysis.recordings.recorded import settled
+from rimd_sim.errors import AnalysisError
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["Design", "DesignError", "StepPrediction", "identification_steps", "predict", "steps_for_identification"]
@@ -44,7 +45,7 @@ CANDIDATE_CYCLES = 60
 MEASURE_CYCLES = 20
 
 
-class DesignError(ValueError):
+class DesignError(AnalysisError):
     """No schedule fits the rig (one line: what was found, what to change)."""
 
 
@@ -215,8 +216,8 @@ def steps_for_identification(config_path: str, *, frequencies: list[float] | Non
                              ramp_rate: float) -> list[float]:
     """``rimd experiment --for-identification CONFIG``: the steps for the rig of ``CONFIG`` (empty: the default).
 
-    The design is said on stderr. Raises ValueError (one line) for --frequencies given as well, a parameter file
-    that does not load, or no schedule for the rig.
+    The design is said on stderr. Raises :class:`DesignError` (one line) for --frequencies given as well, a
+    parameter file that does not load, or no schedule for the rig.
     """
     import sys
 

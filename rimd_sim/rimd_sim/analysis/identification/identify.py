@@ -3,17 +3,20 @@
 :func:`identify` runs stages, each returning typed estimates (docs/identification.md says what determines
 what, and the references):
 
-1. **Reading** (:func:`rimd_sim.analysis.recordings.reading.read`): the impacts in the force channel, the motor's steps and
-   the windows to leave out: holes in ``first_index``, faults seen in the data, faults named on ``/rig/faults``.
+1. **Reading** (:func:`rimd_sim.analysis.recordings.reading.read`): the impacts in the force channel, the motor's
+   steps and the windows to leave out: holes in ``first_index``, faults seen in the data, faults named on
+   ``/rig/faults``.
    Every later stage leaves those windows out and the result says which.
-2. **Motor and amplitude** (:mod:`rimd_sim.analysis.identification.local`): the recorded schedule, A0 from the cart laser.
+2. **Motor and amplitude** (:mod:`rimd_sim.analysis.identification.local`): the recorded schedule, A0 from the
+   cart laser.
 3. **Free flight**: ``f_n`` and ``zeta`` from the relative displacement between impacts; velocity kicks.
 4. **Contact**: the common spring-dashpot pulse of all impacts (any damping; from the 1 MHz triggered
    captures when the recording has them), each impact's onset and scale ``m v0 / cos(theta)``; with the laser's
    impact velocity: the mass, ``k``, ``c`` and the gap.
-5. **Joint fit** (:class:`rimd_sim.analysis.identification.joint_fit.JointFit`): everything at once with the core's integrator,
-   multiple shooting, until converged; when the local estimates are uncertain or the fit does not reach the
-   lasers' noise, more starts across the local estimates' uncertainty (:data:`STARTS`), the best kept.
+5. **Joint fit** (:class:`rimd_sim.analysis.identification.joint_fit.JointFit`): everything at once with the
+   core's integrator, multiple shooting, until converged; when the local estimates are uncertain or the fit does
+   not reach the lasers' noise, more starts across the local estimates' uncertainty (:data:`STARTS`), the best
+   kept.
 6. **Uncertainty and verdict**: a cluster bootstrap over the excitation cycles (impacts and laser samples
    together) linearised at the solution; 95 % intervals; the verdict: identified, or which parameters are
    poorly determined, why, and what experiment would determine them.
@@ -46,6 +49,7 @@ from rimd_sim.analysis.identification.joint_fit import (
 )
 from rimd_sim.analysis.recordings import recorded as rec
 from rimd_sim.analysis.recordings.reading import Reading, Window, keep_mask, read, step_rows
+from rimd_sim.errors import AnalysisError
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["IDENTIFIABLE", "TARGETS", "Estimate", "Identification", "IdentificationError", "Prepared", "Verdict",
@@ -82,7 +86,7 @@ SHORT_SEGMENT = 1.0
 MIN_SEGMENT = 0.75
 
 
-class IdentificationError(Exception):
+class IdentificationError(AnalysisError):
     """The recording cannot give what was asked (one line: which parameter, which channel, what to do)."""
 
 

@@ -1,7 +1,7 @@
 """The local stages of ``rimd identify``: each parameter from the data that show it best, with its error.
 
-Each function takes measured arrays and returns a typed estimate; :mod:`rimd_sim.analysis.identification.identify` runs them
-in order and hands the results to the joint fit (:mod:`rimd_sim.analysis.identification.joint_fit`).
+Each function takes measured arrays and returns a typed estimate; :mod:`rimd_sim.analysis.identification.identify`
+runs them in order and hands the results to the joint fit (:mod:`rimd_sim.analysis.identification.joint_fit`).
 
 * :func:`motor_schedule`: the motor as recorded from a motor cycle start: setpoints, when they were commanded
   (where the linear ramp of the recorded frequency starts) and their ramps; :func:`phase_from_cart` without
@@ -33,13 +33,14 @@ from rimd_sim.analysis.recordings.contact_pulse import (
     fit_pulses,
     onset_scale_errors,
 )
+from rimd_sim.errors import AnalysisError
 
 __all__ = ["ContactEstimate", "Schedule", "cycle_start", "detect_kicks", "fit_amplitude", "fit_free_flight",
            "free_stretches", "impact_samples", "local_contact", "motor_schedule", "phase_from_cart",
            "unwrapped_phase"]
 
 
-class LocalError(Exception):
+class LocalError(AnalysisError):
     """A local stage cannot give its estimate from this recording (one line: what, why, what to do)."""
 
 

@@ -1,7 +1,8 @@
-"""What ``rimd identify`` writes and prints: the files of an :class:`~rimd_sim.analysis.identification.identify.Identification`.
+"""What ``rimd identify`` writes and prints, from an identification.
 
-``identified.yaml`` (the base parameter file with the identified values), ``identification.json``,
-``validation.csv``, ``validation.png``, and the report's lines.
+The files of an :class:`~rimd_sim.analysis.identification.identify.Identification`: ``identified.yaml`` (the
+base parameter file with the identified values), ``identification.json``, ``validation.csv``,
+``validation.png``, and the report's lines.
 """
 
 from __future__ import annotations
@@ -29,22 +30,23 @@ def parse_fix(items: list[str]) -> dict[str, float]:
     """``NAME=VALUE`` strings to a dict.
 
     Raises:
-        ValueError: One line naming the item as typed and the rule.
+        InputError: One line naming the item as typed and the rule.
     """
     from rimd_sim.analysis.identification.identify import IDENTIFIABLE
+    from rimd_sim.errors import InputError
 
     fixed: dict[str, float] = {}
     for item in items:
         name, sep, value = item.partition("=")
         name = name.strip()
         if not sep:
-            raise ValueError(f"--fix {item!r} refused: must be NAME=VALUE")
+            raise InputError(f"--fix {item!r} refused: must be NAME=VALUE")
         if name not in IDENTIFIABLE:
-            raise ValueError(f"--fix {item!r} refused: NAME must be one of {', '.join(IDENTIFIABLE)}")
+            raise InputError(f"--fix {item!r} refused: NAME must be one of {', '.join(IDENTIFIABLE)}")
         try:
             fixed[name] = float(value)
         except ValueError:
-            raise ValueError(f"--fix {item!r} refused: VALUE must be a number") from None
+            raise InputError(f"--fix {item!r} refused: VALUE must be a number") from None
     return fixed
 
 

@@ -1,7 +1,7 @@
 """The analysis of a recording alone (``rimd analyze``): tables, figures, summary and the report's lines.
 
-:func:`analyze` reads the recording once (:func:`rimd_sim.analysis.recordings.reading.read`, the reading ``rimd identify``
-validates against) and writes into ``out``:
+:func:`analyze` reads the recording once (:func:`rimd_sim.analysis.recordings.reading.read`, the reading
+``rimd identify`` validates against) and writes into ``out``:
 
 * ``impacts_detected.csv``, ``impact_events.csv`` (the cross-check, each side with its match), ``steps.csv``
   (per dwell step: steady peak force, its mean, spread and smallest, impacts per cycle, from the events and
@@ -27,6 +27,7 @@ import numpy as np
 
 from rimd_sim.analysis.recordings import recorded as rec
 from rimd_sim.analysis.recordings.reading import Reading, keep_mask, read
+from rimd_sim.errors import AnalysisError
 
 __all__ = ["ReportError", "analyze", "format_report", "format_steps", "threshold_warnings"]
 
@@ -35,7 +36,7 @@ FIGURES = ("peak_force_vs_frequency.png", "impacts.png", "channels.png", "phase_
            "acceleration_spectrum.png")
 
 
-class ReportError(Exception):
+class ReportError(AnalysisError):
     """The recording holds nothing to analyse (one line naming it and what it holds)."""
 
 

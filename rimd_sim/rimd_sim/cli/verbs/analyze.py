@@ -31,14 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Parse, analyse, print the report."""
-    from rimd_sim.analysis.recordings.report import ReportError, analyze, format_report
-    from rimd_sim.cli import CommandError
-    from rimd_sim.io.reader import RecordingError
-    try:
-        summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold, peak=args.peak,
-                          log=lambda text: print(f"rimd analyze: {text}", file=sys.stderr, flush=True))
-    except (RecordingError, ReportError) as exc:
-        raise CommandError(str(exc)) from None
+    from rimd_sim.analysis.recordings.report import analyze, format_report
+    summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold, peak=args.peak,
+                      log=lambda text: print(f"rimd analyze: {text}", file=sys.stderr, flush=True))
     for line in format_report(summary):
         print(line)
     print(f"results in {args.out}")

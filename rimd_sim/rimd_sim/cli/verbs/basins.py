@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from rimd_sim.cli import CommandError, count, number, positive_float
+from rimd_sim.cli import count, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
     add_map_arguments,
     add_model_arguments,
@@ -34,22 +34,18 @@ def main(args: argparse.Namespace) -> int:
     """Compute the basins and write their files."""
     from rimd_sim.analysis.dynamics.peterka import basins, basins_table, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
-    from rimd_sim.errors import RimdError
     from rimd_sim.settings.config import load_config
 
-    try:
-        config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
-        (t_lo, t_hi), (r_lo, r_hi) = default_basin_ranges(config)
-        t_range = (t_lo if args.theta_min is None else args.theta_min,
-                   t_hi if args.theta_max is None else args.theta_max)
-        r_range = (r_lo if args.theta_dot_min is None else args.theta_dot_min,
-                   r_hi if args.theta_dot_max is None else args.theta_dot_max)
-        result = basins(config, args.frequency, t_range, r_range, (args.size, args.size),
-                        transient_cycles=args.transient_cycles, measure_cycles=args.measure_cycles,
-                        early_stop=not args.fixed_length, workers=args.workers, scheduler=args.scheduler,
-                        progress=progress_printer("basins", "rows"))
-    except RimdError as exc:
-        raise CommandError(str(exc)) from None
+    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    (t_lo, t_hi), (r_lo, r_hi) = default_basin_ranges(config)
+    t_range = (t_lo if args.theta_min is None else args.theta_min,
+               t_hi if args.theta_max is None else args.theta_max)
+    r_range = (r_lo if args.theta_dot_min is None else args.theta_dot_min,
+               r_hi if args.theta_dot_max is None else args.theta_dot_max)
+    result = basins(config, args.frequency, t_range, r_range, (args.size, args.size),
+                    transient_cycles=args.transient_cycles, measure_cycles=args.measure_cycles,
+                    early_stop=not args.fixed_length, workers=args.workers, scheduler=args.scheduler,
+                    progress=progress_printer("basins", "rows"))
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "basins.csv", basins_table(result))
     rig = config.rig

@@ -39,21 +39,17 @@ def main(args: argparse.Namespace) -> int:
 
     from rimd_sim.analysis.dynamics.bifurcation import bifurcation, branch_table
     from rimd_sim.analysis.plots import plot_bifurcation
-    from rimd_sim.errors import RimdError
     from rimd_sim.settings.config import load_config
 
     if args.direction not in ("up", "down", "both"):
         raise CommandError(f"--direction {args.direction!r} refused: must be up, down or both")
     check_range("f", args.f_min, args.f_max)
-    try:
-        config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
-        freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
-        print(f"rimd bifurcation: {len(freqs)} frequencies, sweep {args.direction}...", file=sys.stderr, flush=True)
-        branches, wall, workers = bifurcation(config, freqs, args.direction, transient_cycles=args.transient_cycles,
-                                              sample_cycles=args.sample_cycles, ramp_rate=args.ramp_rate,
-                                              scheduler=args.scheduler)
-    except RimdError as exc:
-        raise CommandError(str(exc)) from None
+    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
+    print(f"rimd bifurcation: {len(freqs)} frequencies, sweep {args.direction}...", file=sys.stderr, flush=True)
+    branches, wall, workers = bifurcation(config, freqs, args.direction, transient_cycles=args.transient_cycles,
+                                          sample_cycles=args.sample_cycles, ramp_rate=args.ramp_rate,
+                                          scheduler=args.scheduler)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "bifurcation.csv", branch_table(branches))
     summary = {

@@ -1,8 +1,8 @@
 """``rimd experiment``: a stepped frequency sweep of the running rig, recorded, then analysed.
 
 The steps are scheduled on exact stamps of the rig's own time base, so the same schedule gives the same data
-however late the requests travel (:mod:`rimd_sim.ros.clients.experiment`). Unless ``--no-record``, the verb starts its own
-recorder process (node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``); a rig in
+however late the requests travel (:mod:`rimd_sim.ros.clients.experiment`). Unless ``--no-record``, the verb starts
+its own recorder process (node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``); a rig in
 lockstep that names it among its consumers waits for it, so nothing is lost however fast the rig runs. Once
 the recorder has written everything up to the end of the last step it is stopped with SIGINT and the
 recording is analysed into ``OUT`` with the same ``--settle`` (:mod:`rimd_sim.analysis.recordings.report`). The rig is
@@ -58,17 +58,15 @@ def plan(args: argparse.Namespace):  # noqa: ANN201 - rimd_sim.ros.clients.exper
 
     Raises:
         CommandError: A range upside down, a settle as long as the dwell, a ramp too slow for the dwell...
+        DesignError: ``--for-identification``: no schedule for the rig, or its parameter file does not load.
     """
     from rimd_sim.ros.clients.experiment import ExperimentPlan, frequency_steps
 
     if args.for_identification is not None:
         from rimd_sim.analysis.identification.design import steps_for_identification
 
-        try:
-            freqs = tuple(steps_for_identification(args.for_identification, frequencies=args.frequencies,
-                                                   dwell=args.dwell, settle=args.settle, ramp_rate=args.ramp_rate))
-        except ValueError as exc:
-            raise CommandError(str(exc)) from None
+        freqs = tuple(steps_for_identification(args.for_identification, frequencies=args.frequencies,
+                                               dwell=args.dwell, settle=args.settle, ramp_rate=args.ramp_rate))
     elif args.frequencies:
         freqs = tuple(args.frequencies)
     else:
@@ -119,12 +117,12 @@ def main(args: argparse.Namespace) -> int:
         print(f"experiment done ({len(experiment.frequencies)} steps, not recorded here); "
               f"schedule in {out / 'experiment.json'}")
         return 0
-    from rimd_sim.analysis.recordings.report import ReportError, analyze, format_report
-    from rimd_sim.io.reader import RecordingError
+    from rimd_sim.analysis.recordings.report import analyze, format_report
+    from rimd_sim.errors import RimdError
 
     try:
         summary = analyze(target, out, settle=args.settle, log=lambda text: _log(f"analyze: {text}"))
-    except (RecordingError, ReportError) as exc:
+    except RimdError as exc:   # not a translation: only the verb knows that the experiment itself ran
         raise CommandError(f"the experiment ran but its recording cannot be analysed: {exc}") from None
     print("\n".join(format_report(summary)))
     print(f"recording in {target}; analysis in {out}")

@@ -44,10 +44,7 @@ def load_scenario(path: Path) -> list[dict]:
     doc = read_yaml(path, what="fault scenario")
     if not isinstance(doc, dict) or not isinstance(doc.get("faults"), list):
         raise CommandError(f"{path}: 'faults' refused: the file must hold a 'faults:' list")
-    try:
-        entries = [parse_fault_entry(e, f"faults[{i}]") for i, e in enumerate(doc["faults"])]
-    except CommandError as exc:
-        raise CommandError(f"{path}: {exc}") from None
+    entries = [parse_fault_entry(e, f"{path}: faults[{i}]") for i, e in enumerate(doc["faults"])]
     for i, e in enumerate(entries):
         for key in ("start", "after", "duration", "magnitude"):
             if isinstance(e[key], bool) or not isinstance(e[key], (int, float)):

@@ -31,11 +31,10 @@ def main(args: argparse.Namespace) -> int:
     """Fit and write the results."""
     import time
 
-    from rimd_sim.analysis.dynamics.fit_table import SCALES, TableError, fit_table, read_table
+    from rimd_sim.analysis.dynamics.fit_table import SCALES, fit_table, read_table
     from rimd_sim.analysis.outputs import write_parameter_file
     from rimd_sim.cli import CommandError
     from rimd_sim.cli.verbs._analysis_io import write_csv, write_summary
-    from rimd_sim.errors import ConfigError
     from rimd_sim.settings.config import find_config_file, load_config
 
     for p in args.parameters:
@@ -45,11 +44,8 @@ def main(args: argparse.Namespace) -> int:
         raise CommandError(f"--max-evaluations {args.max_evaluations} refused: must be >= 1")
     table = args.table or find_config_file("paper_table1.csv")
     base_path = args.config or find_config_file()
-    try:
-        entries, natural = read_table(table)
-        base = load_config(base_path, {"natural_frequency": natural} if natural else None)
-    except (TableError, ConfigError) as exc:
-        raise CommandError(str(exc)) from None
+    entries, natural = read_table(table)
+    base = load_config(base_path, {"natural_frequency": natural} if natural else None)
     start = time.perf_counter()
     result = fit_table(base, entries, tuple(args.parameters), max_evaluations=args.max_evaluations,
                        log=lambda text: print(f"rimd fit-table: {text}", file=sys.stderr, flush=True))

@@ -1,4 +1,6 @@
-"""``rimd identify REC --out DIR``: make the twin the recorded rig (the library: :mod:`rimd_sim.analysis.identification.identify`).
+"""``rimd identify REC --out DIR``: make the twin the recorded rig.
+
+The library: :mod:`rimd_sim.analysis.identification.identify`.
 
 Writes into DIR: ``identified.yaml`` (the base parameter file with the identified values replaced, runnable by
 ``rimd rig --config`` and ``--params-file``), ``identification.json`` (estimates, standard errors, 95 %
@@ -36,33 +38,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Parse, identify, write the files, print the estimates, the verdict and the validation."""
-    from rimd_sim.analysis.identification.identify import IdentificationError, identify
+    from rimd_sim.analysis.identification.identify import identify
     from rimd_sim.analysis.identification.report import format_identification, parse_fix, write_outputs
-    from rimd_sim.analysis.outputs import FileFormatError
-    from rimd_sim.cli import CommandError
     from rimd_sim.cli.verbs._analysis_io import check_positive
-    from rimd_sim.errors import ConfigError
-    from rimd_sim.io.reader import RecordingError
     from rimd_sim.settings.config import find_config_file, load_config
 
     check_positive("--threshold", args.threshold)
     check_positive("--settle", args.settle, inclusive=True)
-    try:
-        fixed = parse_fix(args.fix)
-    except ValueError as exc:
-        raise CommandError(str(exc)) from None
+    fixed = parse_fix(args.fix)
     base_path = args.config or find_config_file()
-    try:
-        base = load_config(base_path, fixed)
-    except ConfigError as exc:
-        raise CommandError(str(exc)) from None
+    base = load_config(base_path, fixed)
     start = time.perf_counter()
-    try:
-        result = identify(args.recording, base, fixed, threshold=args.threshold, settle=args.settle,
-                          log=lambda text: print(f"rimd identify: {text}", file=sys.stderr, flush=True))
-        write_outputs(result, base_path, args.out, args.recording, time.perf_counter() - start)
-    except (IdentificationError, RecordingError, FileFormatError) as exc:
-        raise CommandError(str(exc)) from None
+    result = identify(args.recording, base, fixed, threshold=args.threshold, settle=args.settle,
+                      log=lambda text: print(f"rimd identify: {text}", file=sys.stderr, flush=True))
+    write_outputs(result, base_path, args.out, args.recording, time.perf_counter() - start)
     for line in format_identification(result, base):
         print(line)
     print(f"results in {args.out} ({time.perf_counter() - start:.1f} s)")

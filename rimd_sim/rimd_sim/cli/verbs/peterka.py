@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from rimd_sim.cli import CommandError, count, gap_mm
+from rimd_sim.cli import count, gap_mm
 from rimd_sim.cli.verbs._analysis_io import (
     add_map_arguments,
     add_model_arguments,
@@ -50,27 +50,23 @@ def main(args: argparse.Namespace) -> int:
         save_peterka_npz,
     )
     from rimd_sim.analysis.plots import plot_peterka
-    from rimd_sim.errors import RimdError
     from rimd_sim.settings.config import load_config
 
     check_range("gap", args.gap_min_mm, args.gap_max_mm, allow_zero=True, unit="-mm")
     check_range("f", args.f_min, args.f_max)
-    try:
-        config = load_config(args.config)
-        gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3
-        freqs = np.linspace(args.f_min, args.f_max, args.freqs)
-        result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
-                         measure_cycles=args.measure_cycles, early_stop=not args.fixed_length,
-                         workers=args.workers, scheduler=args.scheduler,
-                         progress=progress_printer("peterka", "gap rows"))
-        comparison = None
-        if args.compare_fixed and not args.fixed_length:
-            fixed = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
-                            measure_cycles=args.measure_cycles, early_stop=False, workers=args.workers,
-                            scheduler=args.scheduler, progress=progress_printer("peterka (fixed length)", "gap rows"))
-            comparison = compare_maps(result, fixed, config, args.measure_cycles)
-    except RimdError as exc:
-        raise CommandError(str(exc)) from None
+    config = load_config(args.config)
+    gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3
+    freqs = np.linspace(args.f_min, args.f_max, args.freqs)
+    result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
+                     measure_cycles=args.measure_cycles, early_stop=not args.fixed_length,
+                     workers=args.workers, scheduler=args.scheduler,
+                     progress=progress_printer("peterka", "gap rows"))
+    comparison = None
+    if args.compare_fixed and not args.fixed_length:
+        fixed = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
+                        measure_cycles=args.measure_cycles, early_stop=False, workers=args.workers,
+                        scheduler=args.scheduler, progress=progress_printer("peterka (fixed length)", "gap rows"))
+        comparison = compare_maps(result, fixed, config, args.measure_cycles)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "peterka.csv", peterka_table(result))
     save_peterka_npz(result, args.out / "peterka.npz")

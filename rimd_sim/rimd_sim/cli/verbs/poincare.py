@@ -40,35 +40,31 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.dynamics.steady import classify, constant_frequency, nondimensional
     from rimd_sim.analysis.plots import plot_poincare
-    from rimd_sim.errors import RimdError
     from rimd_sim.model.rig_model import TRUTH_FIELDS, RigModel
     from rimd_sim.settings.config import load_config
 
     if args.frequency is not None and args.ratio is not None:
         raise CommandError("give --frequency or --ratio, not both")
-    try:
-        base = load_config(args.config, {"gap": args.gap_mm * 1e-3})
-        rig = base.rig
-        f = args.frequency if args.frequency is not None else (args.ratio or 1.5) * rig.natural_frequency
-        check_positive("--frequency", f)
-        if f > base.motor.max_frequency:
-            raise CommandError(f"--frequency {f:g} refused: above motor.max_frequency = "
-                               f"{base.motor.max_frequency:g} Hz")
-        cfg = constant_frequency(base, f, args.theta0, args.theta_dot0).with_parameters(
-            {"truth.sample_rate": max(1000.0, 200.0 * f)})
-        print(f"rimd poincare: gap {args.gap_mm:g} mm, {f:.4g} Hz: simulating...", file=sys.stderr, flush=True)
-        model = RigModel(cfg, channels=False, truth=True, strobe=True)
-        n0 = args.transient_cycles
-        model.advance(n0 / f)
-        shown = model.advance((n0 + args.plot_cycles) / f)
-        rest = model.advance((n0 + args.cycles + 1.5) / f)
-        strobe = [s for s in shown.strobe + rest.strobe if n0 < s.cycle_index <= n0 + args.cycles]
-        impacts = [i for i in shown.impacts + rest.impacts if n0 < i.cycle_index <= n0 + args.cycles]
-        print("rimd poincare: largest Lyapunov exponent...", file=sys.stderr, flush=True)
-        lyap = largest_lyapunov(base, f, theta0=args.theta0, theta_dot0=args.theta_dot0,
-                                transient_cycles=args.transient_cycles, cycles=args.cycles)
-    except RimdError as exc:
-        raise CommandError(str(exc)) from None
+    base = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    rig = base.rig
+    f = args.frequency if args.frequency is not None else (args.ratio or 1.5) * rig.natural_frequency
+    check_positive("--frequency", f)
+    if f > base.motor.max_frequency:
+        raise CommandError(f"--frequency {f:g} refused: above motor.max_frequency = "
+                           f"{base.motor.max_frequency:g} Hz")
+    cfg = constant_frequency(base, f, args.theta0, args.theta_dot0).with_parameters(
+        {"truth.sample_rate": max(1000.0, 200.0 * f)})
+    print(f"rimd poincare: gap {args.gap_mm:g} mm, {f:.4g} Hz: simulating...", file=sys.stderr, flush=True)
+    model = RigModel(cfg, channels=False, truth=True, strobe=True)
+    n0 = args.transient_cycles
+    model.advance(n0 / f)
+    shown = model.advance((n0 + args.plot_cycles) / f)
+    rest = model.advance((n0 + args.cycles + 1.5) / f)
+    strobe = [s for s in shown.strobe + rest.strobe if n0 < s.cycle_index <= n0 + args.cycles]
+    impacts = [i for i in shown.impacts + rest.impacts if n0 < i.cycle_index <= n0 + args.cycles]
+    print("rimd poincare: largest Lyapunov exponent...", file=sys.stderr, flush=True)
+    lyap = largest_lyapunov(base, f, theta0=args.theta0, theta_dot0=args.theta_dot0,
+                            transient_cycles=args.transient_cycles, cycles=args.cycles)
     first_truth, truth = shown.truth
     rows = {name: truth[i] for i, name in enumerate(TRUTH_FIELDS)}
     t = (first_truth + np.arange(truth.shape[1])) / cfg.truth_rate

@@ -11,7 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from rimd_sim.cli import CommandError, number
+from rimd_sim.cli import number
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,13 +30,9 @@ def main(args: argparse.Namespace) -> int:
 
     from rimd_sim.analysis.dynamics.pulse import plot_pulse, pulse
     from rimd_sim.cli.verbs._analysis_io import write_summary
-    from rimd_sim.errors import RimdError
     from rimd_sim.settings.config import load_config
 
-    try:
-        result = pulse(load_config(args.config), args.velocity, rate=args.rate)
-    except RimdError as exc:
-        raise CommandError(str(exc)) from None
+    result = pulse(load_config(args.config), args.velocity, rate=args.rate)
     args.out.mkdir(parents=True, exist_ok=True)
     np.savetxt(args.out / "pulse.csv", np.column_stack([result.t, result.force, result.acceleration]),
                delimiter=",", header="t_from_contact_s,impact_force_n,rimd_acceleration_m_s2", comments="",

@@ -36,30 +36,29 @@ def convert(recording: Path, spec, *, namespace: str = "/rig", natural_frequency
     """Log ``recording`` to the sink ``spec``; return (mapper stats, recording info, wall seconds).
 
     Raises:
-        CommandError: Unreadable recording or sink.
+        McapError: Unreadable recording.
+        SinkError: The sink cannot be opened.
+        CommandError: The sink reported a problem when closed.
     """
-    from rimd_sim.viz.mcap_source import McapError, RecordingInfo, read_rig_messages
+    from rimd_sim.viz.mcap_source import RecordingInfo, read_rig_messages
     from rimd_sim.viz.rerun_map import RigMapper, blueprint
-    from rimd_sim.viz.sinks import RerunStream, SinkError
+    from rimd_sim.viz.sinks import RerunStream
 
     info = RecordingInfo({}, {})
     messages = read_rig_messages(recording, namespace=namespace, info=info)
     start = time.perf_counter()
-    try:
-        first = next(messages, None)  # opens and checks the file before any sink is opened
-        with RerunStream(spec, blueprint(), recording_name=recording.name) as stream:
-            mapper = RigMapper(stream.rec, natural_frequency=natural_frequency, batch=50)
-            mapper.log_static()
-            if first is not None:
-                mapper.log_message(*first)
-            for topic, msg in messages:
-                mapper.log_message(topic, msg)
-            mapper.flush()
-            problem = stream.close()
-        if problem:
-            raise CommandError(problem)
-    except (McapError, SinkError) as exc:
-        raise CommandError(str(exc)) from None
+    first = next(messages, None)  # opens and checks the file before any sink is opened
+    with RerunStream(spec, blueprint(), recording_name=recording.name) as stream:
+        mapper = RigMapper(stream.rec, natural_frequency=natural_frequency, batch=50)
+        mapper.log_static()
+        if first is not None:
+            mapper.log_message(*first)
+        for topic, msg in messages:
+            mapper.log_message(topic, msg)
+        mapper.flush()
+        problem = stream.close()
+    if problem:
+        raise CommandError(problem)
     return mapper.stats, info, time.perf_counter() - start
 
 

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import sys
 
 import numpy as np
 
@@ -19,7 +18,6 @@ from rimd_sim.cli.verbs._analysis_io import (
     progress_printer,
     write_summary,
 )
-from rimd_sim.errors import ConfigError
 from rimd_sim.settings.config import load_config
 
 
@@ -40,21 +38,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
     from rimd_sim.analysis.dynamics.sweep import points_table, sweep
-    from rimd_sim.analysis.executor import SchedulerError
     from rimd_sim.analysis.plots import plot_sweep
 
     check_range("f", args.f_min, args.f_max)
     if args.measure_cycles >= args.cycles:
         raise CommandError(f"--measure-cycles {args.measure_cycles} >= --cycles {args.cycles}: no transient left")
-    try:
-        config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
-        freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
-        with progress_printer("sweep", "frequencies") as progress:
-            result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
-                           workers=args.workers, scheduler=args.scheduler, progress=progress)
-    except (ConfigError, SchedulerError) as exc:
-        print(f"rimd sweep: {exc}", file=sys.stderr)
-        return 1
+    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
+    with progress_printer("sweep", "frequencies") as progress:
+        result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
+                       workers=args.workers, scheduler=args.scheduler, progress=progress)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = points_table(result)
     with open(args.out / "sweep.csv", "w", newline="") as fh:

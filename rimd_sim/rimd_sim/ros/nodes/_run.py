@@ -28,6 +28,7 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from rimd_sim.errors import InputError
 from rimd_sim.ros.nodes._stop import StopRequest, install_stop_handlers
 from rimd_sim.settings.config import misapplied_section, misapplied_section_message
 
@@ -60,11 +61,11 @@ def executor_kind() -> str:
     """The executor chosen by ``RIMD_EXECUTOR``: ``events`` or ``single``.
 
     Raises:
-        ValueError: ``RIMD_EXECUTOR`` names no known executor.
+        InputError: ``RIMD_EXECUTOR`` names no known executor.
     """
     choice = os.environ.get(EXECUTOR_ENV, "events") or "events"
     if choice not in EXECUTORS:
-        raise ValueError(f"{EXECUTOR_ENV}={choice!r} refused: must be one of {', '.join(EXECUTORS)}")
+        raise InputError(f"{EXECUTOR_ENV}={choice!r} refused: must be one of {', '.join(EXECUTORS)}")
     return choice
 
 
@@ -78,7 +79,7 @@ def make_executor() -> Executor:
     C++ since Jazzy) is told by the middleware which entity is ready and calls the callback directly.
 
     Raises:
-        ValueError: ``RIMD_EXECUTOR`` names no known executor.
+        InputError: ``RIMD_EXECUTOR`` names no known executor.
     """
     if executor_kind() == "single":
         return SingleThreadedExecutor()
@@ -200,7 +201,7 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
     """
     try:
         executor_kind()
-    except ValueError as exc:
+    except InputError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return refused_status
     stop = install_stop_handlers()

@@ -38,7 +38,7 @@ from std_srvs.srv import Trigger
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
 from rimd_msgs.srv import Burst, GetRate, GetReplayState, IsPaused, PlayNext, Seek, SetRate
-from rimd_sim.errors import ConfigError
+from rimd_sim.errors import ConfigError, InputError
 from rimd_sim.io.reader import Recording, RecordingError, open_recording
 from rimd_sim.ros.clients.progress import PROGRESS_QOS, PROGRESS_TOPIC, SESSION_QOS, SESSION_TOPIC
 from rimd_sim.ros.nodes._params import declare, refuse_unnamed
@@ -58,7 +58,7 @@ SUBSCRIBER_WAIT_S = 10.0
 HOLD_REPORT_S = 0.5
 
 
-class ReplayError(Exception):
+class ReplayError(InputError):
     """The replay cannot start; the message says why (bad parameter, unreadable file, unknown types)."""
 
 
