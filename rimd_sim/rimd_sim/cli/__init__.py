@@ -1,8 +1,8 @@
 """The ``rimd`` command: one console command with subcommands (verbs).
 
 Each verb is a module with ``add_arguments(parser)`` and ``main(args) -> int``, in the manner of the
-``ros2bag`` verbs, listed in :data:`VERBS`. A verb whose issue has not landed yet is listed with that issue
-and answers, on stderr, that it is not implemented, with exit status 2; it never prints fake output.
+``ros2bag`` verbs, listed in :data:`VERBS`. A verb listed before its module exists answers, on stderr, that it
+is not implemented (and what is missing, when its entry says), with exit status 2; it never prints fake output.
 
 Rules for verb modules: keep the module import light (import rclpy, numpy and friends inside ``main``),
 so that ``rimd --help`` stays fast and works even where a heavy dependency is broken; report a failure by
@@ -116,21 +116,15 @@ class Verb:
     Attributes:
         name: The subcommand, as typed (``rimd <name>``).
         summary: One line for ``rimd --help``.
-        module: Import path of the module providing ``add_arguments`` and ``main``; None while the issue
-            that implements the verb has not landed.
-        issue: Number of the issue that implements the verb (when ``module`` is None).
-        issue_title: Title of that issue.
+        module: Import path of the module providing ``add_arguments`` and ``main``; None while the verb is
+            not implemented.
+        missing: While ``module`` is None, what is missing, in a few words (said with the refusal; may be empty).
     """
 
     name: str
     summary: str
     module: str | None = None
-    issue: int | None = None
-    issue_title: str = ""
-
-
-_BRING_UP = (5, "Recorder, replay and bring-up")
-_SIMULATOR = (4, "Simulator node")
+    missing: str = ""
 
 VERBS: tuple[Verb, ...] = (
     Verb("rig", "bring up the rig from config: recorder, Rerun bridge and simulator",
@@ -139,7 +133,8 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.cli.verbs.experiment"),
     Verb("analyze", "analyse a recording (REC.mcap): impacts, peak force vs frequency, phase planes",
          "rimd_sim.cli.verbs.analyze"),
-    Verb("identify", "identify the rig's parameters from a recording: a twin of that rig", "rimd_sim.cli.verbs.identify"),
+    Verb("identify", "identify the rig's parameters from a recording: a twin of that rig",
+         "rimd_sim.cli.verbs.identify"),
     Verb("fit-table", "the parameter set that best reproduces a table of impact resonances (paper Table 1)",
          "rimd_sim.cli.verbs.fit_table"),
     Verb("sweep", "simulated peak force F_i/mg versus frequency ratio for a gap, up, down or from rest",
@@ -163,7 +158,8 @@ VERBS: tuple[Verb, ...] = (
     Verb("pause", "pause the running rig (simulation time frozen)", "rimd_sim.cli.verbs.trigger"),
     Verb("resume", "resume the paused rig", "rimd_sim.cli.verbs.trigger"),
     Verb("reset", "put the hammer back to its initial state (a new run on /rig/session)", "rimd_sim.cli.verbs.trigger"),
-    Verb("clear-faults", "end every fault of the running rig and cancel the scheduled ones", "rimd_sim.cli.verbs.trigger"),
+    Verb("clear-faults", "end every fault of the running rig and cancel the scheduled ones",
+         "rimd_sim.cli.verbs.trigger"),
     Verb("status", "a live view of the running rig: rates, indices, gaps, lateness, motor, faults, impacts",
          "rimd_sim.cli.verbs.status"),
     Verb("rerun", "show a recording (REC.mcap) in the Rerun viewer, or save it as .rrd", "rimd_sim.cli.verbs.rerun"),
@@ -177,8 +173,8 @@ VERBS: tuple[Verb, ...] = (
 
 
 def not_implemented_message(verb: Verb) -> str:
-    """Return the line a verb whose issue has not landed prints on stderr."""
-    return f"rimd {verb.name}: not implemented yet (issue {verb.issue}: {verb.issue_title})"
+    """Return the line a verb without a module prints on stderr."""
+    return f"rimd {verb.name}: not implemented yet" + (f" ({verb.missing})" if verb.missing else "")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -193,7 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
         if verb.module is None:
             sub = subparsers.add_parser(
                 verb.name,
-                help=f"{verb.summary} [not implemented yet: issue {verb.issue}]",
+                help=f"{verb.summary} [not implemented yet]",
                 description=f"{verb.summary}. {not_implemented_message(verb)}",
             )
             sub.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
