@@ -1,4 +1,4 @@
-"""Benchmark of the analyses (issue 7): a Table 1 run and a 200 x 200 Peterka map, beside scipy.
+"""Benchmark of the analyses (docs/analyses.md): a Table 1 run and a 200 x 200 Peterka map, beside scipy.
 
 Prints, in one run:
   * a Table 1 run: 3 gaps x 31 frequencies (2.0-9.5 Hz, 0.25 Hz steps), 150 cycles each from rest, in the
@@ -29,8 +29,8 @@ import numpy as np  # noqa: E402
 
 from rimd_sim.analysis.dynamics.peterka import peterka  # noqa: E402
 from rimd_sim.analysis.dynamics.sweep import sweep  # noqa: E402
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import SimConfig  # noqa: E402
 
 
 def main() -> None:

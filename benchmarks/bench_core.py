@@ -7,7 +7,7 @@ Prints, in one run (same machine state for every figure):
   * the full instrument chain (noise, filters, quantisation) through RigSimulator, in 1 s blocks and in the
     node's 10 ms blocks;
   * the independent scipy solve_ivp (DOP853) reference on the same trajectory, and the speed ratio.
-Targets (issue "Physics core"): >= 10,000x integrating, >= 1,000x with all channels.
+Targets (docs/benchmarks.md, Physics core): >= 10,000x integrating, >= 1,000x with all channels.
 
 Run: .venv/bin/python benchmarks/bench_core.py [--seconds 60]
 """
@@ -28,8 +28,8 @@ sys.path.insert(0, str(ROOT / "rimd_sim"))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from rimd_sim.instruments.rig_simulator import RigSimulator  # noqa: E402
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import SimConfig  # noqa: E402
 
 POINTS = [(0.0, 3.75), (0.0, 5.5), (0.0, 7.25), (1.0e-3, 3.0), (2.4e-3, 5.25)]
 

@@ -1,4 +1,4 @@
-"""Benchmark of the simulator with triggered capture at 1 MHz and 3 faults active (issue 12).
+"""Benchmark of the simulator with triggered capture at 1 MHz and 3 faults active (docs/faults.md).
 
 Prints, in one run, for the default rig ("plain") and for the default channels + capture at 1 MHz + 3 faults
 ("faulted": offset on the force, clock drift of 80 ppm on the acceleration, 10 % block loss on the cart laser):

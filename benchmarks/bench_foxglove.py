@@ -1,4 +1,4 @@
-"""CPU of the Rerun bridge with and without its Foxglove sink, in one run (issue 27, Must show 3).
+"""CPU of the Rerun bridge with and without its Foxglove sink, in one run (docs/benchmarks.md, Foxglove sink).
 
 What it runs, on a ROS domain of its own (the test suite's leases, ROS_AUTOMATIC_DISCOVERY_RANGE LOCALHOST):
 the simulator at real time with the default config, and two bridges side by side, fed by the same rig over

@@ -1,4 +1,4 @@
-"""Benchmark of ``rimd identify`` (issue 24): a battery of rigs, with faults and captures, and the time target.
+"""Benchmark of ``rimd identify`` (docs/identification.md): a battery of rigs with faults and captures; the time target.
 
 **The battery.** ``--rigs N`` rigs (default 14) drawn with a fixed seed across the documented ranges
 (``tests/harness/ident_rigs.py``: mass 0.08-0.30 kg, damping ratio 0.02-0.12, natural frequency 1.5-2.2 Hz,
@@ -8,16 +8,16 @@ it (the simulator node started paused from rest with the hidden rig's file, ``ri
 the same schedule run by the core in this process and written as the recorder writes it, a few times faster),
 then ``rimd identify`` in a new process as a user runs it. Per rig the table prints each parameter's error and
 its printed 95 % interval, whether it is within its target (1 %; the gap 0.02 mm) or named by the verdict, and
-how many intervals cover the truth. The totals: rigs identified or refused by name (must show 1), intervals
-covering the truth (must show 3: at least 90 %). Errors are in % (the gap: in um).
+how many intervals cover the truth. The totals: rigs identified or refused by name (target: all), intervals
+covering the truth (target: at least 90 %). Errors are in % (the gap: in um).
 
 ``--faults``: each rig also with a 0.3 s force dropout over an impact, block loss on the RIMD laser (30 % for 3 s)
-and a stuck cart laser (0.5 s), in the core (the wiring is not the point), against the clean answer (must show 2:
+and a stuck cart laser (0.5 s), in the core (the wiring is not the point), against the clean answer (target:
 within 1 %). ``--captures``: each rig also with the 1 MHz triggered captures, in the core; the contact's
-parameters against the truth (must show 4: within 0.5 %); ``--captures-only``: that section alone.
+parameters against the truth (target: within 0.5 %); ``--captures-only``: that section alone.
 
 **The time.** ``--time``: a 60 s recording of 6 steps of the default rig (the steps of ``--for-identification``)
-identified by ``rimd identify`` in a new process: wall and CPU time (must show 6: at most 60 s on an idle machine).
+identified by ``rimd identify`` in a new process: wall and CPU time (target: at most 60 s on an idle machine).
 
 The machine is shared: every time printed comes with the load average at its start. Run: ``.venv/bin/python
 benchmarks/bench_identify.py [--rigs N] [--core] [--faults] [--captures] [--captures-only] [--time]``.
@@ -140,9 +140,9 @@ def battery(args: argparse.Namespace, work: Path) -> None:
             factory.stop_all()
     n = len(rigs)
     print(f"identified within target or the parameter named by the verdict: {totals['accepted']}/{n} rigs "
-          f"(must show 1: all)")
+          f"(target: all)")
     print(f"95 % intervals covering the truth: {totals['covered']}/{totals['params']} "
-          f"({100 * totals['covered'] / max(totals['params'], 1):.1f} %; must show 3: >= 90 %)")
+          f"({100 * totals['covered'] / max(totals['params'], 1):.1f} %; target: >= 90 %)")
     print(f"rimd identify wall time per 62 s recording: median {sorted(totals['walls'])[n // 2]:.1f} s, "
           f"largest {max(totals['walls']):.1f} s ({_load()} now)")
     if args.faults:
@@ -193,7 +193,7 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
         ok_all += ok
         print(f"{i:>3} " + " ".join(f"{d:+9.4f}" for d in diffs) + f"  {'yes' if ok else 'NO':>18}  "
               f"{len(in_hole):>17}  {len(report['left_out'])} ({', '.join(f'{t} {k}' for t, k in kinds)})")
-    print(f"within 1 % (gap 20 um) of the clean answer: {ok_all}/{len(rigs)} rigs (must show 2)")
+    print(f"within 1 % (gap 20 um) of the clean answer: {ok_all}/{len(rigs)} rigs (target: all)")
 
 
 def captures(rigs: list[dict], work: Path) -> None:
@@ -215,11 +215,11 @@ def captures(rigs: list[dict], work: Path) -> None:
         ok = all(abs(e) <= 0.5 for e in errs[1:])   # the contact's parameters: k and c
         ok_all += ok
         print(f"{i:>3} " + " ".join(f"{e:+10.4f}" for e in errs) + f"  {'yes' if ok else 'NO':>20}  ({wall:.0f} s)")
-    print(f"contact (k, c) within 0.5 % with captures: {ok_all}/{len(rigs)} rigs (must show 4)")
+    print(f"contact (k, c) within 0.5 % with captures: {ok_all}/{len(rigs)} rigs (target: all)")
 
 
 def timing(work: Path) -> None:
-    """The default rig, 60 s of 6 steps, identified in a new process (must show 6: <= 60 s on an idle machine)."""
+    """The default rig, 60 s of 6 steps, identified in a new process (target: <= 60 s on an idle machine)."""
     from rimd_sim.analysis.identification.design import identification_steps
     from rimd_sim.settings.config import SimConfig
 

@@ -11,8 +11,9 @@ For each, after --warmup s of wall time, --seconds of wall time are measured: si
 (from the rig's /clock), CPU of each process in % of one core (utime + stime from /proc over the window), and
 then, from the recording, whether anything was lost (every channel's first_index contiguous from sample 0).
 
-Goals (issue 23): lockstep >= 20x real time on this 2-core machine, and within 15 % of the free-running rate
-when the consumers keep up (the ratio is taken in this one run). Run on an otherwise idle machine:
+Goals (set when lockstep was added; docs/benchmarks.md, Lockstep): lockstep >= 20x real time on this 2-core
+machine, and within 15 % of the free-running rate when the consumers keep up (the ratio is taken in this one run).
+Run on an otherwise idle machine:
     python benchmarks/bench_lockstep.py [--seconds 30] [--warmup 8] [--json out.json]
 """
 

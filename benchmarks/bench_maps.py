@@ -1,10 +1,11 @@
-"""Benchmark of the maps at scale (issue 13): early stopping, batching, Dask workers, big maps.
+"""Benchmark of the maps at scale (docs/analyses.md): early stopping, batching, Dask workers, big maps.
 
 Prints, in one run (ratios are measured within the run; the machine is shared, so absolute times are noisy and
 the load average is printed with each figure):
 
 1. The steps, on an S x S Peterka map (default 60 x 60, 3 starts per cell), local pool on all cores:
-   a. before: one ``RigModel`` per trajectory through ``steady_orbit``, fixed 60 + 36 cycles (as before issue 13);
+   a. before: one ``RigModel`` per trajectory through ``steady_orbit``, fixed 60 + 36 cycles
+      (as before the ensemble kernel);
    b. batching: the ensemble kernel (every trajectory of a gap row in one compiled call), same fixed cycles;
    c. early stop: the ensemble kernel stopping each trajectory when its motion is known, cap 96 cycles;
    d. the default now: early stop with the cap at twice the former cycles (120 + 72).
@@ -42,10 +43,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
 
-from rimd_sim.analysis import peterka as pk  # noqa: E402
+from rimd_sim.analysis.dynamics import peterka as pk  # noqa: E402
 from rimd_sim.analysis.executor import run_tasks  # noqa: E402
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import SimConfig  # noqa: E402
 
 
 def load() -> str:
@@ -128,7 +129,8 @@ def big(config, workers, n_big, skip_big):
     gaps, freqs = grid(200)
     print(f"\n3. Big maps (default: early stop, cap 192), local pool, {load()}")
     t200, r200 = timed_map(config, gaps, freqs, workers=workers)
-    print(f"  200 x 200: {t200:.1f} s on {r200.workers} processes (target <= 30 s; before issue 13: 168 s idle), "
+    print(f"  200 x 200: {t200:.1f} s on {r200.workers} processes "
+          "(target <= 30 s; before the ensemble kernel: 168 s idle), "
           f"mean {r200.cycles.mean():.1f} cycles per trajectory   {load()}")
     if skip_big:
         return t200, r200

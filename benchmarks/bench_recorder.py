@@ -1,4 +1,4 @@
-"""Benchmark of the recorder and the replay over real DDS (issue "Recorder, replay and bring-up").
+"""Benchmark of the recorder and the replay over real DDS (docs/recording.md).
 
 Prints, in one run:
   * recorder throughput with zero loss: the simulator at real_time_factor 0 (as fast as it can) for

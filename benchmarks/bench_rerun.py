@@ -1,4 +1,4 @@
-"""Benchmark of the Rerun bridge (issue 6).
+"""Benchmark of the Rerun bridge (docs/rerun.md).
 
 Prints, in one run:
   * live, at real time with default rates: the simulator node and the ``rimd_rerun`` node over DDS, the bridge

@@ -14,7 +14,7 @@ Printed (and written as JSON with --json):
   * the traffic, from the recording: messages and bytes (serialized payload) per second per topic and in all;
   * loss: every block topic checked from sample 0 with ``first_index``, impact events by index, motor states
     one per block (bench_soak's checks);
-  * the goals of the issue "make the whole node set light": simulator <= 5 %, recorder <= 10 %, Rerun bridge
+  * the goals of the light-rig changes (docs/benchmarks.md): simulator <= 5 %, recorder <= 10 %, Rerun bridge
     <= 10 %, the whole rig <= 25 % of one core, nothing lost; each with "met" or "NOT met".
     "The whole rig" is every process the rig runs: the three nodes, the Rerun server that holds the web
     viewer's data (Rerun's own binary), and the ``rimd rig`` parent; the sum of the three nodes is printed too.

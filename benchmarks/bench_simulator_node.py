@@ -1,4 +1,4 @@
-"""Benchmark of the simulator node over real DDS (issue "Simulator node").
+"""Benchmark of the simulator node over real DDS (docs/rig.md).
 
 Prints, in one run:
   * at real time with default rates: CPU of the simulator process (median of 1 s samples over --seconds,

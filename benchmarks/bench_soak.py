@@ -8,7 +8,7 @@ directory. The run starts when the rig says it runs from sample 0 and lasts --mi
 rig is stopped with SIGINT, as Ctrl-C on ``make run`` does, and must exit 0. Ctrl-C on the bench ends the
 soak early: the rig is stopped the same way and the figures cover the time run.
 
-Goals (issue "soak test"): nothing lost; resident memory growth <= 5 MB per hour per process; block lateness
+Goals: nothing lost; resident memory growth <= 5 MB per hour per process; block lateness
 p99 <= 5 ms. Each goal gets a verdict line, "met" or "NOT met".
 
 Figures printed (and written as JSON with --json; MB = 10^6 bytes, ms = 10^-3 s):

@@ -1,4 +1,4 @@
-"""Benchmark of the structural contact model (issue 15): real-time factors on one core.
+"""Benchmark of the structural contact model (docs/physics.md): real-time factors on one core.
 
 Prints, in one run (same machine state for every figure), per operating point of Table 1, for the
 structural preset (config/structural.yaml) and for the paper's model at the same point:
@@ -6,7 +6,7 @@ structural preset (config/structural.yaml) and for the paper's model at the same
   * with all four channels at the default rates (2, 2, 20, 20 kHz) plus the 1 kHz truth (the simulator node's
     load), noise-free model values;
   * the full instrument chain through RigSimulator in the node's 10 ms blocks;
-and the steps per simulated second. Target (issue 15): >= 1,000x real time on one core.
+and the steps per simulated second. Target (set with the model): >= 1,000x real time on one core.
 
 The step stays affordable because the stiff parts are integrated only where they act: in contact the axial
 and mount modes are error-controlled (their ~5-15 kHz set the step for ~1 ms per impact); in free flight they
@@ -34,8 +34,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_core import time_simulator  # noqa: E402
 
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import (
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import (  # noqa: E402
     SimConfig,
     find_config_file,  # noqa: E402
     load_config,

@@ -1,6 +1,6 @@
 """Compare this working tree with another revision: bit-identity, first-call compile time, and the benchmarks.
 
-Written for issue 25 (one physics driver for every model), whose targets are stated against the code before
+Written for the change to one physics driver for every model, whose targets are stated against the code before
 it: the rigid model bit-identical on the reference runs, the two-mass model giving the same pulses and maps,
 no slowdown of ``bench_core.py`` and ``bench_structural.py`` beyond 5 %, and no more compile time.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Fit the structural contact model's stiffnesses to what the paper shows (issue 15).
+"""Fit the structural contact model's stiffnesses to what the paper shows (docs/physics.md, "Structural model").
 
 Targets (paper, gap 0): Table 1's peak forces 82.4 N at 3.75 Hz (band A) and 120 N at 7.25 Hz (band B), and
 Fig. 3's double peak at 3.75 Hz, about 80 N then 50 N (second/first 0.625). Free parameters: the hammer's

@@ -7,7 +7,8 @@ Every parameter table (name, default, type, rule, description) and every ``rimd`
 - the simulator's parameters: ``rimd_sim.settings.config.PARAMETERS`` (type, rule, description) and
   ``SimConfig().to_parameters()`` (defaults);
 - the recorder's: ``rimd_sim.settings.recording.PARAMETERS`` (and the rules that module checks);
-- the replay's: ``rimd_sim.ros.nodes.replay.PARAMETERS``; the Rerun bridge's: ``rimd_sim.ros.nodes.rerun_bridge.PARAMETERS``;
+- the replay's: ``rimd_sim.runtime.replay.ReplaySettings``;
+- the Rerun bridge's: ``rimd_sim.viz.bridge_settings.PARAMETERS``;
 - the verbs: ``rimd_sim.cli.VERBS`` and each verb's argparse parser (``add_arguments``).
 
 A generated section sits between two markers in a page::
@@ -278,7 +279,7 @@ def render_verbs() -> str:
     by_module: dict[str, list[str]] = {}
     for verb in cli.VERBS:
         page = VERB_PAGES.get(verb.name, DEFAULT_VERB_PAGE)
-        status = "" if verb.module else f" (not implemented yet: issue {verb.issue})"
+        status = "" if verb.module else " (not implemented yet)"
         if verb.module and verb.module in by_module:   # verbs of one module (pause, resume...) share a row
             by_module[verb.module].append(verb.name)
             continue

@@ -74,7 +74,7 @@ def test_poincare_reproduces_fig10_period_half(tmp_path):
 def test_peterka_small_map_has_period_1_and_half_and_marks_coexistence(tmp_path):
     """A 2 x 3 map: at gap 0 the 3.75 Hz cell is 1/1 (band A) and 6.75 Hz 1/2 (band B region); at gap 2.4 mm and
     5.25 Hz rest reaches 1/2 while the upward continuation stays without impact (the coexisting attractors
-    of the paper's Fig. 12, SPEC section 8), so that cell is marked."""
+    of the paper's Fig. 12; docs/interface.md, "What the twin must reproduce"), so that cell is marked."""
     out = tmp_path / "pk"
     assert cli.main(["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3.75",
                      "--f-max", "6.75", "--freqs", "3", "--transient-cycles", "60", "--measure-cycles", "24",

@@ -1,4 +1,4 @@
-"""``rimd analyze`` on bad input, and the pure routines of ``rimd_sim.analysis.recordings.recorded`` on known signals."""
+"""``rimd analyze`` on bad input, and the pure routines of rimd_sim.analysis.recordings.recorded on known signals."""
 
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ def test_cross_check_counts_matches_misses_and_extras():
     assert m["matches"] + m["misses"] + m["not_covered"] == 4          # every event counted once
     assert math.isclose(m["peak_difference_max"], 2 / 52)
     # An event whose contact starts in a hole of the force channel but peaks after it: matched, so not also
-    # "not covered" (issue 22: the counts must add up).
+    # "not covered" (the counts must add up).
     hole = _channel(np.r_[np.zeros(1000), [30, 20, 10, 5], np.zeros(996)], first=0)
     hole.index[1000:] += 10          # 10 samples lost just before the run
     hole.time[1000:] += 10 / 20000.0
@@ -129,7 +129,8 @@ def test_settled_tells_a_steady_window_from_one_still_in_its_transient():
     # Period 2 (one impact every two cycles, alternating magnitudes): still steady.
     period2 = steady[::2]
     assert rec.settled(period2, np.where(np.arange(period2.size) % 2, 60.0, 80.0), 0.0, 8.0, f) is True
-    # The 4.0 Hz step of issue 16: no impact for the first 1.7 s of the window, then one per cycle.
+    # The 4.0 Hz step of the loaded experiment (docs/analyses.md, Reproducibility): no impact for the first 1.7 s of
+    # the window, then one per cycle.
     late = steady[steady >= 1.7]
     assert rec.settled(late, np.full(late.size, 76.0), 0.0, 8.0, f) is False
     # Same impacts per cycle, but the peaks still growing by more than 5 % between the halves.
@@ -155,7 +156,7 @@ def test_the_last_step_ends_where_every_stream_of_the_recording_ends():
     assert rec.common_end(data, detected, np.array([0, 1, 2, 3])) == pytest.approx(7.5, abs=1e-4)
 
 
-# ---- the report of rimd analyze (issue 22): counts that add up, a warning, the figures a lab asks for ----------
+# ---- the report of rimd analyze: counts that add up, a warning, the figures a lab asks for ----------
 
 @pytest.fixture(scope="module")
 def faulted(tmp_path_factory):
@@ -197,7 +198,7 @@ def test_the_printed_counts_add_up_and_a_hiding_threshold_is_warned(faulted, tmp
     assert events == matched + missed + not_covered == imp["events"] and not_covered > 0   # the dropout's impacts
     assert detected == matched2 + extras + (imp.get("detected_after_events_end") or 0) == imp["detected"]
     assert "WARNING" not in text
-    # issue 22: --threshold 2000 exited 0 with "0 detected ... 117 misses" and no warning
+    # --threshold 2000 once exited 0 with "0 detected ... 117 misses" and no warning
     stdout = io.StringIO()
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(io.StringIO()):
         assert cli.main(["analyze", str(path), "--out", str(tmp_path / "t"), "--threshold", "2000"]) == 0

@@ -535,7 +535,7 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
     alive()
     assert len(applied.findall(rig.output())) == log_lines, "a refused command was applied"
 
-    # Faults (issue 12): every wrong field of /rig/inject_fault is refused naming it; nothing is scheduled.
+    # Faults (docs/faults.md): every wrong field of /rig/inject_fault is refused naming it; nothing is scheduled.
     from rimd_msgs.srv import InjectFault
     from rimd_sim.instruments.faults import FAULT_KINDS
     from rimd_sim.settings.config import CHANNEL_NAMES

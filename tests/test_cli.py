@@ -11,12 +11,12 @@ import pytest
 
 from rimd_sim import cli
 
-SPEC_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "sweep", "bifurcation", "peterka",
-              "poincare", "basins", "pulse", "faults", "motor", "perturb", "inject", "pause", "resume", "reset",
-              "clear-faults", "status", "rerun", "replay", "crop", "node", "info")   # SPEC sections 7, 9 and 10;
-#                                                                    replay: issue 27's remaining part
-#: Verbs whose issue has not landed: none left (the Rerun verb, issue 6, was the last).
-NOT_IMPLEMENTED: dict[str, tuple[int, str]] = {}
+#: The verbs of the interface (docs/interface.md, Commands), in the order of ``rimd --help``.
+INTERFACE_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "sweep", "bifurcation", "peterka",
+                   "poincare", "basins", "pulse", "faults", "motor", "perturb", "inject", "pause", "resume", "reset",
+                   "clear-faults", "status", "rerun", "replay", "crop", "node", "info")
+#: Verbs listed without a module, and what their refusal says is missing: none left.
+NOT_IMPLEMENTED: dict[str, str] = {}
 
 
 def _rimd(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
@@ -38,26 +38,29 @@ def test_help_lists_every_subcommand():
     assert result.returncode == 0, result.stderr
     listed = {line.split()[0] for line in result.stdout.splitlines()
               if line.startswith("    ") and line.split()}
-    assert set(SPEC_VERBS) <= listed, f"missing: {set(SPEC_VERBS) - listed}"
+    assert set(INTERFACE_VERBS) <= listed, f"missing: {set(INTERFACE_VERBS) - listed}"
 
 
-def test_verb_table_matches_spec():
-    assert tuple(verb.name for verb in cli.VERBS) == SPEC_VERBS
+def test_verb_table_matches_the_interface():
+    assert tuple(verb.name for verb in cli.VERBS) == INTERFACE_VERBS
     for verb in cli.VERBS:
+        assert (verb.module is None) == (verb.name in NOT_IMPLEMENTED), verb.name
         if verb.name in NOT_IMPLEMENTED:
-            assert verb.module is None
-            assert (verb.issue, verb.issue_title) == NOT_IMPLEMENTED[verb.name]
+            assert verb.missing == NOT_IMPLEMENTED[verb.name]
 
 
 def test_not_implemented_verb_says_so_and_exits_2(monkeypatch, capsys):
     """The mechanism stays for verbs added later: a verb without a module says so on stderr, exit 2."""
-    verb = cli.Verb("teleport", "a verb whose issue has not landed", None, 99, "Teleport")
+    verb = cli.Verb("teleport", "a verb not written yet", None, "the transporter driver")
     monkeypatch.setattr(cli, "VERBS", (*cli.VERBS, verb))
     status = cli.main(["teleport", "some-argument", "--some-option"])
     captured = capsys.readouterr()
     assert status == 2
     assert captured.out == "", "no fake output"
-    assert captured.err.strip() == "rimd teleport: not implemented yet (issue 99: Teleport)"
+    assert captured.err.strip() == "rimd teleport: not implemented yet (the transporter driver)"
+    monkeypatch.setattr(cli, "VERBS", (*cli.VERBS, cli.Verb("beam", "another one", None)))
+    assert cli.main(["beam"]) == 2
+    assert capsys.readouterr().err.strip() == "rimd beam: not implemented yet"
 
 
 @pytest.mark.process
@@ -119,7 +122,7 @@ def _numeric_options():
 
 
 def test_every_numeric_option_of_every_verb_is_checked_and_names_itself_in_its_refusal():
-    """Issue 22: `rimd rig --duration -5` ran until killed; `--gap-mm 2400` answered in metres. Every number a
+    """Once `rimd rig --duration -5` ran until killed and `--gap-mm 2400` answered in metres. Every number a
     verb takes is converted by `cli.number` (finite, within its bounds, refused naming the option as typed)."""
     import argparse
 

@@ -1,4 +1,4 @@
-"""``rimd crop`` (issue 27): a window of a recording as a new rosbag2 recording, read back by rosbags and mcap.
+"""``rimd crop`` (docs/recording.md): a window of a recording as a new rosbag2 recording, read back by rosbags and mcap.
 
 The source is an MCAP file written from the physics core's output by ``mcap_ros2``'s writer
 (:func:`harness.rig_mcap.write_rig_mcap`), not by the code under test; the expected window is computed here

@@ -1,11 +1,11 @@
-"""Experiment design for identification.
+"""Experiment design for identification (``rimd experiment --for-identification``).
 
-The library is rimd_sim.analysis.identification.design; the verb ``rimd experiment --for-identification``.
+The library: rimd_sim.analysis.identification.design.
 
 Hypotheses:
 
 * for the default rig the chosen steps lie in band A, which holds the paper's gap-0 band-A resonance 3.75 Hz
-  (Table 1, SPEC section 8), spread across it, each one steady impact per cycle in the experiment's continued run,
+  (Table 1; docs/interface.md), spread across it, each one steady impact per cycle in the experiment's continued run,
   as an independent check of the core's ``sweep`` up the same steps also reads one impact per cycle;
 * a rig whose gap the hammer never reaches gets a one-line refusal naming the range searched;
 * ``rimd experiment --for-identification`` schedules the design's steps (the verb's ``schedule()``, no rig

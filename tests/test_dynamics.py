@@ -59,9 +59,9 @@ def paper_gap0():
 
 
 def test_period_doubling_window_at_gap0_paper_model(paper_gap0):
-    """Paper section 2.1 / SPEC 8: at gap 0 the paper's model has a period-1 impact motion with alternating
-    magnitudes from 4.80-4.85 Hz (the experiment: near 4.75 Hz). With the paper-model preset the
-    stroboscopic class is 1/1 up to 4.80 Hz and 2/2 (one impact per cycle, period 2, two magnitudes) from
+    """Paper section 2.1 (docs/interface.md, "What the twin must reproduce"): at gap 0 the paper's model has a period-1
+    impact motion with alternating magnitudes from 4.80-4.85 Hz (the experiment: near 4.75 Hz). With the paper-model
+    preset the stroboscopic class is 1/1 up to 4.80 Hz and 2/2 (one impact per cycle, period 2, two magnitudes) from
     4.85 Hz. Measured from rest, 100 transient and 48 measured cycles, on a 0.05 Hz grid."""
     labels = {f: steady_orbit(paper_gap0, f) for f in (4.75, 4.8, 4.85, 4.9)}
     assert [labels[f].label for f in (4.75, 4.8)] == ["1/1", "1/1"]

@@ -117,7 +117,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, rimd_ri
     print("f, sweep up, events, channel (fit), channel (largest sample):", report)
     for f, expected, events, channel, raw in report:
         assert abs(events / expected - 1) <= 0.02, (f, expected, events)
-        # Force channel alone, within 5 % (the target): the spring-dashpot force is largest at contact
+        # Force channel alone, within 5 % (docs/analyses.md): the spring-dashpot force is largest at contact
         # start (it jumps to c v0) and falls by up to 18 % within one 50 us sample, so the largest sample of a
         # 0.37 ms contact is 0-18 % low (at 4 Hz every impact of a step is sampled at the same phase); the
         # analysis fits the law's pulse to each impact's samples and reads its peak at the onset.

@@ -1,4 +1,4 @@
-"""Faults seen by a DAQ client over DDS (issue 12): every kind detected from the stream alone, at its time.
+"""Faults seen by a DAQ client over DDS (docs/faults.md): every kind detected from the stream alone, at its time.
 
 Each kind is seen at its stated time and ended; the other channels untouched; same seed + scenario =
 bit-identical messages; bad requests refused while the rig keeps running. (The +100 ppm clock drift over 600 s

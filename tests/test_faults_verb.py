@@ -1,4 +1,4 @@
-"""``rimd faults SCENARIO.yaml`` against a running rig, and its refusals (issue 12)."""
+"""``rimd faults SCENARIO.yaml`` against a running rig, and its refusals (docs/faults.md)."""
 
 from __future__ import annotations
 

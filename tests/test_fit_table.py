@@ -48,8 +48,8 @@ def test_fit_table_on_table_1(tmp_path):
         assert abs(float(row["twin_grid_hz"]) - float(row["frequency_hz"])) <= 0.25 + 1e-9, row
     forces = {float(r["frequency_hz"]): r for r in rows if r["peak_force_n"]}
     assert sorted(forces) == [3.75, 7.25]
-    # Each residual is the twin's peak minus the table's, and its size is the one SPEC section 3 states for the
-    # defaults (the fit moves them little): 79 N against 82.4 N (-4 %) at 3.75 Hz, 126 N against 120 N (+5 %) at
+    # Each residual is the twin's peak minus the table's, and its size is the one docs/configuration.md (Presets) states
+    # for the defaults (the fit moves them little): 79 N against 82.4 N (-4 %) at 3.75 Hz, 126 N against 120 N (+5 %) at
     # 7.25 Hz, each within 2 points.
     for f, (table, relative) in {3.75: (82.4, -0.04), 7.25: (120.0, 0.05)}.items():
         r = forces[f]

@@ -1,4 +1,4 @@
-"""Foxglove, live (issue 27): the bridge's Foxglove WebSocket server against a running rig.
+"""Foxglove, live (docs/foxglove.md): the bridge's Foxglove WebSocket server against a running rig.
 
 The client is the test process (:mod:`tests.harness.foxglove_client`, on the ``websockets`` library, written
 from the protocol's specification); the simulator and the bridge run as separate processes over DDS. What a
@@ -18,7 +18,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from harness.foxglove_client import FoxgloveClient
 from rimd_msgs.srv import SetMotorFrequency
 
-#: Every topic the simulator publishes by default (SPEC section 4 and the faults of section 9), with its type.
+#: Every topic the simulator publishes by default (docs/interface.md, Topics), with its type.
 RIG_TOPICS = {
     "/rig/cart/displacement": "rimd_msgs/msg/SampleBlock",
     "/rig/rimd/displacement": "rimd_msgs/msg/SampleBlock",
@@ -32,7 +32,7 @@ RIG_TOPICS = {
 }
 RIG_SERVICES = {"/rig/set_motor_frequency", "/rig/perturb", "/rig/inject_fault", "/rig/clear_faults", "/rig/pause",
                 "/rig/resume", "/rig/reset"}
-FORCE_RATE_HZ = 20_000   # config/rimd.yaml: the force sensor's sample rate (SPEC: 20 kHz)
+FORCE_RATE_HZ = 20_000   # config/rimd.yaml: the force sensor's sample rate (20 kHz)
 
 
 def _decoder(schema: dict):
@@ -75,7 +75,7 @@ def test_a_client_gets_every_rig_topic_with_its_schema_and_the_force_blocks_on_t
         client.wait_for(lambda r: len(r.messages.get(subscription, ())) >= 100, 30, "100 force blocks")
         blocks = [force(data) for _, data in list(client.received.messages[subscription])]
         # Contiguous first_index (no block lost or repeated) and every stamp on the 20 kHz grid of the first:
-        # sample n at t0 + n / rate, so 50 us per sample exactly (SPEC section 4).
+        # sample n at t0 + n / rate, so 50 us per sample exactly (docs/interface.md, Conventions).
         for before, after in zip(blocks, blocks[1:], strict=False):
             assert after.first_index == before.first_index + len(before.samples), after.first_index
         first = blocks[0]

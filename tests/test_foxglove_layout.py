@@ -1,4 +1,4 @@
-"""The Foxglove layout config/foxglove/rig_layout.json (issue 27), checked without Foxglove.
+"""The Foxglove layout config/foxglove/rig_layout.json (docs/foxglove.md), checked without Foxglove.
 
 The layout was not opened in Foxglove here (docs/foxglove.md says why). What is checked instead: the file
 follows the layout format that Foxglove's and Lichtblick's "Import layout from file" read (``configById``,
@@ -140,7 +140,7 @@ def test_every_message_path_names_a_rig_topic_and_a_field_of_its_message(layout)
             assert kind is not None, f"{path}: {TOPICS[topic]} has no field {field}"
             assert kind.endswith("[]") == (index is not None), f"{path}: an array is indexed, a number is not"
             assert kind.removesuffix("[]") in ("float64", "uint64"), f"{path}: not a number to plot"
-    # The four channels, the impact events' peak force, the motor state, the faults (issue 27's list).
+    # The four channels, the impact events' peak force, the motor state, the faults (docs/foxglove.md, The layout).
     assert plotted == set(TOPICS)
     assert "/rig/impact/events.peak_force" in paths
 

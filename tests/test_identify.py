@@ -2,10 +2,11 @@
 
 The rigs are drawn by ``tests/harness/ident_rigs.py`` (the battery of ``benchmarks/bench_identify.py`` runs 14;
 these are a few well-chosen ones); the steps are those ``rimd experiment --for-identification`` picks for the rig
-(rimd_sim.analysis.identification.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the measured channels.
-Hypotheses (issue 24):
+(rimd_sim.analysis.identification.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the
+measured channels.
+Hypotheses:
 
-* a rig like the issue's "second rig" (every value changed, an overdamped contact, a 1.1 mm gap), run as the
+* a rig like the "second rig" (every value changed, an overdamped contact, a 1.1 mm gap), run as the
   simulator process and recorded by ``rimd experiment`` with a velocity kick in free flight, is identified: every
   parameter within 1 % (the gap within 0.02 mm), or named by the verdict; its 95 % intervals cover the truth; the
   kick is found; ``identified.yaml`` runs the simulator node; and the validation reads the recording exactly as
@@ -33,7 +34,7 @@ from harness.outputs import read_json
 from rimd_sim.analysis.identification.design import identification_steps
 from rimd_sim.settings.config import SimConfig
 
-#: The issue's "second rig": every value off the defaults, an overdamped contact (c / 2 sqrt(k m) = 1.66).
+#: The "second rig": every value off the defaults, an overdamped contact (c / 2 sqrt(k m) = 1.66).
 SECOND_RIG = draw_rigs(14)[0]
 #: A contact the 20 kHz channel cuts short: 0.15 ms, three samples (the battery's stiffest, most damped corner).
 SHORT_CONTACT = {"mass": 0.08, "contact.stiffness": 1e7, "contact.damping": 3000.0, "natural_frequency": 2.0,
@@ -170,7 +171,7 @@ def test_faults_and_holes_leave_the_answer_within_1_percent_of_the_clean_one(tmp
     assert ("/rig/impact/force", "dropout") in said and ("/rig/impact/force", "gap") in said
     assert ("/rig/rimd/displacement", "block_loss") in said and ("/rig/rimd/displacement", "gap") in said
     assert ("/rig/cart/displacement", "stuck") in said
-    # the impact hidden in the dropout is not explained as a kick (issue 24: "velocity kicks without contact:
+    # the impact hidden in the dropout is not explained as a kick (it once was: "velocity kicks without contact:
     # -0.1292 m/s at 18.9542 s", inside the hole): neither found nor kept
     import re
 

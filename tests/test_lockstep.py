@@ -1,4 +1,4 @@
-"""Lockstep end to end (issue 23): the rig runs exactly as fast as its slowest consumer and loses nothing.
+"""Lockstep end to end: the rig runs exactly as fast as its slowest consumer and loses nothing (docs/rig.md).
 
 Each rig here is the product's own bring-up in lockstep, through the pytest plugin users get
 (``rimd_sim.ros.testing``, fixture ``rimd_rig``), with its consumers in other processes over DDS.

@@ -47,10 +47,10 @@ def test_bad_input_is_refused():
 @pytest.mark.parametrize(("frequency", "chaotic"), [(4.3, False), (4.4, True), (4.5, False), (4.6, True),
                                                     (4.75, True), (4.95, True), (5.1, False)])
 def test_chaotic_window_at_gap_1mm_defaults(frequency, chaotic):
-    """SPEC section 8: with the defaults at gap 1.0 mm an independent reference finds a positive largest
-    exponent at about 4.4-4.95 Hz. Criterion: lambda_max > CHAOS_THRESHOLD and the Poincare points not
-    converging. Measured from rest on a 0.05 Hz grid (200 + 300 cycles): chaotic at 4.4 and 4.6-4.95 Hz
-    (lambda 0.36-1.09 1/s) with a periodic window (2/2) at 4.45-4.55 Hz inside; 4.3 Hz is 4/4, 5.1 Hz 1/2."""
+    """docs/interface.md, "What the twin must reproduce": with the defaults at gap 1.0 mm an independent reference finds
+    a positive largest exponent at about 4.4-4.95 Hz. Criterion: lambda_max > CHAOS_THRESHOLD and the Poincare points
+    not converging. Measured from rest on a 0.05 Hz grid (200 + 300 cycles): chaotic at 4.4 and 4.6-4.95 Hz (lambda
+    0.36-1.09 1/s) with a periodic window (2/2) at 4.45-4.55 Hz inside; 4.3 Hz is 4/4, 5.1 Hz 1/2."""
     cfg = SimConfig().with_parameters({"gap": 1.0e-3})
     verdict, exponent, label = is_chaotic(cfg, frequency)
     assert verdict is chaotic, (exponent, label)
@@ -59,9 +59,9 @@ def test_chaotic_window_at_gap_1mm_defaults(frequency, chaotic):
 @pytest.mark.parametrize(("frequency", "chaotic"), [(3.1, False), (3.15, True), (3.3, True), (3.45, True),
                                                     (3.6, True), (3.7, False)])
 def test_chaotic_window_at_gap_2_4mm_paper_model(frequency, chaotic):
-    """SPEC section 8: the paper-model preset (m = 1 kg, no structural damping) is chaotic at gap 2.4 mm at
-    about 3.15-3.6 Hz. Measured from rest on a 0.05 Hz grid: period 1 (1/1) up to 3.10 Hz, chaotic from
-    3.15 to 3.65 Hz (lambda 0.12-1.27 1/s), a periodic window at 3.70 Hz (6/10); above it chaos and
+    """docs/interface.md, "What the twin must reproduce": the paper-model preset (m = 1 kg, no structural damping) is
+    chaotic at gap 2.4 mm at about 3.15-3.6 Hz. Measured from rest on a 0.05 Hz grid: period 1 (1/1) up to 3.10 Hz,
+    chaotic from 3.15 to 3.65 Hz (lambda 0.12-1.27 1/s), a periodic window at 3.70 Hz (6/10); above it chaos and
     periodic windows alternate (chaotic again at 3.75, 3.9, 3.95 Hz)."""
     cfg = load_config(find_config_file("paper_model.yaml"), {"gap": 2.4e-3})
     verdict, exponent, label = is_chaotic(cfg, frequency)

@@ -1,4 +1,4 @@
-"""Maps at scale (issue 13): early stopping, the ensemble kernel, and the Dask executor seam.
+"""Maps at scale (docs/analyses.md): early stopping, the ensemble kernel, and the Dask executor seam.
 
 * The ensemble kernel without early stopping is the fixed-length ``steady_orbit`` run, cell for cell (class
   and final state), so the fixed-length reference of the agreement test is the same computation as before.

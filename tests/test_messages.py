@@ -28,7 +28,7 @@ FIELDS = {
                    "theta", "theta_dot", "cart_position", "rimd_position", "rimd_velocity",
                    "rimd_acceleration", "penetration", "contact_force", "motor_phase", "motor_frequency")],
                ("in_contact", "sequence<boolean>")],
-    # start_stamp: an extension of the SPEC (issue 16), zero keeps the SPEC's behaviour.
+    # start_stamp: added to the first request fields; zero keeps their behaviour (the next block boundary).
     SetMotorFrequency.Request: [("frequency_hz", "double"), ("ramp_rate", "double"),
                                 ("start_stamp", "builtin_interfaces/Time")],
     SetMotorFrequency.Response: [("success", "boolean"), ("message", "string"), ("frequency_hz", "double"),

@@ -1,4 +1,4 @@
-"""A node stopped by SIGINT or SIGTERM exits 0 with no traceback, whatever it is doing (issue 16, defect 1).
+"""A node stopped by SIGINT or SIGTERM exits 0 with no traceback, whatever it is doing (docs/rig.md, Stopping).
 
 Each of the four node executables is started and stopped several times at random moments: while it is
 still loading (right after its stop handlers are in place, which ``/proc/PID/status`` shows: SIGTERM

@@ -1,4 +1,4 @@
-"""The everyday one-shot commands and ``rimd status`` against a running simulator (issue 22, items 5 and 6).
+"""The everyday one-shot commands and ``rimd status`` against a running simulator (docs/rig.md).
 
 Hypotheses: each command prints the rig's own answer and exits 0, or exits 1 with the rig's refusal (the rig
 keeps running); a bad number is refused by the command itself naming the option in its unit (exit 2); with no

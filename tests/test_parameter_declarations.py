@@ -10,8 +10,8 @@ values that break its extra rule):
   integer where a real number is meant) is accepted and comes back converted, unchanged;
 - the default obeys its own rule.
 
-And "adding a parameter is one edit" (issue 25): a settings class with one field more, made at run time, gives
-the parameter to the configuration, to the node's descriptors and its set-time validation (the real recorder
+And "adding a parameter is one edit" (docs/architecture.md): a settings class with one field more, made at run
+time, gives the parameter to the configuration, to the node's descriptors and its set-time validation (the real recorder
 node in this process), and to the generated documentation table.
 """
 

@@ -1,4 +1,4 @@
-"""Foxglove's timeline driving a replay (issue 27), in-process: the mapping and the state machine of
+"""Foxglove's timeline driving a replay (docs/foxglove.md), in-process: the mapping and the state machine of
 rimd_sim.runtime.playback_control over the replay's real player (rimd_sim.runtime.replay) on a fake clock, no ROS.
 
 Hypotheses:

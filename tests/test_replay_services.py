@@ -1,4 +1,4 @@
-"""The replay driven like rosbag2's player, over DDS (issue 27), and the replay's small refusals (issue 22).
+"""The replay driven like rosbag2's player, over DDS, and the replay's small refusals.
 
 Hypotheses, with the replay node in its own process and a subscriber here: while paused, ``~/play_next``
 publishes exactly one message and ``~/burst`` exactly N (none while playing); ``~/seek`` lands on the first

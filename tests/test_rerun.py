@@ -169,7 +169,7 @@ def test_offline_recording_gives_the_same_entities_and_its_counts(tmp_path, repo
 @pytest.mark.ros
 @pytest.mark.timeout(120)
 def test_a_recording_of_rimd_recorder_gives_the_same_view(ros_processes, ros_executor, tmp_path):
-    """The offline path on a file of the real recorder (issue 5): every recorded sample and impact is in the
+    """The offline path on a file of the real recorder: every recorded sample and impact is in the
     .rrd at its time, with the same entities as the live bridge."""
     from harness.bags import read_with_mcap_ros2
     from harness.rig import record_rig

@@ -1,6 +1,6 @@
 """Blocks leave when a real DAQ would send them, however the rig is started, and every run has an identity.
 
-Issue 22, defects 1 and 2. Hypotheses, with the simulator at real time in its own process and a subscriber in
+Hypotheses, with the simulator at real time in its own process and a subscriber in
 this one that reads the DDS reception time of each block (not when Python got round to it):
 
 - the reception time minus the time the block's last sample was due (its stamp: t0 + n / rate, wall clock)

@@ -1,4 +1,4 @@
-"""Every analysis runs every model (issue 25): the structural preset through sweep, orbit, bifurcation, Poincare,
+"""Every analysis runs every model (docs/physics.md): the structural preset through sweep, orbit, bifurcation, Poincare,
 the Peterka and basins maps (their ensemble path) and the Lyapunov exponent.
 
 Hypotheses, and where the expected values come from:
@@ -10,7 +10,7 @@ Hypotheses, and where the expected values come from:
 * Classes from rest are the structural preset's Table 1 (tests/core/test_structural.py, impacts per cycle
   counted over 50 cycles): one impact per cycle at 3.75 Hz and one every two cycles at 7.25 Hz (gap 0) and at
   5.25 Hz (gap 2.4 mm).
-* At gap 2.4 mm, 5.25 Hz, coexisting attractors (paper Fig. 12 right, SPEC section 8): an upward sweep stays on
+* At gap 2.4 mm, 5.25 Hz, coexisting attractors (paper Fig. 12 right; docs/interface.md): an upward sweep stays on
   the non-impacting motion while a start from rest reaches band B.
 * Lyapunov exponents: without impact the model is the base-excited linear oscillator (the modes are never
   excited), exponent -zeta omega_n (closed form); a stable period-1 impacting orbit (band A) contracts faster.
@@ -25,10 +25,10 @@ import pytest
 
 from harness.outputs import read_json
 from rimd_sim import cli
+from rimd_sim.analysis.dynamics.bifurcation import bifurcation
 from rimd_sim.analysis.dynamics.lyapunov import largest_lyapunov
 from rimd_sim.analysis.dynamics.peterka import basins, peterka
 from rimd_sim.analysis.dynamics.steady import steady_orbit
-from rimd_sim.analysis.dynamics.bifurcation import bifurcation
 from rimd_sim.analysis.dynamics.sweep import sweep
 from rimd_sim.model.ensemble import StopRule, run_cells
 from rimd_sim.model.rig_model import model_for

@@ -1,4 +1,4 @@
-"""``rimd sweep`` and the sweep analysis (part of issue 7)."""
+"""``rimd sweep`` and the sweep analysis (docs/analyses.md)."""
 
 from __future__ import annotations
 
@@ -50,9 +50,9 @@ def test_rimd_sweep_refuses_bad_ranges(tmp_path, capsys):
 
 
 def test_coexisting_attractors_at_gap_2_4mm():
-    """Paper Fig. 12 (right), SPEC section 8: at gap 2.4 mm an upward sweep falls off band A onto the
-    non-impacting motion and stays there through band B's frequency, while a start from rest reaches band B
-    (5.25 Hz, one impact every two cycles)."""
+    """Paper Fig. 12 (right), docs/interface.md, "What the twin must reproduce": at gap 2.4 mm an upward sweep falls off
+    band A onto the non-impacting motion and stays there through band B's frequency, while a start from rest reaches
+    band B (5.25 Hz, one impact every two cycles)."""
     cfg = SimConfig().with_parameters({"gap": 2.4e-3})
     freqs = np.arange(2.0, 5.51, 0.25)
     up = sweep(cfg, freqs, "up")

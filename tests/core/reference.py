@@ -1,6 +1,6 @@
 """An independent reference integration of the rig model with ``scipy.integrate.solve_ivp``.
 
-Written from the paper's equations (SPEC section 2), sharing no code with ``rimd_sim.model``: the
+Written from the paper's equations (docs/physics.md), sharing no code with ``rimd_sim.model``: the
 pendulum on the cart at constant motor frequency, spring-dashpot contact, Filippov switching with
 terminal directed events (contact starts when delta rises through 0; it ends when the force falls
 through 0 or delta falls through 0; after a release with delta > 0 the hammer re-contacts when the force

@@ -25,7 +25,7 @@ def test_paper_model_preset_differs_only_in_mass_and_damping():
 
 
 def test_derived_length_from_natural_frequency():
-    """L = g / (2 pi 1.82)^2 = 0.0750 m (SPEC section 1)."""
+    """L = g / (2 pi 1.82)^2 = 0.0750 m (docs/physics.md, Model)."""
     assert SimConfig().rig.length == pytest.approx(0.07502, abs=1e-5)
 
 
@@ -155,14 +155,14 @@ def test_every_default_obeys_its_own_rule():
 
 
 def test_an_integer_is_accepted_where_a_real_number_is_meant():
-    """`gap: 0`, `-p real_time_factor:=2`: an integer for a real parameter is converted, not refused (issue 22)."""
+    """`gap: 0`, `-p real_time_factor:=2`: an integer for a real parameter is converted, not refused."""
     cfg = SimConfig().with_parameters({"real_time_factor": 2, "gap": 0, "contact.stiffness": 6000000})
     assert cfg.real_time_factor == 2.0 and isinstance(cfg.real_time_factor, float)
     assert cfg.rig.contact.stiffness == 6e6 and isinstance(cfg.rig.contact.stiffness, float)
 
 
 def test_yaml_errors_name_the_file_line_and_column(tmp_path):
-    """Every YAML the product reads reports where it is broken, as a compiler would (issue 22)."""
+    """Every YAML the product reads reports where it is broken, as a compiler would."""
     path = tmp_path / "rig.yaml"
     path.write_text("/**/rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n    mass: [0.1\n")
     with pytest.raises(ConfigError, match=rf"config file is not valid YAML: {path}:5:1: "):
@@ -171,7 +171,7 @@ def test_yaml_errors_name_the_file_line_and_column(tmp_path):
 
 def test_a_relative_config_is_found_from_anywhere(tmp_path, monkeypatch):
     """`rimd rig --config config/paper_model.yaml` typed outside the repository finds the shipped preset; a file
-    found nowhere is refused saying where it was looked for (issue 22)."""
+    found nowhere is refused saying where it was looked for."""
     from rimd_sim.settings.yaml_file import resolve_config
 
     monkeypatch.chdir(tmp_path)

@@ -1,4 +1,4 @@
-"""The one driver built per model (issue 25): its contract, the registry, and numba's cache across processes.
+"""The one driver built per model (docs/physics.md): its contract, the registry, and numba's cache across processes.
 
 Each test says its hypothesis. The cache tests run the compiled functions in fresh interpreters on a numba cache
 directory of their own (``NUMBA_CACHE_DIR``), so they see what a user sees from the second run on.

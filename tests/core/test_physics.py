@@ -169,7 +169,7 @@ def test_agrees_with_independent_solve_ivp(gap, freq, per_cycle):
 
 def test_table1_gap0_peaks():
     """Defaults at gap 0 reproduce the paper's peak forces within 10 % (82.4 N at 3.75 Hz, 120 N at
-    7.25 Hz); the tuned defaults give 79 N and 126 N (SPEC section 3).
+    7.25 Hz); the tuned defaults give 79 N and 126 N (docs/interface.md, "What the twin must reproduce").
     """
     for freq, paper, tuned in ((3.75, 82.4, 79.0), (7.25, 120.0, 126.0)):
         impacts = RigModel(at_frequency(freq), channels=False, truth=False).advance(20.0).impacts
@@ -198,7 +198,7 @@ def test_gap0_long_dwell_is_handled_without_chattering():
 
 def test_period_doubling_near_4_85_hz_at_gap0_paper_model():
     """The paper's model (m = 1 kg, no structural damping) shows a period-1 motion with alternating impact
-    magnitudes from about 4.80-4.85 Hz (SPEC section 8; the experiment: near 4.75 Hz), and not at 4.75 Hz.
+    magnitudes from about 4.80-4.85 Hz (docs/interface.md; the experiment: near 4.75 Hz), and not at 4.75 Hz.
     """
     from rimd_sim.settings.config import find_config_file, load_config
 
@@ -244,7 +244,7 @@ def test_table1_impact_resonances_from_rest(gap):
     steady state read over the last 50 of 150 cycles: band A = frequency of the largest peak force among
     one-impact-per-cycle motions, band B among one-impact-per-two-cycles motions. The defaults reproduce
     five of the six resonances exactly; band B at 1.0 mm comes out at 6.50 Hz instead of 6.25 Hz
-    (SPEC section 3), which this test pins."""
+    (docs/interface.md, "What the twin must reproduce"), which this test pins."""
     rows = []
     for f in np.arange(2.0, 9.51, 0.25):
         f = float(f)

@@ -1,4 +1,4 @@
-"""The structural contact model (issue 15): two-mass hammer, force sensor on a compliant mount.
+"""The structural contact model (docs/physics.md): two-mass hammer, force sensor on a compliant mount.
 
 Each test states its hypothesis and where the expected number comes from.
 """
@@ -164,7 +164,7 @@ def test_fitted_preset_double_peak_and_ringing_at_3_75_hz(structural):
 
 #: Paper Table 1 (band A, band B) per gap.
 TABLE1 = {0.0: (3.75, 7.25), 1.0e-3: (3.00, 6.25), 2.4e-3: (2.50, 5.25)}
-#: What the fitted preset gave when it was fitted (issue 15): a regression pin (docs/physics.md reports the miss
+#: What the fitted preset gave when it was fitted: a regression pin (docs/physics.md reports the miss
 #: at 1.0 mm).
 TABLE1_STRUCTURAL = {0.0: (3.75, 7.25), 1.0e-3: (3.00, 6.50), 2.4e-3: (2.50, 5.25)}
 

@@ -1,4 +1,4 @@
-"""Rigs for the identification battery (issue 24) and the two ways of recording them.
+"""Rigs for the identification battery (docs/identification.md) and the two ways of recording them.
 
 * :func:`draw_rigs`: seeded rigs drawn across the documented ranges of :data:`RANGES`.
 * :func:`record_through_rig`: the rig as a user runs it: the simulator node started paused from rest with the
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-#: Ranges of the battery's rigs (issue 24): a lab's own hammer may lie anywhere in them.
+#: Ranges of the battery's rigs: a lab's own hammer may lie anywhere in them.
 RANGES = {
     "mass": (0.08, 0.30),                  # kg, log-uniform
     "damping_ratio": (0.02, 0.12),

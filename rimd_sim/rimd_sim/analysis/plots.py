@@ -67,7 +67,7 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
                                     legend={"fontsize": 8, "loc": "upper left"})
 
 
-# ---- nonlinear analyses (issue 7): bifurcation, phase plane + Poincare map, Peterka map, basins ----------
+# ---- nonlinear analyses: bifurcation, phase plane + Poincare map, Peterka map, basins ----------
 
 #: Fixed colours of the main classes (the paper's Fig. 12: period 1 red, period 1/2 green).
 CLASS_COLOURS = {

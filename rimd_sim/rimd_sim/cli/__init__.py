@@ -1,8 +1,8 @@
 """The ``rimd`` command: one console command with subcommands (verbs).
 
 Each verb is a module with ``add_arguments(parser)`` and ``main(args) -> int``, in the manner of the
-``ros2bag`` verbs, listed in :data:`VERBS`. A verb whose issue has not landed yet is listed with that issue
-and answers, on stderr, that it is not implemented, with exit status 2; it never prints fake output.
+``ros2bag`` verbs, listed in :data:`VERBS`. A verb listed before its module exists answers, on stderr, that it
+is not implemented (and what is missing, when its entry says), with exit status 2; it never prints fake output.
 
 Rules for verb modules: keep the module import light (import rclpy, numpy and friends inside ``main``),
 so that ``rimd --help`` stays fast and works even where a heavy dependency is broken; report a failure by
@@ -135,21 +135,15 @@ class Verb:
     Attributes:
         name: The subcommand, as typed (``rimd <name>``).
         summary: One line for ``rimd --help``.
-        module: Import path of the module providing ``add_arguments`` and ``main``; None while the issue
-            that implements the verb has not landed.
-        issue: Number of the issue that implements the verb (when ``module`` is None).
-        issue_title: Title of that issue.
+        module: Import path of the module providing ``add_arguments`` and ``main``; None while the verb is
+            not implemented.
+        missing: While ``module`` is None, what is missing, in a few words (said with the refusal; may be empty).
     """
 
     name: str
     summary: str
     module: str | None = None
-    issue: int | None = None
-    issue_title: str = ""
-
-
-_BRING_UP = (5, "Recorder, replay and bring-up")
-_SIMULATOR = (4, "Simulator node")
+    missing: str = ""
 
 VERBS: tuple[Verb, ...] = (
     Verb("rig", "bring up the rig from config: recorder, Rerun bridge and simulator",
@@ -198,8 +192,8 @@ VERBS: tuple[Verb, ...] = (
 
 
 def not_implemented_message(verb: Verb) -> str:
-    """Return the line a verb whose issue has not landed prints on stderr."""
-    return f"rimd {verb.name}: not implemented yet (issue {verb.issue}: {verb.issue_title})"
+    """Return the line a verb without a module prints on stderr."""
+    return f"rimd {verb.name}: not implemented yet" + (f" ({verb.missing})" if verb.missing else "")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -214,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
         if verb.module is None:
             sub = subparsers.add_parser(
                 verb.name,
-                help=f"{verb.summary} [not implemented yet: issue {verb.issue}]",
+                help=f"{verb.summary} [not implemented yet]",
                 description=f"{verb.summary}. {not_implemented_message(verb)}",
             )
             sub.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)

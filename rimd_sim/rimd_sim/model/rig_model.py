@@ -1,18 +1,18 @@
 """The rig model as a streaming integrator: advance in simulation time, get exact samples and impacts.
 
 :class:`RigModel` owns the state of one trajectory of the model the configuration selects
-(``structure.model``, SPEC section 2 and issue 15) and its compiled driver (:mod:`rimd_sim.model.kernel`). It
-knows nothing of noise or ROS: it returns noise-free physical quantities on exact sample grids (sample ``n``
-of a channel at ``n / rate`` seconds of simulation time), the impacts completed so far, stroboscopic
-(Poincare) points and the motor state.
+(``structure.model``: the paper's model or the structural one, docs/physics.md) and its compiled driver
+(:mod:`rimd_sim.model.kernel`). It knows nothing of noise or ROS: it returns noise-free physical quantities on
+exact sample grids (sample ``n`` of a channel at ``n / rate`` seconds of simulation time), the impacts
+completed so far, stroboscopic (Poincare) points and the motor state.
 
 The models are data: :data:`MODELS` is the one place that picks one. Each entry names the physics module
 (the contract of :mod:`rimd_sim.model.kernel`) the driver is built from, once per model and process, at its
 first use. ``RigModel``, the simulator, the ensemble of the maps and every analysis look the model up there.
 
 Commands act *now*, at the model's current time :attr:`RigModel.time`: the current integration step is
-ended exactly there (see :func:`~rimd_sim.model.kernel.truncate`). :class:`~rimd_sim.instruments.rig_simulator.RigSimulator`
-schedules commands at stated simulation times on top of this.
+ended exactly there (see :func:`~rimd_sim.model.kernel.truncate`).
+:class:`~rimd_sim.instruments.rig_simulator.RigSimulator` schedules commands at stated simulation times on top of this.
 """
 
 from __future__ import annotations
@@ -203,7 +203,7 @@ class PhysicsModel:
 MODELS: dict[str, PhysicsModel] = {m.name: m for m in (
     PhysicsModel("rigid", "the paper's model: one rigid hammer against a rigid force sensor", rigid),
     PhysicsModel("two_mass", "the hammer as two masses joined by its axial stiffness, the force sensor on a "
-                 "compliant mount (issue 15)", structural, sources=(rigid,),
+                 "compliant mount (docs/physics.md, Structural model)", structural, sources=(rigid,),
                  # The capture samples the acceleration in contact only; this model's rings after it.
                  capture=False),
 )}

@@ -1,4 +1,4 @@
-"""Structural contact model: the impact as the sensors see it (issue 15).
+"""Structural contact model: the impact as the sensors see it (docs/physics.md, "Structural model").
 
 The paper's model (:mod:`rimd_sim.model.rigid`) is one rigid hammer against a rigid force sensor. Its own
 measurements show more (section 2.1, Fig. 3): a first force peak of about 80 N, then a second of about 50 N

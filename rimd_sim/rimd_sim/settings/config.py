@@ -101,7 +101,7 @@ STRUCTURE_MODELS = ("rigid", "two_mass")
 
 @dataclass(frozen=True)
 class StructureParams:
-    """Optional structural contact model (issue 15, docs/physics.md "Structural model"); ``structure.*``.
+    """Optional structural contact model (docs/physics.md "Structural model"); ``structure.*``.
 
     ``model = "rigid"`` is the paper's single-mass hammer (the default). ``"two_mass"`` splits the hammer
     into the impact device (front, ``impactor_mass``) and the aluminium coupling that carries the

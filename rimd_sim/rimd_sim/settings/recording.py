@@ -1,9 +1,9 @@
 """Parameters of the recorder node, declared once (:mod:`rimd_sim.settings.params`), without rclpy.
 
 ``rimd rig`` checks a configuration's recorder section with :func:`check_recorder_parameters` before starting
-anything; the node declares :data:`PARAMETERS` and builds :class:`RecorderSettings` from its values. Fixed by
-SPEC section 6: ``output_dir``, ``topics``, ``max_duration``, ``max_size``, ``compression``, ``start_paused``;
-the others are additions. Every parameter is read at start.
+anything; the node declares :data:`PARAMETERS` and builds :class:`RecorderSettings` from its values. Part of the
+interface (docs/interface.md): ``output_dir``, ``topics``, ``max_duration``, ``max_size``, ``compression``,
+``start_paused``; the others are additions. Every parameter is read at start.
 """
 
 from __future__ import annotations
@@ -16,9 +16,8 @@ from typing import Any
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 
-__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings", "check_parameter",
-           "check_recorder_parameters",
-           "compile_patterns"]
+__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings",
+           "check_parameter", "check_recorder_parameters", "compile_patterns"]
 
 #: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
 #: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.

@@ -1,4 +1,4 @@
-"""From rig messages to Rerun: entities, the simulation-time timeline and the blueprint (SPEC section 6).
+"""From rig messages to Rerun: entities, the simulation-time timeline and the blueprint (docs/rerun.md).
 
 Pure of ROS: a message is any object with the attributes of its ``rimd_msgs`` type, so rclpy messages and
 messages decoded from an MCAP file by ``mcap_ros2`` go through the same functions. Arrays may be

@@ -69,7 +69,7 @@ class SweepResult:
     workers: int
 
     def summary(self) -> dict:
-        """The ``summary.json`` content (SPEC section 7)."""
+        """The ``summary.json`` content (its keys: docs/interface.md, "Commands")."""
         def band(p: SweepPoint | None) -> dict | None:
             return None if p is None else {"frequency_hz": p.frequency_hz, "peak_force_n": p.peak_force_n,
                                            "force_ratio": p.force_ratio}

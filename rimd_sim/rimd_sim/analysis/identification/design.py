@@ -5,7 +5,7 @@
 its transient, or chaotic, gives impacts the schedule cannot be aligned with). Which motor frequencies give that
 depends on the rig: band A (one impact per cycle) lies around 1.6-2.5 times the natural frequency, shifted by
 gap/A0 and the damping, and at gap/A0 above ~1.5 an upward sweep can stay on the motion without impact while a
-start from rest impacts (the paper's Fig. 12, SPEC section 8).
+start from rest impacts (the paper's Fig. 12; docs/interface.md, "What the twin must reproduce").
 
 :func:`identification_steps` finds the steps for the rig as the user believes it is (a parameter file):
 

@@ -69,7 +69,7 @@ NEEDS = {
     "contact.stiffness": (rec.RIMD_X, rec.CART_X, rec.FORCE),
     "contact.damping": (rec.RIMD_X, rec.CART_X, rec.FORCE),
 }
-#: What "identified" means: the 95 % interval's half-width within 1 % (the gap: 0.02 mm), issue 24.
+#: What "identified" means: the 95 % interval's half-width within 1 % (the gap: 0.02 mm); docs/identification.md.
 TARGETS = {p: ("relative", 0.01) for p in IDENTIFIABLE} | {"gap": ("absolute", 0.02e-3)}
 #: Longest segment of the multiple shooting (s).
 MAX_SEGMENT = 10.0

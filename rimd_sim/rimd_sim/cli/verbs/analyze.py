@@ -40,7 +40,7 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def __getattr__(name: str):  # noqa: ANN202 - the names this module held before issue 26, for old callers
+def __getattr__(name: str):  # noqa: ANN202 - names this module held before the analysis became a library, for old callers
     """``analyze`` and ``print_report`` moved to :mod:`rimd_sim.analysis.recordings.report` (imported on first use)."""
     if name == "analyze":
         from rimd_sim.analysis.recordings.report import analyze

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-#: Node name -> module with ``main(args)``. The recorder and replay join with their issue.
+#: Node name -> module with ``main(args)``.
 NODES = {
     "simulator": "rimd_sim.ros.nodes.simulator",
     "recorder": "rimd_sim.ros.nodes.recorder",

@@ -1,4 +1,4 @@
-"""``rimd pulse``: one impact at a given velocity, force and acceleration at 1 MHz (issue 15).
+"""``rimd pulse``: one impact at a given velocity, force and acceleration at 1 MHz (docs/physics.md).
 
 Writes ``DIR/pulse.png`` (force and acceleration over time), ``DIR/pulse.csv`` (the samples) and
 ``DIR/summary.json`` (``peak_force_n``, ``second_peak_force_n``, ``duration_s``, ``ring_frequency_hz`` and

@@ -1,6 +1,6 @@
 """``rimd sweep``: simulated steady peak impact force F_i/mg and impacts per cycle versus Omega/omega.
 
-Writes ``DIR/summary.json`` (SPEC section 7), ``DIR/sweep.csv`` and ``DIR/sweep.png``.
+Writes ``DIR/summary.json`` (its keys: docs/interface.md, "Commands"), ``DIR/sweep.csv`` and ``DIR/sweep.png``.
 """
 
 from __future__ import annotations
