@@ -26,7 +26,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from harness.ros import call_service, spin_until
 from rimd_msgs.msg import RigSession, SampleBlock
 from rimd_sim.io.cdr import read_block
-from rimd_sim.ros.nodes._run import PolledSubscriptions
+from rimd_sim.ros.nodes.polling import PolledSubscriptions
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
