@@ -296,10 +296,11 @@ class RimdNode(Node):
     REFUSED_STATUS: ClassVar[int] = 2
     REFUSED_PREFIX: ClassVar[str] = ""
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, node_name: str | None = None, **kwargs: Any) -> None:
+        """A node named ``node_name`` (default :attr:`NODE_NAME`); ``kwargs`` as rclpy's ``Node`` takes them."""
         if self.NAMESPACE is not None:
             kwargs.setdefault("namespace", self.NAMESPACE)
-        super().__init__(self.NODE_NAME, **kwargs)
+        super().__init__(node_name or self.NODE_NAME, **kwargs)
 
     def declare(self, table: Mapping[str, Param]) -> dict[str, Any]:
         """Declare the parameters of ``table`` (:func:`declare`); return their values as ROS holds them."""
