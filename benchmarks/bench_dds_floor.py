@@ -5,7 +5,7 @@ channel blocks are CDR bytes encoded once, so this is only rclpy's ``publish`` a
 100 blocks/s, the four channel blocks (20, 20, 200 and 200 samples), a truth block (10 samples of 10
 arrays and 10 flags) and a motor state, on 6 reliable topics of depth 110: 600 messages/s, 0.49 MB/s.
 Subscriber processes take them as the rig's recorder and Rerun bridge do (raw subscriptions taken every
-20 ms by ``rimd_sim.ros.nodes._run.PolledSubscriptions``, events executor) and do nothing with them. The same
+20 ms by ``rimd_sim.ros.nodes.polling.PolledSubscriptions``, events executor) and do nothing with them. The same
 Fast DDS profile as the nodes (``rimd_sim/nodes/fastdds_profiles.xml``), a ROS domain of its own, localhost.
 
 Printed: for 0, 1 and 2 subscribers (the rig has two, the recorder and the bridge), the CPU of the publisher
@@ -87,7 +87,7 @@ def subscriber(seconds: float) -> None:
     from rclpy.experimental import EventsExecutor
 
     from rimd_msgs.msg import MotorState, RigState, SampleBlock
-    from rimd_sim.ros.nodes._run import PolledSubscriptions, PollingNode
+    from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
 
     class Sink(PollingNode):
         def __init__(self) -> None:

@@ -2,12 +2,15 @@
 
 Executables (console scripts) are installed to ``lib/rimd_sim/`` (see setup.cfg) so that a full ROS 2
 install can ``ros2 run rimd_sim <name>`` them; ``env.sh`` also puts that directory on ``PATH`` for the
-``rimd`` command. A node added later only needs a line in ``NODE_EXECUTABLES`` below, for example
-``"rimd_simulator = rimd_sim.ros.nodes._entry:simulator"``.
+``rimd`` command. The node executables come from the registry of nodes, ``rimd_sim/ros/nodes/registry.py``,
+read here by its path (pure data: nothing of ROS is imported at build time); a node added there is installed by
+the next ``make setup``.
 """
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from pathlib import Path
 
 from setuptools import find_packages, setup
@@ -34,13 +37,18 @@ def _config_files() -> list[str]:
                   for path in (HERE / "config").glob(pattern))
 
 
+def _node_executables() -> list[str]:
+    """``"executable = module:function"`` of every node of the registry (loaded by path, without the package)."""
+    path = HERE / PACKAGE_NAME / "ros" / "nodes" / "registry.py"
+    spec = importlib.util.spec_from_file_location("_rimd_node_registry", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module   # NamedTuple and annotations look their module up while the class is made
+    spec.loader.exec_module(module)
+    return module.console_scripts()
+
+
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
-NODE_EXECUTABLES: list[str] = [
-    "rimd_simulator = rimd_sim.ros.nodes._entry:simulator",
-    "rimd_recorder = rimd_sim.ros.nodes._entry:recorder",
-    "rimd_replay = rimd_sim.ros.nodes._entry:replay",
-    "rimd_rerun = rimd_sim.ros.nodes._entry:rerun",
-]
+NODE_EXECUTABLES: list[str] = _node_executables()
 
 setup(
     name=PACKAGE_NAME,

@@ -12,7 +12,8 @@
 #   requirements  pip install -r requirements.txt (every wheel pinned) when the lock or the venv changed;
 #                 stamp: VENV/.rimd-requirements.sha256
 #   build         colcon build --symlink-install of ros_ws when a build input changed (package manifests,
-#                 setup.py/.cfg, .msg/.srv, cmake/, the venv, this script); stamp: .stamps/build-*.sha256
+#                 setup.py/.cfg, the registry of nodes (its console scripts), .msg/.srv, cmake/, the venv,
+#                 this script); stamp: .stamps/build-*.sha256
 #                 Python sources are symlinked, so editing a .py never needs a rebuild.
 # A failing step stops the set-up with "set-up step 'NAME' failed: WHY" and a non-zero exit status.
 set -uo pipefail
@@ -135,6 +136,7 @@ step_build() {
         "$ROOT/rimd_msgs/CMakeLists.txt" "$ROOT/rimd_msgs/package.xml"
         "$ROOT/rimd_msgs/msg/"*.msg "$ROOT/rimd_msgs/srv/"*.srv
         "$ROOT/rimd_sim/package.xml" "$ROOT/rimd_sim/setup.py" "$ROOT/rimd_sim/setup.cfg"
+        "$ROOT/rimd_sim/rimd_sim/ros/nodes/registry.py"
         "$ROOT/rimd_sim/resource/"*
         "$WS/src/"*
     )

@@ -11,7 +11,7 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from harness.ros import spin_until
-from rimd_sim.ros.nodes._run import PolledSubscriptions, PollingNode
+from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
 
 pytestmark = pytest.mark.ros
 

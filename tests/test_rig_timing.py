@@ -9,9 +9,10 @@ this one that reads the DDS reception time of each block (not when Python got ro
   when the node was built and the pacing clock ~100 ms later, when it started);
 - ``/diagnostics`` reports that same lateness (its ``lateness_p50_ms`` within 3 ms of the subscriber's median;
   before, ~0.2 ms while subscribers saw ~100 ms);
-- ``/rig/session`` (transient local) names each run: a start gives ``reason`` start, ``sequence`` 0, the stamp
-  of sample 0, the seed and the configuration's hash; a reset gives a new ``run_id`` with ``reason`` reset at
-  the reset's block boundary; another start of the node gives another ``run_id`` and a first_index from 0.
+- ``/rig/session`` (transient local) reaches a subscriber for each run: a start (``reason`` start), a reset (a
+  new ``run_id``, ``reason`` reset), another start of the node (another ``run_id``, and a first_index from 0).
+  The session's fields (sequence, start stamp, seed, hash, time base) are the runtime's test
+  (tests/runtime/test_simulator_runtime.py).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from harness.ros import call_service, spin_until
 from rimd_msgs.msg import RigSession, SampleBlock
 from rimd_sim.io.cdr import read_block
-from rimd_sim.ros.nodes._run import PolledSubscriptions
+from rimd_sim.ros.nodes.polling import PolledSubscriptions
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
@@ -96,13 +97,9 @@ def test_blocks_arrive_on_time_however_the_rig_starts_and_each_run_is_named(ros_
     rig.wait_for_output(r"rig ready", timeout=60)
     assert spin_until(ros_executor, lambda: sessions, timeout=10), "no /rig/session"
     first = sessions[-1]
-    assert (first.reason, first.sequence, first.time_base, first.lockstep) == ("start", 0, "wall_clock", False)
-    assert first.seed == 0 and len(first.config_hash) == 64 and len(first.run_id) == 32
+    assert (first.reason, first.time_base) == ("start", "wall_clock")
     unpaused = arrivals.measure(MEASURE_S)
     assert unpaused <= 5.0, f"unpaused start: blocks {unpaused:.1f} ms late (median)"
-    # The first block heard and its stamp: the session's start stamp is the stamp of sample 0 (t0).
-    t0 = first.start_stamp.sec * 1_000_000_000 + first.start_stamp.nanosec
-    assert t0 % 1_000_000 == 0 and t0 > 0
     diag = _diagnosed_p50(ros_executor, node, diagnostics)
     assert abs(diag - unpaused) <= 3.0, f"/diagnostics says {diag} ms, a subscriber sees {unpaused:.2f} ms"
 
@@ -111,8 +108,7 @@ def test_blocks_arrive_on_time_however_the_rig_starts_and_each_run_is_named(ros_
     assert call_service(ros_executor, node, trigger, Trigger.Request(), timeout=10).success
     assert spin_until(ros_executor, lambda: len(sessions) >= 2, timeout=10), "no new session after reset"
     reset = sessions[-1]
-    assert reset.reason == "reset" and reset.sequence == 1 and reset.run_id != first.run_id
-    assert (reset.start_stamp.sec * 1_000_000_000 + reset.start_stamp.nanosec - t0) % 10_000_000 == 0  # a boundary
+    assert reset.reason == "reset" and reset.run_id != first.run_id
     after_reset = arrivals.measure(MEASURE_S)
     assert after_reset <= 5.0, f"after reset: blocks {after_reset:.1f} ms late (median)"
     assert rig.stop() == 0, rig.tail()
@@ -135,7 +131,6 @@ def test_blocks_arrive_on_time_however_the_rig_starts_and_each_run_is_named(ros_
     assert arrivals.first_indices[0] == 0, "the restarted rig's first block heard is not sample 0"
     assert spin_until(ros_executor, lambda: sessions, timeout=10)
     again = sessions[-1]
-    assert again.reason == "start" and again.sequence == 0 and again.run_id not in (first.run_id, reset.run_id)
-    assert again.config_hash == first.config_hash, "same configuration, another hash"
+    assert again.reason == "start" and again.run_id not in (first.run_id, reset.run_id)
     assert rig.stop() == 0, rig.tail()
     arrivals.node.destroy_node()

@@ -1,10 +1,12 @@
-"""The simulator node in its own process, heard over DDS on the test's own domain.
+"""The simulator node in its own process, heard over DDS on the test's own domain: its wiring.
 
-Hypotheses: the node publishes every channel as contiguous blocks whose stamps are exactly
-``t0 + first_index / sample_rate``; a bad motor request is refused with a reason while the rig keeps
-publishing; a good one takes effect at the block boundary the response names; at gap 0 and 3.75 Hz the
-impact events arrive one per excitation cycle with the core's steady peak force; a bad parameter set is
-refused with the rule.
+The runtime's logic (stamps, impacts per cycle, refusals, commands at exact stamps, pause, perturbation, reset,
+the run's identity) is tested in-process on a fake clock, tests/runtime/test_simulator_runtime.py. Here:
+every topic arrives over DDS as contiguous blocks stamped ``t0 + first_index / sample_rate``; the services
+answer with the runtime's answers (a refusal with its reason and the setpoint in force, an acceptance with the
+stamp it takes effect, also a requested stamp) and the rig keeps publishing; the parameter services refuse a bad
+value with the rule; at real time the pacing thread publishes rate x time samples with one wall-clock t0; pause
+stops the stream and resume continues it without a gap.
 """
 
 from __future__ import annotations
@@ -21,8 +23,6 @@ from rosgraph_msgs.msg import Clock
 from harness.ros import call_service, spin_until
 from rimd_msgs.msg import ImpactEvent, MotorState, SampleBlock
 from rimd_msgs.srv import SetMotorFrequency
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
@@ -57,8 +57,10 @@ def fast_rig(ros_processes, ros_executor, request):
 # history (20 s of simulation time) loses blocks by the DDS contract, more so on a loaded machine.
 @pytest.mark.parametrize("fast_rig", ["4.0"], indirect=True)
 def test_channels_contiguous_exact_stamps_and_impacts(fast_rig, ros_executor):
-    """Motor at rest, then set_motor_frequency(3.75 Hz) at gap 0: impacts start; in steady state one per
-    excitation cycle with the core's steady peak force for that point."""
+    """Motor at rest, then set_motor_frequency(3.75 Hz) at gap 0 through the service: impacts start.
+
+    Their steady state, one per cycle with the core's peak force, is the runtime's test.
+    """
     rig, node = fast_rig
     qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
     blocks: dict[str, list[SampleBlock]] = {topic: [] for topic in RATES}
@@ -78,7 +80,7 @@ def test_channels_contiguous_exact_stamps_and_impacts(fast_rig, ros_executor):
                             timeout=10)
     assert response.success, response.message
     start = _ns(response.effective_stamp)
-    assert spin_until(ros_executor, lambda: len(events) >= 40, timeout=60)
+    assert spin_until(ros_executor, lambda: len(events) >= 3, timeout=60)
     for topic, received in blocks.items():
         rate = RATES[topic]
         # Late joining is allowed (the node started first); from the first block heard on, nothing is lost.
@@ -93,15 +95,6 @@ def test_channels_contiguous_exact_stamps_and_impacts(fast_rig, ros_executor):
     assert clock and motor and motor[-1].frequency == 3.75
     assert all(_ns(e.header.stamp) > start for e in events)
 
-    # Steady state: one impact per cycle, peak force as the core computes it for this point (79.2 N).
-    steady = [e for e in events if _ns(e.header.stamp) > start + 6e9]
-    assert len(steady) >= 10
-    cycles = [e.cycle_index for e in steady]
-    assert cycles == list(range(cycles[0], cycles[0] + len(cycles)))
-    core = RigModel(SimConfig().with_parameters({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75}),
-                    channels=False, truth=False).advance(10.0).impacts
-    assert steady[-1].peak_force == pytest.approx(core[-1].peak_force, rel=1e-3)
-
 
 @pytest.mark.running
 def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executor):
@@ -111,8 +104,7 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     node.create_subscription(MotorState, "/rig/motor/state", motor.append, qos)
     client = node.create_client(SetMotorFrequency, "/rig/set_motor_frequency")
     assert spin_until(ros_executor, lambda: len(motor) > 5, timeout=30)
-    bad = [(math.nan, 0.0, "finite"), (math.inf, 0.0, "finite"), (-math.inf, 0.0, "finite"), (-1.0, 0.0, ">= 0"),
-           (13.0, 0.0, "max_frequency"), (3.0, -1.0, "ramp_rate"), (3.0, math.nan, "ramp_rate")]
+    bad = [(math.nan, 0.0, "finite"), (3.0, -1.0, "ramp_rate")]   # the runtime's test has every rule
     for freq, ramp, reason in bad:
         count = len(motor)
         response = call_service(ros_executor, node, client,
@@ -130,18 +122,19 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     assert before and all(m.frequency == 3.75 for m in before)
     assert f"set_motor_frequency at simulation time {effective / 1e9:.6f} s" in rig.output()
 
-    # start_stamp: a stamp already passed, or more than a day ahead, is refused naming the field and the rule.
+    # start_stamp: a stamp already passed is refused naming the field and the rule.
     from builtin_interfaces.msg import Time
     now = _ns(motor[-1].header.stamp)
-    for stamp, reason in ((now - 1_000_000_000, "already passed"), (now + 200_000 * 10**9, "ahead of the rig")):
+    for stamp, reason in ((now - 1_000_000_000, "already passed"),):
         request = SetMotorFrequency.Request(frequency_hz=4.0, start_stamp=Time(sec=stamp // 10**9,
                                                                                 nanosec=stamp % 10**9))
         response = call_service(ros_executor, node, client, request, timeout=10)
         assert not response.success and "start_stamp" in response.message and reason in response.message, \
             response.message
         assert response.frequency_hz == 5.0
-    # A stamp ahead, between two samples: the ramp starts exactly there. The rig runs as fast as it can, so
-    # it is paused while the request travels (the stamp is then surely ahead of it).
+    # A stamp ahead, between two samples, answered exactly (that the ramp starts exactly there is the runtime's
+    # test). The rig runs as fast as it can, so it is paused while the request travels (the stamp is then surely
+    # ahead of it).
     from std_srvs.srv import Trigger
     pause, resume = (node.create_client(Trigger, f"/rig/{name}") for name in ("pause", "resume"))
     paused = call_service(ros_executor, node, pause, Trigger.Request(), timeout=10)
@@ -155,8 +148,7 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
     assert response.success and _ns(response.effective_stamp) == at, response.message
     assert call_service(ros_executor, node, resume, Trigger.Request(), timeout=10).success
     assert spin_until(ros_executor, lambda: _ns(motor[-1].header.stamp) > at + 50_000_000, timeout=30)
-    assert all(m.frequency_setpoint == 5.0 for m in motor if effective < _ns(m.header.stamp) < at)
-    assert all(m.frequency_setpoint == 4.0 for m in motor if _ns(m.header.stamp) > at)
+    assert motor[-1].frequency_setpoint == 4.0
 
     params = node.create_client(SetParameters, "/rig/rimd_simulator/set_parameters")
     for name, value, reason in (("gap", -1e-3, ">= 0"), ("contact.model", "rubber", "one of"),
@@ -223,9 +215,11 @@ def test_real_time_counts_and_exact_stamps(ros_processes, ros_executor):
 # behind after the resume (first_index 165200 then 200000: a loss by the DDS contract, not a gap in the rig).
 @pytest.mark.parametrize("fast_rig", ["4.0"], indirect=True)
 def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
-    """Pause freezes the stream (no new blocks), resume continues it without a gap in first_index; a
-    perturbation makes the hammer's inertial velocity jump by the requested amount at the stated time;
-    reset puts the hammer back to rest. Each command is logged with its simulation time."""
+    """Pause freezes the stream (no new blocks), resume continues it without a gap in first_index; perturb and
+    reset answer with the stamp they take effect, and are logged with their simulation time when applied.
+
+    The kick's size and instant, and the hammer at rest after the reset, are the runtime's test.
+    """
     from std_srvs.srv import Trigger
 
     from rimd_msgs.msg import RigState
@@ -264,11 +258,8 @@ def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     response = call_service(ros_executor, node, perturb, Perturb.Request(velocity=0.2), timeout=10)
     assert response.success, response.message
     when = _ns(response.effective_stamp)
+    assert when % 10_000_000 == 0 and response.message.startswith("hammer velocity +0.2 m/s at simulation time")
     assert spin_until(ros_executor, lambda: _ns(truth[-1].header.stamp) > when + 50_000_000, timeout=10)
-    samples = [(_ns(t.header.stamp) + i * 1_000_000, v) for t in truth for i, v in enumerate(t.rimd_velocity)]
-    after = next(i for i, (ts, _) in enumerate(samples) if ts >= when)
-    assert samples[after][0] == when  # the kick lands exactly on a truth sample (block boundary)
-    assert samples[after][1] - samples[after - 1][1] == pytest.approx(0.2, abs=0.01)
     assert f"perturb at simulation time {when / 1e9:.6f} s" in rig.output() or spin_until(
         ros_executor, lambda: f"perturb at simulation time {when / 1e9:.6f} s" in rig.output(), timeout=5)
 
@@ -277,6 +268,6 @@ def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     t_reset = float(reset.message.split("simulation time ")[1].split(" s")[0])
     target = round(t_reset * 1e9)
     assert spin_until(ros_executor, lambda: _ns(truth[-1].header.stamp) > target, timeout=10)
-    at_reset = next(t for t in truth if _ns(t.header.stamp) == target)
-    assert at_reset.theta[0] == 0.0 and at_reset.theta_dot[0] == 0.0
+    assert any(_ns(t.header.stamp) == target for t in truth)   # a truth block starts at the reset's boundary
+    assert spin_until(ros_executor, lambda: f"reset at simulation time {t_reset:.6f} s" in rig.output(), timeout=10)
     assert rig.stop() == 0, rig.tail()

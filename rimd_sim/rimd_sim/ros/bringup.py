@@ -34,6 +34,7 @@ from typing import Any, TextIO
 import yaml
 
 from rimd_sim.errors import ConfigError, InputError
+from rimd_sim.ros.nodes.registry import by_name, rig_nodes
 from rimd_sim.settings.config import (
     SimConfig,
     check_simulator_section,
@@ -93,9 +94,8 @@ class RigPlan:
         return [node.name for node in self.nodes]
 
 
-#: The rig's nodes in start order (stopped in reverse): (name, entry, consumer, namespace).
-_NODES = (("rimd_recorder", "recorder", True, "/"), ("rimd_rerun", "rerun", False, "/rig"),
-          ("rimd_simulator", "simulator", False, "/rig"))
+#: The rig's nodes in start order (stopped in reverse): (name, entry, consumer, namespace), from the registry.
+_NODES = tuple((n.executable, n.name, n.consumer, n.namespace) for n in rig_nodes())
 
 
 def _section(config_path: Path, doc: Any, name: str) -> dict | None:
@@ -240,7 +240,8 @@ def plan_replay(recording: str | Path, *, parameters: Mapping[str, Any] | None =
         values = {"start_paused": True, "keep_alive": True, **values}
     build(ReplaySettings, values)   # ConfigError (an InputError's parent) names the parameter and its rule
     args = ["--ros-args", *(a for name, value in values.items() for a in ("-p", f"{name}:={_ros_value(value)}"))]
-    nodes = [PlannedNode("rimd_replay", "replay", tuple(args))]
+    replay, bridge = by_name("replay"), by_name("rerun")
+    nodes = [PlannedNode(replay.executable, replay.name, tuple(args))]
     address = None
     if foxglove:
         host, port = host or DEFAULT_HOST, DEFAULT_PORT if port is None else port
@@ -249,10 +250,10 @@ def plan_replay(recording: str | Path, *, parameters: Mapping[str, Any] | None =
         except FoxgloveError as exc:
             raise InputError(str(exc)) from None
         address = websocket_url(host, port) if port else "the ws:// address the bridge logs (port 0: a free port)"
-        nodes.append(PlannedNode("rimd_rerun", "rerun", (
+        nodes.append(PlannedNode(bridge.executable, bridge.name, (
             "--ros-args", "-p", "rerun:=false", "-p", "foxglove.enabled:=true", "-p", f"foxglove.host:={host}",
             "-p", f"foxglove.port:={port}", "-p", f"foxglove.playback_node:={REPLAY_NODE}",
-            "-p", f"foxglove.parameter_nodes:=['{REPLAY_NODE}']"), namespace="/rig"))
+            "-p", f"foxglove.parameter_nodes:=['{REPLAY_NODE}']"), namespace=bridge.namespace))
     return RigPlan(None, None, tuple(nodes), foxglove_address=address)
 
 

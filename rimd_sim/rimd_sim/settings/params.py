@@ -7,7 +7,7 @@ rule, in one place. From that one declaration come
 * the validated frozen settings (:func:`build`, and ``with_parameters`` on the classes that offer it): every
   value is checked with :meth:`Param.validate`, which names the key, the value and the rule
   (:class:`~rimd_sim.errors.ConfigError`);
-* the ROS parameter descriptors and the set-time validation of the nodes (``rimd_sim.ros.nodes._params``);
+* the ROS parameter descriptors and the set-time validation of the nodes (``rimd_sim.ros.nodes.base``);
 * the tables of ``docs/configuration.md`` and the node pages (``scripts/gen_docs.py``);
 * the cases of the bad-input tests (``tests/test_bad_input.py`` reads :func:`parameters`).
 

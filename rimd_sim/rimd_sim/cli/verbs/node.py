@@ -1,27 +1,27 @@
-"""``rimd node NAME [--ros-args ...]``: run one node of the rig in the foreground (like ``ros2 run``)."""
+"""``rimd node NAME [--ros-args ...]``: run one node of the rig in the foreground (like ``ros2 run``).
+
+The nodes are those of the registry, :mod:`rimd_sim.ros.nodes.registry`.
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
 
-#: Node name -> module with ``main(args)``.
-NODES = {
-    "simulator": "rimd_sim.ros.nodes.simulator",
-    "recorder": "rimd_sim.ros.nodes.recorder",
-    "replay": "rimd_sim.ros.nodes.replay",
-    "rerun": "rimd_sim.ros.nodes.rerun_bridge",
-}
+from rimd_sim.ros.nodes.registry import NODES, by_name
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``rimd node``."""
-    parser.add_argument("name", choices=sorted(NODES), help="the node to run")
+    parser.add_argument("name", choices=sorted(n.name for n in NODES), help="the node to run")
+    parser.epilog = "nodes: " + "; ".join(f"{n.name} ({n.executable}): {n.description}" for n in sorted(NODES))
     parser.add_argument("ros_args", nargs=argparse.REMAINDER,
                         help="ROS arguments, e.g. --ros-args --params-file config/rimd.yaml -p gap:=0.001")
 
 
 def main(args: argparse.Namespace) -> int:
     """Run the node until Ctrl-C; return its exit status."""
-    module = importlib.import_module(NODES[args.name])
-    return int(module.main(["rimd_" + args.name, *args.ros_args]) or 0)
+    node = by_name(args.name)
+    module, _, function = node.target.partition(":")
+    run = getattr(importlib.import_module(module), function)
+    return int(run([node.executable, *args.ros_args]) or 0)

@@ -1,8 +1,9 @@
-"""Entry points of the node executables (``rimd_simulator``, ``rimd_recorder``, ``rimd_replay``, ``rimd_rerun``).
+"""Entry points of the node executables, one function per node of the registry (:mod:`rimd_sim.ros.nodes.registry`).
 
 Importing this module installs the stop handlers (SIGINT, SIGTERM) at once, before the node modules and
 their heavy imports are loaded: a node stopped while it is still starting exits 0 like one stopped while it
-runs. Each function then imports its node module and runs its ``main``.
+runs. Each function (``simulator``, ``recorder``, ...: the registry's names) then imports its node's module and
+runs its ``main``.
 
 ``python -m rimd_sim.ros.nodes._entry NAME [--ros-args ...]`` does the same for a child process (``rimd rig``,
 ``rimd experiment``).
@@ -13,9 +14,11 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from rimd_sim.ros.nodes._stop import install_stop_handlers
+from rimd_sim.ros.nodes.registry import NODES, NodeEntry
 
 install_stop_handlers()
 
@@ -24,34 +27,26 @@ install_stop_handlers()
 FASTDDS_PROFILES = Path(__file__).with_name("fastdds_profiles.xml")
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILES))
 
-__all__ = ["recorder", "replay", "rerun", "simulator"]
+
+def load(target: str) -> Callable[..., int | None]:
+    """The function ``module:function`` names (its module imported now)."""
+    module, _, function = target.partition(":")
+    return getattr(importlib.import_module(module), function)
 
 
-def _main(module: str) -> int:
-    return int(importlib.import_module(module).main() or 0)
+def _entry(node: NodeEntry) -> Callable[[], int]:
+    def run() -> int:
+        return int(load(node.target)() or 0)
+
+    run.__name__ = run.__qualname__ = node.name
+    run.__doc__ = f"``{node.executable}``: {node.description}."
+    return run
 
 
-def simulator() -> int:
-    """``rimd_simulator``."""
-    return _main("rimd_sim.ros.nodes.simulator")
-
-
-def recorder() -> int:
-    """``rimd_recorder``."""
-    return _main("rimd_sim.ros.nodes.recorder")
-
-
-def replay() -> int:
-    """``rimd_replay``."""
-    return _main("rimd_sim.ros.nodes.replay")
-
-
-def rerun() -> int:
-    """``rimd_rerun``."""
-    return _main("rimd_sim.ros.nodes.rerun_bridge")
-
-
-ENTRIES = {"simulator": simulator, "recorder": recorder, "replay": replay, "rerun": rerun}
+#: Short name -> entry function (the console scripts call them by name: ``_entry:simulator``).
+ENTRIES: dict[str, Callable[[], int]] = {node.name: _entry(node) for node in NODES}
+globals().update(ENTRIES)
+__all__ = ["ENTRIES", "load", *ENTRIES]
 
 if __name__ == "__main__":
     if len(sys.argv) < 2 or sys.argv[1] not in ENTRIES:

@@ -6,7 +6,7 @@ feeds it from the node it belongs to (the Rerun bridge ``rimd_rerun``):
 * **Topics.** The node hands over the raw (CDR) messages of the subscriptions it already has for Rerun
   (:meth:`FoxgloveRelay.on_message`; no second subscription to a topic), and the relay subscribes to the other
   topics matching ``foxglove.topics`` as they appear in the graph (every ``DISCOVERY_PERIOD_S``), raw, taken by
-  the node's :class:`~rimd_sim.ros.nodes._run.PolledSubscriptions`, with the publishers' reliability and
+  the node's :class:`~rimd_sim.ros.nodes.polling.PolledSubscriptions`, with the publishers' reliability and
   durability, like the recorder. Each message goes out with its bytes unchanged, at log time = the node's rig
   clock: the last ``/clock`` received when the rig publishes one (simulation time), else the wall clock; that
   clock is also broadcast to the clients every ``TIME_PERIOD_S`` (foxglove_bridge with ``use_sim_time``).

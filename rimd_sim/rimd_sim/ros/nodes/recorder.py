@@ -6,7 +6,7 @@
   when they all are; transient local when they all are) with a deep history, and the offered profiles are
   stored with the channel, as rosbag2 does.
 * The executor thread takes the subscriptions every ``POLL_PERIOD_S`` (every waiting message at once,
-  :class:`rimd_sim.ros.nodes._run.PolledSubscriptions`), stamps each message (node clock: wall time, or simulation
+  :class:`rimd_sim.ros.nodes.polling.PolledSubscriptions`), stamps each message (node clock: wall time, or simulation
   time with ``use_sim_time``) and hands it to a :class:`rimd_sim.runtime.recorder.RecordingSession` (no ROS):
   its writer thread, woken once per batch, owns the files (:class:`rimd_sim.io.bag.BagWriter`), counts
   loss and closes a chunk at least every ``flush_interval`` seconds. A full queue (``queue_size`` messages)
@@ -48,7 +48,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
-from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
@@ -57,8 +57,7 @@ from rimd_sim import __version__
 from rimd_sim.io.bag import BagWriter
 from rimd_sim.io.cdr import HEADER_FIRST_TYPES, header_stamp
 from rimd_sim.ros.clients.progress import PROGRESS_TOPIC, ProgressReporter
-from rimd_sim.ros.nodes._params import declare, refuse_unnamed
-from rimd_sim.ros.nodes._run import PolledSubscriptions, PollingNode, log_at, run_node
+from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
 from rimd_sim.runtime.recorder import RecordingSession
 from rimd_sim.settings.params import build
 from rimd_sim.settings.recording import (
@@ -110,9 +109,13 @@ def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
 class RecorderNode(PollingNode):
     """The recorder node. See the module docstring."""
 
+    NODE_NAME = NODE_NAME
+    REFUSED = (RecorderConfigError,)
+    REFUSED_PREFIX = "configuration refused: "
+
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self._p: RecorderSettings = build(RecorderSettings, declare(self, PARAMETERS))  # ConfigError: caught in main
+        super().__init__(**kwargs)
+        self._p: RecorderSettings = build(RecorderSettings, self.declare(PARAMETERS))  # ConfigError: refused
         p = self._p
         self._include = compile_patterns("topics", p.topics)
         self._exclude = compile_patterns("exclude", p.exclude)
@@ -144,7 +147,7 @@ class RecorderNode(PollingNode):
         self._paused = p.start_paused
         self._subs: dict[str, Any] = {}
         self._handlers: dict[str, Any] = {}
-        # The subscriptions are taken by a timer, every message waiting at once (nodes._run.PolledSubscriptions).
+        # The subscriptions are taken by a timer, every message waiting at once (nodes.polling.PolledSubscriptions).
         self._polled = PolledSubscriptions(self, POLL_PERIOD_S)
         self._last_stamp: dict[str, int] = {}   # header stamp (ns) of the last message received per topic
         self._written_stamp: dict[str, int] = {}   # and written (writer thread)
@@ -167,7 +170,7 @@ class RecorderNode(PollingNode):
                                + (" (paused: call ~/resume to start)" if self._paused else ""))
 
     def _log(self, level: str, line: str) -> None:
-        log_at(self, level, line)
+        self.log(level, line)
 
     # -- discovery and subscriptions --------------------------------------------------------------------------
     def _wanted(self, topic: str) -> bool:
@@ -315,11 +318,6 @@ class RecorderNode(PollingNode):
             response.success, response.message = True, "resumed"
         return response
 
-    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
-        refusal = refuse_unnamed(self, parameter_list)
-        return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
-
     def _on_set_parameters(self, params) -> SetParametersResult:  # noqa: ANN001
         for param in params:
             # use_sim_time too: switching it would change the recording's log time base in the middle of a file.
@@ -374,12 +372,16 @@ class RecorderNode(PollingNode):
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(msg)
 
+    def finish(self) -> None:
+        """At the stop (:meth:`RimdNode.finish`): :meth:`shutdown`."""
+        self.shutdown()
+
     def shutdown(self) -> None:
         """Record what already reached the node, let the writer drain the queue, finish the file, print a summary.
 
         Every message waiting in a subscription when the stop was asked (the executor had not dispatched it
         yet: the recorder lags behind a fast rig) is taken and written, so a stop never cuts the topics at
-        different times. This runs before the context is shut down (see :mod:`rimd_sim.ros.nodes._run`).
+        different times. This runs before the context is shut down (see :mod:`rimd_sim.ros.nodes.base`).
         """
         if self._recording and not self._paused and self.context.ok():
             for topic, handler in list(self._handlers.items()):
@@ -397,8 +399,7 @@ def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_recorder`` executable (also ``rimd node recorder``)."""
     if hasattr(signal, "SIGXFSZ"):   # a file size limit then fails the write (EFBIG), reported, not fatal
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    return run_node("rimd_recorder", RecorderNode, (RecorderConfigError,), args=args,
-                    refused_prefix="configuration refused: ", close=lambda node: node.shutdown())
+    return RecorderNode.main(args)
 
 
 if __name__ == "__main__":

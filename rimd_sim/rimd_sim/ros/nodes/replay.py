@@ -28,10 +28,8 @@ import time
 from typing import Any
 
 import yaml
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
-from rclpy.node import Node
-from rclpy.parameter import Parameter
+from rclpy.executors import Executor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
@@ -41,8 +39,8 @@ from rimd_msgs.srv import Burst, GetRate, GetReplayState, IsPaused, PlayNext, Se
 from rimd_sim.errors import ConfigError, InputError
 from rimd_sim.io.reader import Recording, RecordingError, open_recording
 from rimd_sim.ros.clients.progress import PROGRESS_QOS, PROGRESS_TOPIC, SESSION_QOS, SESSION_TOPIC
-from rimd_sim.ros.nodes._params import declare, refuse_unnamed
-from rimd_sim.ros.nodes._run import run_node, spin_until_stopped
+from rimd_sim.ros.nodes._stop import StopRequest
+from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.runtime.pacing import Hold, Wait
 from rimd_sim.runtime.replay import Finished, Paused, Player, ReplaySettings
 from rimd_sim.settings.params import build, parameters
@@ -115,12 +113,16 @@ def check_parameters(values: dict[str, Any]) -> ReplaySettings:
     return settings
 
 
-class ReplayNode(Node):
+class ReplayNode(RimdNode):
     """The replay node. See the module docstring."""
 
+    NODE_NAME = NODE_NAME
+    REFUSED = (ReplayError,)
+    REFUSED_STATUS = 1
+
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        p = self._p = check_parameters(declare(self, PARAMETERS))
+        super().__init__(**kwargs)
+        p = self._p = check_parameters(self.declare(PARAMETERS))
         patterns = _patterns("topics", p.topics)
         self._wait_patterns = _patterns("wait_topics", p.wait_topics)
         remap = parse_remap(p.remap)
@@ -189,14 +191,19 @@ class ReplayNode(Node):
                  + (", kept alive at the end" if p.keep_alive else "")
                  + (" (paused: ~/resume, ~/play_next or ~/burst)" if p.start_paused else ""))
 
-    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
-        refusal = refuse_unnamed(self, parameter_list)
-        return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
-
     def start(self) -> None:
         """Start publishing (in a thread)."""
         self._thread.start()
+
+    def spin_node(self, executor: Executor, stop: StopRequest) -> None:
+        """Publish until the stop, or the end of the recording (then wait for the subscribers' acknowledgements)."""
+        self.start()
+        spin_until_stopped(executor, stop, done=self.finished.is_set)
+        self.wait_for_acknowledgements()
+
+    def finish(self) -> None:
+        """At the stop: :meth:`stop`."""
+        self.stop()
 
     def stop(self) -> None:
         """Stop publishing and wait for the thread."""
@@ -405,14 +412,7 @@ class ReplayNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_replay`` executable (also ``rimd node replay``)."""
-
-    def spin(node: ReplayNode, executor, stop) -> None:  # noqa: ANN001
-        node.start()
-        spin_until_stopped(executor, stop, done=node.finished.is_set)
-        node.wait_for_acknowledgements()
-
-    return run_node("rimd_replay", ReplayNode, (ReplayError,), args=args, refused_status=1, spin=spin,
-                    close=lambda node: node.stop())
+    return ReplayNode.main(args)
 
 
 if __name__ == "__main__":

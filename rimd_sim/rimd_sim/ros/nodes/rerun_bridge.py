@@ -18,16 +18,13 @@ import time
 from collections import deque
 from typing import Any
 
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
 from rimd_sim.errors import ConfigError
 from rimd_sim.io.cdr import header_stamp, read_block
 from rimd_sim.ros.clients.progress import ProgressReporter
-from rimd_sim.ros.nodes._params import declare, refuse_unnamed
-from rimd_sim.ros.nodes._run import PolledSubscriptions, PollingNode, run_node
+from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
 from rimd_sim.settings.params import build, to_flat
 from rimd_sim.viz.bridge_settings import PARAMETERS, BridgeSettings
 from rimd_sim.viz.foxglove_sink import FoxgloveError
@@ -45,11 +42,15 @@ DEFAULT_NAMESPACE = "rig"
 class RerunBridgeNode(PollingNode):
     """The Rerun bridge node. See the module docstring."""
 
+    NODE_NAME = NODE_NAME
+    NAMESPACE = DEFAULT_NAMESPACE
+    REFUSED = (SinkError, FoxgloveError, ConfigError)
+    REFUSED_STATUS = 1
+
     def __init__(self, **kwargs: Any) -> None:
-        """Declare parameters, open the sink (SinkError: caught in main), subscribe."""
-        kwargs.setdefault("namespace", DEFAULT_NAMESPACE)
-        super().__init__(NODE_NAME, **kwargs)
-        settings = build(BridgeSettings, declare(self, PARAMETERS))   # ConfigError: caught in main
+        """Declare parameters, open the sink (SinkError: refused, see REFUSED), subscribe."""
+        super().__init__(**kwargs)
+        settings = build(BridgeSettings, self.declare(PARAMETERS))   # ConfigError: refused
         p = to_flat(settings)
         if not p["rerun"] and not p["foxglove.enabled"]:
             raise FoxgloveError("rerun and foxglove.enabled are both false: the bridge would serve nothing")
@@ -59,7 +60,7 @@ class RerunBridgeNode(PollingNode):
         self.foxglove: Any = None
         # The block topics arrive serialized and are read in place (rimd_sim.io.cdr.read_block: the
         # samples as NumPy views, no message objects): a third of the bridge's time went to rclpy's
-        # deserialisation. They are taken by a timer, every message waiting at once (nodes._run.
+        # deserialisation. They are taken by a timer, every message waiting at once (nodes.polling.
         # PolledSubscriptions): one wake-up per period instead of one dispatch per message.
         # With Foxglove on, the same raw messages go to it too (one subscription per topic); the impact events
         # then arrive raw as well and are deserialised for Rerun only.
@@ -125,11 +126,6 @@ class RerunBridgeNode(PollingNode):
                 + (f"the timeline drives the replay {replay} (playback control once it answers)" if replay else
                    f"services and parameters under {self.get_namespace()}"))
 
-
-    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        """Set parameters; rclpy's parameter services come here. Every refusal names the parameter."""
-        refusal = refuse_unnamed(self, parameter_list)
-        return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
 
     def _raw_handler(self, topic: str, type_name: str):
         on_message = self._handler(topic)
@@ -213,6 +209,23 @@ class RerunBridgeNode(PollingNode):
             f"status: {self._received} messages, {sum(s.samples.values())} samples, {s.impacts} impacts, "
             f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}")
 
+    def finish(self) -> int:
+        """At the stop: close (:meth:`close`) and say what was delivered; 1 when the last data was not."""
+        status = 0
+        problem = self.close()
+        if problem:
+            print(f"rimd_rerun: {problem}", file=sys.stderr)
+            status = 1
+        if self.foxglove is not None:
+            print(f"rimd_rerun: closed the Foxglove server {self.foxglove.url}: {self.foxglove.forwarded} messages "
+                  "forwarded", flush=True)
+        if self.mapper is not None:
+            s = self.mapper.stats
+            print(f"rimd_rerun: closed {self.stream.viewer_url}: "
+                  + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
+                  + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
+        return status
+
     def close(self) -> str:
         """Close the Rerun stream and the Foxglove server (idempotent); "" or why the last data was not delivered.
 
@@ -230,25 +243,8 @@ class RerunBridgeNode(PollingNode):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_rerun`` executable (also ``rimd node rerun``)."""
+    return RerunBridgeNode.main(args)
 
-    def close(node: RerunBridgeNode) -> int:
-        status = 0
-        problem = node.close()
-        if problem:
-            print(f"rimd_rerun: {problem}", file=sys.stderr)
-            status = 1
-        if node.foxglove is not None:
-            print(f"rimd_rerun: closed the Foxglove server {node.foxglove.url}: {node.foxglove.forwarded} messages "
-                  "forwarded", flush=True)
-        if node.mapper is not None:
-            s = node.mapper.stats
-            print(f"rimd_rerun: closed {node.stream.viewer_url}: "
-                  + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
-                  + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
-        return status
-
-    return run_node("rimd_rerun", RerunBridgeNode, (SinkError, FoxgloveError, ConfigError), args=args, refused_status=1,
-                    close=close)
 
 if __name__ == "__main__":
     sys.exit(main())

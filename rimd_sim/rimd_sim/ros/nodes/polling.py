@@ -1,0 +1,82 @@
+"""Subscriptions a node takes itself, every waiting message at once (the recorder, the Rerun bridge).
+
+Under the events executor each message costs a dispatch from C++ to Python on top of its take; a timer that
+takes everything waiting serves the rig's 600 messages a second in 50 wake-ups (docs/rig.md, "CPU: executor and
+message handling").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from rclpy.node import Node
+
+from rimd_sim.ros.nodes.base import RimdNode
+
+__all__ = ["PolledSubscriptions", "PollingNode"]
+
+
+class PolledSubscriptions:
+    """Raw subscriptions that their node takes itself, every ready message at once, every ``period`` s.
+
+    Under the events executor each message costs a dispatch from C++ to Python on top of its take; a
+    timer that takes everything waiting (``take_message`` in a loop, one C call per message) serves the
+    rig's 600 messages a second in 50 wake-ups. The messages wait at most one period in their DDS history
+    (the subscriptions' depth must hold a period of traffic), and the take gives the message info (source
+    timestamp) with the bytes. The executor must not take these subscriptions too: the node is a
+    :class:`PollingNode`, which hides them from it.
+    Should an executor dispatch one all the same, the message still reaches its handler (without info).
+    """
+
+    def __init__(self, node: Node, period: float) -> None:
+        self._node = node
+        self._subs: list[tuple[Any, Callable[[bytes, dict], None]]] = []
+        self._hidden: set[int] = set()
+        self.timer = node.create_timer(period, self.poll)
+
+    def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None]) -> Any:
+        """Create a raw subscription of the node whose messages go to ``handler(data, info)``."""
+        sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}), qos, raw=True)
+        self._hidden.add(id(sub))
+        self._subs.append((sub, handler))
+        return sub
+
+    def visible(self, subscriptions: Iterable[Any]) -> list[Any]:
+        """The subscriptions an executor should take: all but the polled ones."""
+        return [s for s in subscriptions if id(s) not in self._hidden]
+
+    @staticmethod
+    def take(sub: Any, handler: Callable[[bytes, dict], None], limit: int = 100_000) -> int:
+        """Hand up to ``limit`` messages waiting in ``sub`` to ``handler``; return how many."""
+        handle = sub.handle
+        for n in range(limit):
+            try:
+                with handle:
+                    taken = handle.take_message(sub.msg_type, True)
+            except Exception:  # noqa: BLE001 - the subscription is being destroyed
+                return n
+            if taken is None:
+                return n
+            handler(taken[0], taken[1])
+        return limit
+
+    def poll(self) -> int:
+        """Take every message waiting in every polled subscription; return how many."""
+        return sum(self.take(sub, handler) for sub, handler in self._subs)
+
+
+class PollingNode(RimdNode):
+    """A node whose executor does not take its :class:`PolledSubscriptions` (``self._polled``).
+
+    rclpy's executors read ``Node.subscriptions``; this property leaves the polled ones out. The subclass
+    sets ``self._polled`` in its ``__init__``.
+    """
+
+    _polled: PolledSubscriptions | None = None   # None until the subclass creates it
+
+    @property
+    def subscriptions(self) -> list:
+        """The subscriptions the executor takes: all but the polled ones."""
+        subs = super().subscriptions
+        return list(subs) if self._polled is None else self._polled.visible(subs)
