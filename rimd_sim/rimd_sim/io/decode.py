@@ -43,7 +43,8 @@ import numpy as np
 
 from rimd_sim.io.msgdefs import MessageDefinitionError, message_definition, service_definitions
 
-__all__ = ["SEQUENCE", "Field", "decode_message", "message_decoder", "parse_definition", "topic_decoder"]
+__all__ = ["SEQUENCE", "Field", "decode_message", "installed_definition", "message_decoder", "parse_definition",
+           "topic_decoder"]
 
 #: Primitive type: (struct code, size in bytes, NumPy dtype code of an array of it).
 _PRIMITIVES = {
@@ -72,11 +73,15 @@ class Field:
         name: The field's name.
         type: A primitive type name (``float64``, ``string``, ...) or a message type's full name ``pkg/msg/Type``.
         array: None for a single value, :data:`SEQUENCE` for ``T[]`` and ``T[<=N]``, N for ``T[N]``.
+        bound: N of a bounded sequence ``T[<=N]`` (None: unbounded or not a sequence); not checked when decoding.
+        string_bound: N of a bounded string ``string<=N``; not checked when decoding.
     """
 
     name: str
     type: str
     array: int | None = None
+    bound: int | None = None
+    string_bound: int | None = None
 
 
 def _full_name(name: str, where: str) -> tuple[str, str]:
@@ -114,12 +119,14 @@ def _parse_fields(pkg: str, text: str, where: str) -> tuple[Field, ...]:
             field_type = f"{pkg}/msg/{base}"
         if match["bound"] is not None and field_type not in _STRINGS:
             raise MessageDefinitionError(f"{where}, line {number}: only strings take a bound (<=N): {line!r}")
-        array = None
+        array = bound = None
         if match["array"] is not None:
-            fixed = match["size"] and not match["array"].startswith("[<=")
-            array = int(match["size"]) if fixed else SEQUENCE
+            bounded = match["array"].startswith("[<=")
+            array = int(match["size"]) if match["size"] and not bounded else SEQUENCE
+            bound = int(match["size"]) if bounded else None
         name = match["name"] + "_" if keyword.iskeyword(match["name"]) else match["name"]
-        fields.append(Field(name, field_type, array))
+        string_bound = int(match["bound"]) if match["bound"] is not None else None
+        fields.append(Field(name, field_type, array, bound, string_bound))
     return tuple(fields)
 
 
@@ -365,8 +372,12 @@ def _compile(root: str, specs: dict[str, tuple[Field, ...]], order: str) -> Call
     return generator.names["decode"]
 
 
-def _definition_text(type_name: str) -> str:
-    """The installed full definition of a message type or of a service's ``_Request``/``_Response``."""
+def installed_definition(type_name: str) -> str:
+    """The installed full definition of a message type or of a service's ``_Request``/``_Response``.
+
+    Raises:
+        MessageDefinitionError: Not installed (see :mod:`rimd_sim.io.msgdefs`), or not such a type name.
+    """
     pkg, full = _full_name(type_name, type_name)
     kind, name = full.split("/")[1:]
     if kind == "srv":
@@ -393,7 +404,7 @@ def message_decoder(type_name: str, definition: str = "") -> Callable[[bytes], A
         MessageDefinitionError: The definition cannot be read, lacks a type it uses, uses ``wstring``, or ("")
             is not installed.
     """
-    text = definition or _definition_text(type_name)
+    text = definition or installed_definition(type_name)
     specs = parse_definition(type_name, text)
     root = next(iter(specs))
     little, big = _compile(root, specs, "<"), _compile(root, specs, ">")
