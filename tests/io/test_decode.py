@@ -508,3 +508,37 @@ def test_analyze_and_rerun_read_a_recording_without_ros(tmp_path):
     assert summary["messages"] == {**blocks, "/rig/impact/events": written.impacts}
     assert summary["loss"]["undecodable_messages"] == {} and summary["loss"]["complete"]
     assert (tmp_path / "rig.rrd").stat().st_size > 0
+
+
+def test_the_fault_report_reads_fault_events_and_captures_through_the_decoder(tmp_path):
+    """``/rig/faults`` and ``/rig/capture/force`` as the fault report of ``rimd analyze`` reads them; a topic of
+    another type under a rig name is left out (the main analysis reports it)."""
+    from rimd_msgs.msg import Capture, FaultEvent
+    from rimd_sim.analysis.recordings.faultreport import fault_report
+    from rimd_sim.io.bag import BagWriter, qos_profile_dict
+    from rimd_sim.io.reader import open_recording
+
+    bag = BagWriter(tmp_path / "rec")
+    bag.add_topic("/rig/faults", "rimd_msgs/msg/FaultEvent", [qos_profile_dict()])
+    bag.add_topic("/rig/capture/force", "rimd_msgs/msg/Capture", [qos_profile_dict()])
+    bag.add_topic("/rig/impact/force", "rimd_msgs/msg/FaultEvent", [qos_profile_dict()])   # a foreign type
+    events = [FaultEvent(event="start", id=3, channel="impact_force", kind="stuck", start=1.5, duration=0.25,
+                         magnitude=2.0, detail="held at 0.5 N ✓"),
+              FaultEvent(event="end", id=3, channel="impact_force", kind="stuck", start=1.5, duration=0.25,
+                         magnitude=2.0, detail="duration elapsed")]
+    for i, event in enumerate(events):
+        bag.write("/rig/faults", serialize_message(event), 10 + i)
+        bag.write("/rig/impact/force", serialize_message(event), 10 + i)
+    capture = Capture(index=0, sample_rate=1e6, pre_trigger_samples=2, samples=[0.0, 1.0, 80.5, 3.0], unit="N")
+    capture.header.stamp.sec, capture.header.stamp.nanosec = 2, 500_000_000
+    bag.write("/rig/capture/force", serialize_message(capture), 20)
+    bag.close()
+    report = fault_report(open_recording(tmp_path / "rec"), np.array([80.0]), np.array([0.5005]), 2_000_000_000)
+    assert report["faults"] == [
+        {"event": "start", "id": 3, "channel": "impact_force", "kind": "stuck", "start_s": 1.5, "duration_s": 0.25,
+         "magnitude": 2.0, "detail": "held at 0.5 N ✓"},
+        {"event": "end", "id": 3, "channel": "impact_force", "kind": "stuck", "start_s": 1.5, "duration_s": 0.25,
+         "magnitude": 2.0, "detail": "duration elapsed"}]
+    assert report["channels"] == {}
+    assert report["captures"]["count"] == 1 and report["captures"]["sample_rate"] == 1e6
+    assert report["captures"]["capture_peak_n_max"] == 80.5 and report["captures"]["matched"] == 1
