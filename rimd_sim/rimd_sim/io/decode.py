@@ -7,9 +7,13 @@ when the file carries none, from the installed definition (:func:`rimd_sim.io.ms
 Neither rclpy nor the built message packages are imported.
 
 The decoder of a type is generated once from its definition (Python source compiled with :func:`exec`, cached):
-the primitive fields between two variable-length ones are read with one ``struct`` call, whose pad bytes follow
-from the alignment known at that point; arrays of numbers are NumPy views over the bytes (``numpy.frombuffer``:
-no copy, read-only, in the data's byte order); nested messages are built inline.
+consecutive primitive fields are read with one ``struct`` call wherever their alignment is known when the
+decoder is generated (the pad bytes then are part of the format); arrays of numbers are NumPy views over the
+bytes (``numpy.frombuffer``: no copy, read-only, in the data's byte order); nested messages are built inline.
+``rosbags`` (and ``mcap_ros2``) could decode the same files; they stay the tests' independent references
+(``tests/io/test_decode.py``) rather than the readers' decoder, because a reference that is also the
+implementation checks nothing, and because the readers need one error (``ValueError``) for bytes that do not
+decode and one shape of message, which a decoder of the package's own gives without a further dependency.
 
 The layout is XCDR1 as ROS 2 publishes it (the same rules as :class:`rimd_sim.io.cdr.CdrReader`): a 4-byte
 encapsulation header giving the byte order (both are read), then the body, each primitive aligned to its own
