@@ -2,9 +2,9 @@
 
 The files are read by the damage-tolerant reader (:mod:`rimd_sim.io.reader`): a truncated or damaged
 file gives every message before the damage (chunks checked against their CRC, so never altered bytes), and
-what was lost is reported in :class:`RecordingInfo`. Decoding is ``mcap_ros2``'s, from the full message
-definitions stored in the file, so a recording of any build of ``rimd_msgs`` with the same fields reads the
-same.
+what was lost is reported in :class:`RecordingInfo`. Decoding is :mod:`rimd_sim.io.decode`'s (the decoder of
+every reader of a recording), from the full message definitions stored in the file, so a recording of any
+build of ``rimd_msgs`` with the same fields reads the same.
 """
 
 from __future__ import annotations
@@ -61,9 +61,7 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
         McapError: A file cannot be opened or is not MCAP, no rig topic under ``namespace`` can be read, or a
             damaged recording holds no readable rig message.
     """
-    from mcap.records import Schema
-    from mcap_ros2.decoder import DecoderFactory
-
+    from rimd_sim.io.decode import topic_decoder
     from rimd_sim.io.reader import RecordingError, open_recording
 
     path = Path(path)
@@ -79,9 +77,8 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
     info.damaged.extend(r.describe() for r in recording.reports if not r.complete)
     damage = "; ".join(info.damaged)
 
-    factory = DecoderFactory()
     decoders = {}
-    for number, (name, topic) in enumerate(sorted(recording.topics.items())):
+    for name, topic in sorted(recording.topics.items()):
         rel = _relative(name, namespace)
         if rel is None:
             continue
@@ -90,14 +87,9 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
                                  "left out")
             continue
         try:
-            decoder = factory.decoder_for(topic.message_encoding, Schema(
-                id=number + 1, name=topic.type_name, encoding=topic.schema_encoding, data=topic.definition.encode()))
-        except Exception as exc:  # noqa: BLE001 - a definition mcap_ros2 cannot parse: the topic is left out
-            decoder, why = None, f"{type(exc).__name__}: {exc}"
-        else:
-            why = f"message encoding {topic.message_encoding!r}, schema encoding {topic.schema_encoding!r}"
-        if decoder is None:
-            info.problems.append(f"{name}: cannot decode its messages ({why}): left out")
+            decoder = topic_decoder(topic)
+        except Exception as exc:  # noqa: BLE001 - a definition that cannot be read: the topic is left out
+            info.problems.append(f"{name}: cannot decode its messages ({type(exc).__name__}: {exc}): left out")
             continue
         decoders[name] = decoder
         info.topics[name] = rel

@@ -1,7 +1,7 @@
 """From rig messages to Rerun: entities, the simulation-time timeline and the blueprint (docs/rerun.md).
 
 Pure of ROS: a message is any object with the attributes of its ``rimd_msgs`` type, so rclpy messages and
-messages decoded from an MCAP file by ``mcap_ros2`` go through the same functions. Arrays may be
+messages decoded from an MCAP file by :mod:`rimd_sim.io.decode` go through the same functions. Arrays may be
 ``array.array``, lists or numpy arrays.
 
 Timeline ``sim_time`` (a duration): the simulation time of each sample, from the channel's sample 0. Sample

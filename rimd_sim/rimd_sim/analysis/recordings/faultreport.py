@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from rimd_sim.analysis.recordings.faultscan import Block, drift_fit, drift_window, impact_times, scan_channel
+from rimd_sim.io.decode import topic_decoder
 
 __all__ = ["CHANNEL_TOPICS", "fault_report", "format_fault_report"]
 
@@ -37,31 +38,38 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
         detected_times_s: Their peak times (s from ``origin_ns``).
         origin_ns: The analysis's time origin (ns).
     """
-    from rclpy.serialization import deserialize_message
-
-    import rimd_msgs.msg as msgs
-
     blocks: dict[str, list[Block]] = {t: [] for t in CHANNEL_TOPICS}
     meta: dict[str, tuple[float, float, float]] = {}
     zero_ns: dict[str, int] = {}   # per channel: the stamp of its sample 0 (ns)
     events, captures = [], []
-    for msg in recording.messages([*CHANNEL_TOPICS, FAULTS, CAPTURE_FORCE]):
+    types = {**dict.fromkeys(CHANNEL_TOPICS, "rimd_msgs/msg/SampleBlock"), FAULTS: "rimd_msgs/msg/FaultEvent",
+             CAPTURE_FORCE: "rimd_msgs/msg/Capture"}
+    decoders = {}
+    for msg in recording.messages(list(types)):
+        if msg.type_name and msg.type_name != types[msg.topic]:
+            continue    # another type under a rig topic name: the main analysis reports it
         try:
+            decoder = decoders.get(msg.topic)
+            if decoder is None:
+                decoder = decoders[msg.topic] = topic_decoder(recording.topics.get(msg.topic), types[msg.topic])
+            m = decoder(msg.data)
+            stamp_ns = int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
             if msg.topic in CHANNEL_TOPICS:
-                m = deserialize_message(msg.data, msgs.SampleBlock)
-                blocks[msg.topic].append(Block(int(m.first_index), np.asarray(m.samples, float),
-                                               int(m.saturated_count)))
-                meta.setdefault(msg.topic, (m.sample_rate, m.range_min, m.range_max))
+                block = Block(int(m.first_index), np.asarray(m.samples, float), int(m.saturated_count))
+                channel_meta = (m.sample_rate, m.range_min, m.range_max)
+                blocks[msg.topic].append(block)
+                meta.setdefault(msg.topic, channel_meta)
                 if msg.topic not in zero_ns and m.sample_rate > 0:
-                    zero_ns[msg.topic] = (int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
-                                          - round(int(m.first_index) * 1e9 / m.sample_rate))
+                    zero_ns[msg.topic] = stamp_ns - round(int(m.first_index) * 1e9 / m.sample_rate)
             elif msg.topic == FAULTS:
-                events.append(deserialize_message(msg.data, msgs.FaultEvent))
+                events.append({"event": m.event, "id": m.id, "channel": m.channel, "kind": m.kind,
+                               "start_s": m.start, "duration_s": m.duration, "magnitude": m.magnitude,
+                               "detail": m.detail})
             else:
-                captures.append(deserialize_message(msg.data, msgs.Capture))
-        except Exception:  # noqa: BLE001 - damaged bytes: the main analysis counts them
+                captures.append((stamp_ns, m.samples, m.sample_rate))
+        except Exception:  # noqa: BLE001 - damaged bytes, no definition: the main analysis counts them
             continue
-    report: dict = {"channels": {}, "faults": [], "drift": None, "captures": None}
+    report: dict = {"channels": {}, "faults": events, "drift": None, "captures": None}
     for topic, bl in blocks.items():
         if not bl:
             continue
@@ -72,10 +80,6 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
         report["channels"][CHANNEL_TOPICS[topic]] = [
             {"kind": f.kind, "start_s": f.start, "end_s": f.end, "detail": f.detail}
             for f in scan_channel(bl, rate, lo, hi, impacts=impacts)]
-    for e in events:
-        report["faults"].append({"event": e.event, "id": e.id, "channel": e.channel, "kind": e.kind,
-                                 "start_s": e.start, "duration_s": e.duration, "magnitude": e.magnitude,
-                                 "detail": e.detail})
     force, acc = "/rig/impact/force", "/rig/rimd/acceleration"
     if blocks[force] and blocks[acc]:
         t_acc = impact_times(blocks[acc], meta[acc][0], 200.0, absolute=True)
@@ -92,16 +96,16 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
                                "lag_s_max": float(np.max(np.abs(lag - np.median(lag))))}
     if captures:
         rows = []
-        for c in captures:
-            trig = (c.header.stamp.sec * 1_000_000_000 + c.header.stamp.nanosec - origin_ns) * 1e-9
-            peak = float(np.max(c.samples)) if len(c.samples) else float("nan")
+        for stamp_ns, samples, _ in captures:
+            trig = (stamp_ns - origin_ns) * 1e-9
+            peak = float(np.max(samples)) if len(samples) else float("nan")
             k = int(np.argmin(np.abs(detected_times_s - trig))) if detected_times_s.size else -1
             near = k >= 0 and abs(detected_times_s[k] - trig) < 0.002
             rows.append((trig, peak, float(detected_peaks[k]) if near else float("nan")))
         arr = np.array(rows)
         low = (1.0 - arr[:, 2] / arr[:, 1]) * 100.0
         ok = np.isfinite(low)
-        report["captures"] = {"count": len(captures), "sample_rate": captures[0].sample_rate,
+        report["captures"] = {"count": len(captures), "sample_rate": captures[0][2],
                               "matched": int(ok.sum()),
                               "channel_low_percent_mean": float(low[ok].mean()) if ok.any() else None,
                               "channel_low_percent_max": float(low[ok].max()) if ok.any() else None,

@@ -45,12 +45,15 @@ Times are seconds relative to the recording's earliest stamp (``origin_ns``); st
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from rimd_sim.analysis.recordings.contact_pulse import PulseSamples, SpringDashpotPulse, pulse_of, pulse_peaks
+from rimd_sim.io.decode import topic_decoder
+from rimd_sim.io.msgdefs import MessageDefinitionError
 from rimd_sim.io.reader import Recording, open_recording
 
 FORCE = "/rig/impact/force"
@@ -62,6 +65,10 @@ ACC = "/rig/rimd/acceleration"
 FAULTS = "/rig/faults"
 CAPTURE_FORCE = "/rig/capture/force"
 BLOCK_TOPICS = (FORCE, RIMD_X, CART_X, ACC)
+#: The message type of each topic the analyses read.
+EXPECTED_TYPES = {**{topic: "rimd_msgs/msg/SampleBlock" for topic in BLOCK_TOPICS},
+                  EVENTS: "rimd_msgs/msg/ImpactEvent", MOTOR: "rimd_msgs/msg/MotorState",
+                  FAULTS: "rimd_msgs/msg/FaultEvent", CAPTURE_FORCE: "rimd_msgs/msg/Capture"}
 
 #: Default detection threshold of the force channel (N).
 DEFAULT_THRESHOLD = 2.0
@@ -164,31 +171,60 @@ _MOTOR_FIELDS = ("frequency_setpoint", "frequency", "phase", "cycle_index")
 _FAULT_FIELDS = ("event", "id", "channel", "kind", "start", "duration", "magnitude", "detail")
 
 
+def _block_row(m) -> tuple:  # noqa: ANN001 - a decoded message (rimd_sim.io.decode)
+    return _stamp_ns(m.header), int(m.first_index), float(m.sample_rate), np.asarray(m.samples, dtype=float)
+
+
+def _event_row(m) -> tuple:  # noqa: ANN001
+    return _stamp_ns(m.header), *(getattr(m, f) for f in _EVENT_FIELDS)
+
+
+def _motor_row(m) -> tuple:  # noqa: ANN001
+    return _stamp_ns(m.header), *(getattr(m, f) for f in _MOTOR_FIELDS)
+
+
+def _fault_row(m) -> tuple:  # noqa: ANN001
+    return _stamp_ns(m.header), {f: getattr(m, f) for f in _FAULT_FIELDS}
+
+
+def _capture_row(m) -> tuple:  # noqa: ANN001 - the samples copied out of the message's bytes: few, kept whole
+    return (_stamp_ns(m.header), int(m.index), float(m.sample_rate), int(m.pre_trigger_samples),
+            np.array(m.samples, dtype=float))
+
+
+#: What the analyses keep of each topic's messages.
+_ROWS = {**{topic: _block_row for topic in BLOCK_TOPICS}, EVENTS: _event_row, MOTOR: _motor_row, FAULTS: _fault_row,
+         CAPTURE_FORCE: _capture_row}
+
+
+def _decoder(recording: Recording, topic: str, expected: str) -> Callable:
+    """The decoder of ``topic``'s messages (:mod:`rimd_sim.io.decode`); one that refuses each when there is none."""
+    try:
+        return topic_decoder(recording.topics.get(topic), expected)
+    except MessageDefinitionError as exc:
+        reason = str(exc)
+
+        def undecodable(_data: bytes) -> None:
+            raise ValueError(reason)
+        return undecodable
+
+
 def load(path: str | Path) -> RecordedData:
     """Open and decode a recording (file or directory); damaged parts are skipped and reported.
+
+    The messages are decoded from the definitions the file carries (:mod:`rimd_sim.io.decode`): no ROS needed.
 
     Raises:
         rimd_sim.io.reader.RecordingError: The path does not exist or is not MCAP at all.
     """
-    from rclpy.serialization import deserialize_message
-
-    import rimd_msgs.msg
-
     recording = open_recording(path)
-    kinds = {FORCE: rimd_msgs.msg.SampleBlock, RIMD_X: rimd_msgs.msg.SampleBlock,
-             CART_X: rimd_msgs.msg.SampleBlock, ACC: rimd_msgs.msg.SampleBlock, EVENTS: rimd_msgs.msg.ImpactEvent,
-             MOTOR: rimd_msgs.msg.MotorState, FAULTS: rimd_msgs.msg.FaultEvent, CAPTURE_FORCE: rimd_msgs.msg.Capture}
-    blocks: dict[str, list] = {t: [] for t in BLOCK_TOPICS}
-    events: list = []
-    motor: list = []
-    faults: list = []
-    captures: list = []
+    rows: dict[str, list] = {topic: [] for topic in EXPECTED_TYPES}
     undecodable: dict[str, int] = {}
     wrong_type: dict[str, dict] = {}
     counts: dict[str, int] = {}
-    expected_types = {topic: f"rimd_msgs/msg/{cls.__name__}" for topic, cls in kinds.items()}
-    for msg in recording.messages(list(kinds)):
-        expected = expected_types[msg.topic]
+    decoders: dict[str, Callable] = {}
+    for msg in recording.messages(list(EXPECTED_TYPES)):
+        expected = EXPECTED_TYPES[msg.topic]
         if msg.type_name and msg.type_name != expected:
             # Another type under a rig topic name: its bytes may well decode as the rig's type (garbage), so
             # the type is checked, not left to the decoder.
@@ -196,24 +232,19 @@ def load(path: str | Path) -> RecordedData:
                                                       "messages": 0})
             wrong["messages"] += 1
             continue
+        decoder = decoders.get(msg.topic)
+        if decoder is None:
+            decoder = decoders[msg.topic] = _decoder(recording, msg.topic, expected)
         try:
-            decoded = deserialize_message(msg.data, kinds[msg.topic])
+            # A definition in the file without a field read here counts as bytes that do not decode.
+            row = _ROWS[msg.topic](decoder(msg.data))
         except Exception:  # noqa: BLE001 - damaged bytes inside a readable record: count, do not stop
             undecodable[msg.topic] = undecodable.get(msg.topic, 0) + 1
             continue
         counts[msg.topic] = counts.get(msg.topic, 0) + 1
-        if msg.topic in blocks:
-            blocks[msg.topic].append((_stamp_ns(decoded.header), int(decoded.first_index),
-                                      float(decoded.sample_rate), np.asarray(decoded.samples, dtype=float)))
-        elif msg.topic == EVENTS:
-            events.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _EVENT_FIELDS)))
-        elif msg.topic == MOTOR:
-            motor.append((_stamp_ns(decoded.header), *(getattr(decoded, f) for f in _MOTOR_FIELDS)))
-        elif msg.topic == FAULTS:
-            faults.append((_stamp_ns(decoded.header), {f: getattr(decoded, f) for f in _FAULT_FIELDS}))
-        else:
-            captures.append((_stamp_ns(decoded.header), int(decoded.index), float(decoded.sample_rate),
-                             int(decoded.pre_trigger_samples), np.asarray(decoded.samples, dtype=float)))
+        rows[msg.topic].append(row)
+    blocks = {topic: rows[topic] for topic in BLOCK_TOPICS}
+    events, motor, faults, captures = rows[EVENTS], rows[MOTOR], rows[FAULTS], rows[CAPTURE_FORCE]
     stamps = [b[0][0] for b in blocks.values() if b] + [e[0] for e in events[:1]] + [m[0] for m in motor[:1]]
     origin = min(stamps) if stamps else 0
     data = RecordedData(Path(path), recording, origin, counts=counts, undecodable=undecodable,
