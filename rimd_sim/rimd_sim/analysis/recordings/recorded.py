@@ -1,6 +1,6 @@
 """Analyses of a recording alone (never the simulator's internals): impacts, stepped sweeps, phase planes.
 
-Everything here works on what a recording holds (SPEC section 4):
+Everything here works on what a recording holds (docs/interface.md, Topics):
 
 * **Impact detection from the sampled force channel** (``/rig/impact/force``), the paper's routine (section
   3: "for each excitation frequency the maximum impact force is detected"): every run of consecutive samples
@@ -272,7 +272,7 @@ def _columns(rows: list[tuple], names: tuple[str, ...], origin: int) -> dict[str
 
 
 def _channel(topic: str, items: list, origin: int) -> Channel:
-    """Samples of a channel in index order; sample n is at ``t_ref + n / rate`` (SPEC section 4)."""
+    """Samples of a channel in index order; sample n is at ``t_ref + n / rate`` (docs/interface.md, Topics)."""
     items.sort(key=lambda b: b[1])
     stamp0, first0, rate, _ = items[0]
     index_parts, value_parts = [], []

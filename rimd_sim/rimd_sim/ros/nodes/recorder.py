@@ -1,4 +1,4 @@
-"""Node ``rimd_recorder``: records rig topics into rosbag2-compatible MCAP files (SPEC section 6).
+"""Node ``rimd_recorder``: records rig topics into rosbag2-compatible MCAP files (docs/recording.md).
 
 * Discovery: every ``discovery_period`` the node lists the graph's topics and subscribes, with raw
   (serialized) subscriptions, to each topic matching one of ``topics`` (regular expressions, full match) and

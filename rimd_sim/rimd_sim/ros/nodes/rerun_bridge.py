@@ -1,4 +1,4 @@
-"""Node ``rimd_rerun``: streams the rig topics to Rerun (SPEC section 6) and, if asked, to Foxglove (issue 27).
+"""Node ``rimd_rerun``: streams the rig topics to Rerun (docs/rerun.md) and, if asked, to Foxglove (docs/foxglove.md).
 
 A thin adapter: subscriptions to the rig topics (relative names, namespace ``/rig`` by default) hand each
 message to :class:`rimd_sim.viz.rerun_map.RigMapper`, which logs it to a :class:`rimd_sim.viz.sinks.RerunStream`
