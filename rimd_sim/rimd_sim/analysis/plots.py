@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -12,6 +13,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from rimd_sim.analysis.dynamics.sweep import SweepResult  # noqa: E402
+
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
 
 
 def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa: ANN001
@@ -184,7 +188,7 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
     fig, ax = plt.subplots(figsize=(10, 6))
     _class_image(ax, result.frequency_ratio, result.gap_ratio, result.primary, palette)
     gi, fj = np.nonzero(result.coexisting)
-    marks = []
+    marks: list[Artist] = []
     dense = max(result.primary.shape) > DENSE_CELLS
     if len(gi) and dense:
         from matplotlib.colors import ListedColormap

@@ -15,9 +15,10 @@ from __future__ import annotations
 import io
 import struct
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile
@@ -30,7 +31,7 @@ _MAGIC = b"\x89MCAP0\r\n"
 #: Largest record (and decompressed chunk) accepted: a longer one is taken for a damaged length field.
 _RECORD_LIMIT = 1 << 30
 #: The records the reader needs, parsed; any other (indexes, attachments, summary offsets) is skipped by length.
-_PARSED = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read, Opcode.CHUNK: Chunk.read,
+_PARSED: dict[int, Callable[[ReadDataStream], Any]] = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read, Opcode.CHUNK: Chunk.read,
            Opcode.METADATA: Metadata.read, Opcode.DATA_END: DataEnd.read, Opcode.FOOTER: Footer.read,
            Opcode.STATISTICS: Statistics.read}
 #: Where each record may stand (MCAP spec; the Header only first): a record found elsewhere has a damaged opcode.
@@ -329,7 +330,7 @@ def _check_end(stream, footer_end: int, size: int, footer: Footer, data_end: int
         return "damaged end of file: the footer is not followed by the MCAP magic bytes", footer_end
     if footer_end + len(_MAGIC) != size:
         return f"{size - footer_end - len(_MAGIC)} bytes after the end of the MCAP data", footer_end + len(_MAGIC)
-    if data_end is None:
+    if data_end is None or data_end_record is None:   # found together
         return "damaged file: no DataEnd record before the footer", footer_end
     if data_end_record.data_section_crc not in (0, data_crc):
         return "the data section's CRC does not match: a record outside the chunks is damaged", data_end

@@ -476,8 +476,7 @@ def _resume_when_connected(consumers: tuple[str, ...], procs: Mapping[str, subpr
     from std_srvs.srv import Trigger
 
     context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO,
-               **({} if domain_id is None else {"domain_id": domain_id}))
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = rclpy.create_node("rimd_rig", context=context, start_parameter_services=False)
         executor = rclpy.executors.SingleThreadedExecutor(context=context)

@@ -156,7 +156,8 @@ class RecordingSession:
         Raises:
             TimeoutError: The writer did not get to it in time.
         """
-        done, result = threading.Event(), []
+        done = threading.Event()
+        result: list[Any] = []
         self._queue.put(("call", function, done, result))
         if self._thread is None:   # no thread: everything queued is processed here, in order
             self.process()

@@ -214,7 +214,7 @@ class FoxgloveSink:
             capabilities.append(Capability.Services)
         if parameter_backend is not None:
             capabilities.append(Capability.Parameters)
-        self._options = {"name": name, "host": host, "capabilities": capabilities,
+        self._options: dict[str, Any] = {"name": name, "host": host, "capabilities": capabilities,
                          "server_listener": _Listener(self) if parameter_backend or playback else None,
                          "supported_encodings": [MESSAGE_ENCODING],
                          "services": [self._service(s) for s in self._services] or None, "context": self._context}
@@ -311,6 +311,7 @@ class FoxgloveSink:
 
     def handle_playback(self, request: Any) -> Any:
         """The SDK's PlaybackControlRequest carried out: its errors shown as error statuses; the state answered."""
+        assert self._playback is not None   # the listener takes playback requests only then
         report, errors = self._playback.handle(PlaybackRequest(
             play=request.playback_command == PlaybackCommand.Play, speed=float(request.playback_speed),
             seek_ns=None if request.seek_time is None else int(request.seek_time),
@@ -332,6 +333,7 @@ class FoxgloveSink:
             response=MessageSchema(encoding=MESSAGE_ENCODING, schema=Schema(
                 name=response.type_name, encoding=SCHEMA_ENCODING, data=response.text.encode())))
         backend = self._service_backend
+        assert backend is not None   # checked in __init__: services come with their backend
 
         def handler(request_msg: Any) -> bytes:
             # Runs in one of the SDK's threads; an exception's text becomes the client's failure message.
@@ -368,9 +370,14 @@ class FoxgloveSink:
             value = [float(v) for v in value]
         return ParameterEntry(parameter.name, kind, value)
 
+    def _parameters(self) -> ParameterBackend:
+        """The parameter backend (parameters are served only with one)."""
+        assert self._parameter_backend is not None
+        return self._parameter_backend
+
     def get_parameters(self, names: Sequence[str]) -> list[Any]:
         """The SDK's parameters for a client's get request (the listener's work, also callable directly)."""
-        return [self._parameter(e) for e in self._parameter_backend.get(list(names))]
+        return [self._parameter(e) for e in self._parameters().get(list(names))]
 
     def set_parameters(self, parameters: Sequence[Any]) -> list[Any]:
         """Set what a client asked; report refusals as error statuses; return the values now in force."""
@@ -380,7 +387,7 @@ class FoxgloveSink:
                 entries.append(self._entry(parameter))
             except ValueError as exc:
                 self.status(f"{parameter.name}: {exc}", error=True, status_id=f"parameter {parameter.name}")
-        results = self._parameter_backend.set(entries) if entries else []
+        results = self._parameters().set(entries) if entries else []
         for name, accepted, reason in results:
             if not accepted:
                 self.status(f"parameter {name} refused: {reason}", error=True, status_id=f"parameter {name}")

@@ -211,6 +211,7 @@ def _segments(motor: dict, t_first: float, t_end: float, avoid: np.ndarray, lase
     full = loc.motor_schedule(motor, t_first, t_end)
     wanted = [t_first] + [full.t0 + tc - 0.3 for tc, _, _ in full.commands]
     starts: list[float] = []
+    z: float | None
     for target in sorted(wanted):
         z = target
         while True:
@@ -680,6 +681,7 @@ def twin_reading(reading: Reading, ident: Identification, segments: list[Segment
     rate = force.rate if force is not None else 100.0
     config = model_config(ident.config, {}, schedule, result.states[0], force_rate=rate)
     run, fch = run_schedule(config, schedule, [(t - seg0.t0, v) for t, v in result.kicks], t_end - seg0.t0, force=True)
+    assert fch is not None   # force=True
     t_f, v_f = fch
     twin_force = rec.Channel(rec.FORCE, rate, np.arange(v_f.size), t_f, v_f)
     pulse = None

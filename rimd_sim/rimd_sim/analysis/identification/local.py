@@ -222,6 +222,7 @@ def fit_free_flight(y_t: np.ndarray, y: np.ndarray, pieces: list[np.ndarray], mo
         if best is None or fit.cost < best.cost:
             best = fit
     fit = best
+    assert fit is not None   # three tries
     n = fit.fun.size
     s2 = 2 * fit.cost / max(n - 2 - 3 * len(data), 1)
     try:
@@ -405,10 +406,10 @@ def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.
     caps = capture_samples(captures, quiet, limit=MAX_CAPTURES) if captures else []
     joint = list(samples)
     for p in caps:   # the capture of an impact replaces its channel samples; the laser's velocity of that impact
-        k = int(np.argmin(np.abs(detected["start"][idx] - p.onset_hi))) if idx.size else -1
-        if k >= 0 and abs(detected["start"][idx][k] - p.onset_hi) < 1e-3:
-            p.eps, p.eps1 = samples[k].eps, samples[k].eps1
-            joint[k] = p
+        nearest = int(np.argmin(np.abs(detected["start"][idx] - p.onset_hi))) if idx.size else -1
+        if nearest >= 0 and abs(detected["start"][idx][nearest] - p.onset_hi) < 1e-3:
+            p.eps, p.eps1 = samples[nearest].eps, samples[nearest].eps1
+            joint[nearest] = p
     caps = [p for p in joint if p.dt < 0.5 / force.rate]
     if len(caps) >= 3:
         shape_set = caps if len(caps) <= 40 else [caps[k] for k in
@@ -440,6 +441,7 @@ def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.
     if free_mass:
         m, m_se = robust_mean(np.where(v0 > 0.005, scales * cos_t / v0, np.nan))
     else:
+        assert mass is not None   # the caller gives the mass it holds fixed
         m, m_se = float(mass), 0.0
     if not math.isfinite(m):
         raise LocalError("the hammer laser shows no impact velocity at the impacts: mass cannot be identified; "

@@ -151,14 +151,14 @@ def step_rows(steps: list[rec.Step], events: dict[str, np.ndarray], detected: di
             times, peaks = events.get("time"), events.get("peak_force")
             if (times is None or times.size == 0) and detected["start"].size:   # no events recorded
                 times, peaks = detected["start"][ok], detected["peak_force"][ok]
-            if times is not None:
+            if times is not None and peaks is not None:   # the event columns come together
                 verdict = rec.settled(times, peaks, s.steady_from, s.end, s.setpoint)
         row["settled"] = verdict
         for label, times, peaks in (("events", events.get("time"), events.get("peak_force")),
                                     ("channel", detected["start"][ok], detected["peak_force"][ok])):
             keys = (f"peak_force_{label}_n", f"impacts_{label}", f"impacts_per_cycle_{label}",
                     f"peak_force_{label}_mean_n", f"peak_force_{label}_std_n", f"peak_force_{label}_min_n")
-            if s.steady_from is None or times is None or (label == "channel" and force is None):
+            if s.steady_from is None or times is None or peaks is None or (label == "channel" and force is None):
                 row.update(dict.fromkeys(keys))
                 if label == "channel":
                     row["peak_force_channel_largest_sample_n"] = None

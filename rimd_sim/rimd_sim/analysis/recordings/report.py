@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -173,13 +174,15 @@ def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path) -> 
     """Phase planes and Poincare maps over each step's steady window (figure at ``path``); the Poincare rows."""
     from rimd_sim.analysis import plots
 
-    panels, poincare_rows = [], []
+    panels: list[dict] = []
+    poincare_rows: list[dict] = []
     rimd, cart = data.channels.get(rec.RIMD_X), data.channels.get(rec.CART_X)
     if rimd is None or cart is None:
         return poincare_rows
     t, x, v = rec.phase_plane(rimd, cart)
     strobe = rec.poincare_points(t, x, v, rec.poincare_times(data.motor))
-    windows = [(s, s.steady_from, s.end) for s in steps if s.steady_from is not None]
+    windows: list[tuple[rec.Step | None, float, float]] = [(s, s.steady_from, s.end) for s in steps
+                                                            if s.steady_from is not None]
     if not windows:   # no motor states: the whole recording is one window
         finite = t[np.isfinite(t)]
         windows = [(None, finite[0], finite[-1])] if finite.size else []
@@ -225,7 +228,7 @@ def pulse_zoom(reading: Reading, before: float = 0.5e-3, after: float = 1.5e-3) 
     median = float(np.median(det["peak_force"][pool]))
     i = int(pool[np.argmin(np.abs(det["peak_force"][pool] - median))])
     onset = float(det["start"][i])
-    zoom = {"onset": onset, "peak": float(det["peak_force"][i]), "step": int(step_of[i]), "captured": False,
+    zoom: dict[str, Any] = {"onset": onset, "peak": float(det["peak_force"][i]), "step": int(step_of[i]), "captured": False,
             "force": None, "acceleration": None, "capture_force": None, "model_force": None}
     sel = (force.time >= onset - before) & (force.time <= onset + after)
     zoom["force"] = (force.time[sel], force.values[sel])

@@ -69,6 +69,7 @@ def main(args: argparse.Namespace) -> int:
                                 transient_cycles=args.transient_cycles, cycles=args.cycles)
     except RimdError as exc:
         raise CommandError(str(exc)) from None
+    assert shown.truth is not None   # RigModel(truth=True)
     first_truth, truth = shown.truth
     rows = {name: truth[i] for i, name in enumerate(TRUTH_FIELDS)}
     t = (first_truth + np.arange(truth.shape[1])) / cfg.truth_rate

@@ -141,9 +141,9 @@ def entry_to_value(entry: ParameterEntry, current: int | None = None) -> Paramet
         wanted = _KINDS.get(current)
         if (kind, wanted) in (("integer", "double"), ("integer_array", "double_array")):
             kind = wanted
-    value = ParameterValue(type=_TYPES.get(kind, ParameterType.PARAMETER_NOT_SET))
     if kind is None:
-        return value
+        return ParameterValue(type=ParameterType.PARAMETER_NOT_SET)
+    value = ParameterValue(type=_TYPES.get(kind, ParameterType.PARAMETER_NOT_SET))
     data = entry.value
     if kind == "double":
         data = float(data)
@@ -407,16 +407,18 @@ class FoxgloveRelay:
     def _watch_playback(self) -> None:
         """Read the replay's state every PLAYBACK_POLL_S: offer its range, tell the clients of every change."""
         log = self._node.get_logger()
+        playback = self.playback
+        assert playback is not None   # the watcher runs only with one
         while not self._stop.is_set():
-            report, line = self.playback.poll()
-            span = self.playback.time_range
+            report, line = playback.poll()
+            span = playback.time_range
             if span is not None and span != self.sink.playback_range:
                 try:
                     self.sink.set_playback_range(*span)
-                    log.info(f"foxglove: playback control of {self.playback.name} over its recording's log times "
+                    log.info(f"foxglove: playback control of {playback.name} over its recording's log times "
                              f"{span[0] / 1e9:.9f} to {span[1] / 1e9:.9f} s ({self.url})")
                 except FoxgloveError as exc:
-                    log.error(f"foxglove: playback control of {self.playback.name} not offered: {exc}")
+                    log.error(f"foxglove: playback control of {playback.name} not offered: {exc}")
             if report is not None:
                 self.sink.broadcast_playback(report)
             if line:

@@ -20,7 +20,7 @@ import os
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import rclpy
 import yaml
@@ -39,6 +39,9 @@ SPIN_PERIOD_S = 0.1
 #: SingleThreadedExecutor, for comparison or should the events executor misbehave on some platform).
 EXECUTOR_ENV = "RIMD_EXECUTOR"
 EXECUTORS = ("events", "single")
+
+#: The node class an executable runs (what its ``spin`` and ``close`` receive).
+NodeT = TypeVar("NodeT", bound=Node)
 
 
 def log_at(node: Node, level: str, line: str) -> None:
@@ -107,7 +110,9 @@ class PolledSubscriptions:
 
     def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None]) -> Any:
         """Create a raw subscription of the node whose messages go to ``handler(data, info)``."""
-        sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}), qos, raw=True)
+        # raw=True: the callback gets the serialized bytes (rclpy's annotation says a message).
+        sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}),  # type: ignore[arg-type]
+                                             qos, raw=True)
         self._hidden.add(id(sub))
         self._subs.append((sub, handler))
         return sub
@@ -146,7 +151,7 @@ class PollingNode(Node):
     _polled: PolledSubscriptions | None = None   # None until the subclass creates it
 
     @property
-    def subscriptions(self) -> list:
+    def subscriptions(self) -> list:  # type: ignore[override]  # rclpy says Iterator; the executors iterate it
         """The subscriptions the executor takes: all but the polled ones."""
         subs = super().subscriptions
         return list(subs) if self._polled is None else self._polled.visible(subs)
@@ -177,11 +182,11 @@ def params_file_problem(node: Node, args: Sequence[str]) -> str | None:
     return None
 
 
-def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseException], ...], *,
+def run_node(name: str, make_node: Callable[[], NodeT], refused: tuple[type[BaseException], ...], *,
              args: list[str] | None = None, refused_status: int = 2, refused_prefix: str = "",
              executor: Callable[[], Executor] = make_executor,
-             spin: Callable[[Node, Executor, StopRequest], None] | None = None,
-             close: Callable[[Node], int | None] | None = None) -> int:
+             spin: Callable[[NodeT, Executor, StopRequest], None] | None = None,
+             close: Callable[[NodeT], int | None] | None = None) -> int:
     """Run one node until it ends, Ctrl-C, SIGTERM or an external shutdown; return the exit status.
 
     Args:
@@ -205,13 +210,14 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
         return refused_status
     stop = install_stop_handlers()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
+    node: NodeT | None = None
     status = 0
     runner = executor()
+    caught: tuple[type[BaseException], ...] = (*refused, rclpy.exceptions.ParameterException)
     try:
         try:
             node = make_node()
-        except (*refused, rclpy.exceptions.ParameterException) as exc:
+        except caught as exc:
             print(f"{name}: {refused_prefix}{exc}", file=sys.stderr)
             return refused_status
         problem = params_file_problem(node, sys.argv if args is None else args)

@@ -51,6 +51,7 @@ from rclpy.duration import Duration
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
@@ -158,7 +159,7 @@ class RecorderNode(PollingNode):
             self.create_service(Trigger, f"~/{name}", handler)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._params_client = AsyncParameterClient(self, p.rig_node) if p.rig_node else None
-        self._params_future = None
+        self._params_future: Future | None = None
         self._params_done = self._params_client is None
         self.create_timer(p.discovery_period, self._discover)
         self.create_timer(1.0, self._publish_diagnostics)
@@ -197,6 +198,7 @@ class RecorderNode(PollingNode):
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self._session.add_topic(topic, type_name, offered)
+            assert self._polled is not None   # made in __init__
             self._subs[topic] = sub = self._polled.create(msg_type, topic, qos, self._make_handler(topic, type_name))
             self._progress.add_subscription(sub)
             self.get_logger().info(f"recording {topic} ({type_name}, "
@@ -254,6 +256,7 @@ class RecorderNode(PollingNode):
         if self._params_done:
             return
         client, future = self._params_client, self._params_future
+        assert client is not None   # else _params_done
         if future is None:
             if client.services_are_ready():
                 self._params_future = client.list_parameters()

@@ -183,6 +183,7 @@ class RerunBridgeNode(PollingNode):
 
         def on_message(msg: Any) -> None:
             self._received += 1
+            assert self.mapper is not None   # called only with Rerun on
             start = time.perf_counter()
             self.mapper.log_message(topic, msg)
             self._slowest = max(self._slowest, time.perf_counter() - start)
@@ -224,6 +225,7 @@ class RerunBridgeNode(PollingNode):
             self.foxglove.close()
         if self.stream is None:
             return ""
+        assert self.mapper is not None   # made with the stream
         self.mapper.flush()
         return self.stream.close()
 
@@ -240,7 +242,7 @@ def main(args: list[str] | None = None) -> int:
         if node.foxglove is not None:
             print(f"rimd_rerun: closed the Foxglove server {node.foxglove.url}: {node.foxglove.forwarded} messages "
                   "forwarded", flush=True)
-        if node.mapper is not None:
+        if node.mapper is not None and node.stream is not None:   # made together
             s = node.mapper.stats
             print(f"rimd_rerun: closed {node.stream.viewer_url}: "
                   + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))

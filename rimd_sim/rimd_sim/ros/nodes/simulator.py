@@ -419,6 +419,7 @@ class SimulatorNode(Node):
                 return
             topics = {t: from_time(d) for t, d in zip(msg.topics, msg.topics_done_through, strict=True)}
         with self._pace_lock:
+            assert self._pacer.lockstep is not None   # progress is taken only in lockstep
             verdict = self._pacer.lockstep.progress(msg.consumer, from_time(msg.done_through), msg.instance, topics,
                                                     leaving=msg.leaving)
         if verdict.joined:   # its subscriptions may be newer than its report: let DDS match them first
@@ -566,6 +567,7 @@ class SimulatorNode(Node):
             self._overruns += 1
 
     def _truth_message(self, block: SimBlock) -> RigState:
+        assert block.truth is not None   # the truth is published only when simulated
         first, rows = block.truth
         msg = self._truth_msg
         msg.header.stamp = to_time(self._sample_stamp_ns(first, self._truth_rate))
@@ -594,6 +596,7 @@ class SimulatorNode(Node):
         if self._lockstep is not None and self._pacer.held:
             now = time.monotonic()
             with self._pace_lock:
+                assert self._pacer.lockstep is not None   # self._lockstep
                 holders = self._pacer.lockstep.holders()
                 since = min((c.held_since for c in holders if c.held_since is not None), default=now)
                 timed_out = any(c.timed_out for c in holders)
@@ -628,6 +631,7 @@ class SimulatorNode(Node):
         if self._lockstep is not None:
             values["lockstep_waiting_for"] = holding
             with self._pace_lock:
+                assert self._pacer.lockstep is not None   # self._lockstep
                 for c in self._pacer.lockstep.consumers.values():
                     values[f"lockstep {c.name} done_through_s"] = "" if c.done_ns is None else f"{c.done_ns / 1e9:.6f}"
                     values[f"lockstep {c.name} state"] = (
