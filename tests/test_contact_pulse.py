@@ -51,7 +51,7 @@ def test_the_closed_form_pulse_is_the_cores_force(m, k, c):
     assert abs(shape_at_release) < 1e-9 * model.shape(np.array([0.0]))[0]
 
 
-def _core_force(ref, t: np.ndarray) -> np.ndarray:  # noqa: ANN001
+def _core_force(ref, t: np.ndarray) -> np.ndarray:
     """The core's force at times ``t`` from the contact start: 0 outside the contact, inside it interpolated
     between the 1 MHz samples (linearly extrapolated over the < 1 us from the onset to the first sample: the
     force jumps at the onset)."""

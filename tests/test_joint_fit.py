@@ -36,13 +36,13 @@ def prepared(tmp_path_factory):
     return local_stages(rec.load(path), SimConfig(), {})
 
 
-def _fit(prepared):  # noqa: ANN001, ANN202
+def _fit(prepared):
     from rimd_sim.analysis.identification.joint_fit import JointFit
 
     return JointFit(SimConfig(), list(prepared.estimates), {}, prepared.segments, prepared.obs)
 
 
-def _truth_x(fit, prepared):  # noqa: ANN001, ANN202
+def _truth_x(fit, prepared):
     """The unknowns at the true parameters, each shot's initial state (and kicks) fitted."""
     from scipy.optimize import least_squares
 

@@ -79,7 +79,7 @@ def main() -> int:
     timing = {"busy_s": 0.0, "first_wall": None, "last_wall": None, "blocks": 0}
     subs = {}
 
-    def on_block(data, topic):  # noqa: ANN001
+    def on_block(data, topic):
         started = time.perf_counter()
         if args.work_ms or args.jitter_ms:
             time.sleep((args.work_ms + rng.uniform(0.0, args.jitter_ms)) / 1e3)
@@ -93,7 +93,7 @@ def main() -> int:
         timing["last_wall"] = now
         timing["blocks"] += 1
 
-    def on_block_work(data, topic):  # noqa: ANN001
+    def on_block_work(data, topic):
         msg = deserialize_message(data, msgs.SampleBlock)
         n = len(msg.samples)
         end = (msg.first_index + n) / msg.sample_rate

@@ -291,7 +291,7 @@ class StopSignals:
         self.requested = False
         self._previous: dict[int, Any] = {}
 
-    def _on_signal(self, signum: int, frame: Any) -> None:  # noqa: ARG002
+    def _on_signal(self, signum: int, frame: Any) -> None:
         self.requested = True
 
     def __enter__(self) -> StopSignals:
@@ -338,7 +338,7 @@ class Rig:
             out: Any = None
             if self.log_dir is not None:
                 self.log_dir.mkdir(parents=True, exist_ok=True)
-                out = open(self.log_dir / f"{node.name}.log", "w")   # noqa: SIM115 - closed in stop()
+                out = open(self.log_dir / f"{node.name}.log", "w")   # closed in stop()
                 self._logs.append(out)
             self.processes[node.name] = subprocess.Popen(
                 node.command(), start_new_session=True, env=dict(self.env) if self.env is not None else None,

@@ -252,7 +252,7 @@ class RecordingSession:
                 _, function, done, result = item
                 try:
                     result.append(function())
-                except Exception as exc:  # noqa: BLE001 - reported to the service caller
+                except Exception as exc:  # reported to the service caller
                     result.append(exc)
                 done.set()
             if self.bag.failure is not self._reported:   # a new write error, or cleared by a split
@@ -292,7 +292,7 @@ class RecordingSession:
         """
         try:
             function(*args)
-        except Exception as exc:  # noqa: BLE001 - a bug must not kill the writer silently
+        except Exception as exc:  # a bug must not kill the writer silently
             self.write_errors += 1
             if self.write_errors <= 5:
                 self._log(ERROR, f"writing the recording failed: {type(exc).__name__}: {exc}")

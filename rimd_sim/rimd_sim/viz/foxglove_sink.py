@@ -229,7 +229,7 @@ class FoxgloveSink:
         while True:
             try:
                 return foxglove.start_server(port=port, playback_time_range=self.playback_range, **self._options)
-            except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types (e.g. address in use)
+            except Exception as exc:  # the SDK raises its own error types (e.g. address in use)
                 if time.monotonic() < deadline:
                     time.sleep(0.005)
                     continue
@@ -424,15 +424,15 @@ class _Listener(ServerListener):
         """``call()``; should it raise, ``failed: <exception>`` is shown to the clients and ``fallback`` returned."""
         try:
             return call()
-        except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
+        except Exception as exc:  # shown to the client, never raised into the SDK's thread
             self._sink.status(f"{failed}: {exc}", error=True, status_id=status_id)
             return fallback
 
-    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
+    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:
         return self._shown(lambda: self._sink.get_parameters(param_names), "parameters could not be read",
                            "parameters", [])
 
-    def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
+    def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:
         return self._shown(lambda: self._sink.set_parameters(parameters), "parameters could not be set",
                            "parameters", [])
 

@@ -91,7 +91,7 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
         try:
             decoder = factory.decoder_for(topic.message_encoding, Schema(
                 id=number + 1, name=topic.type_name, encoding=topic.schema_encoding, data=topic.definition.encode()))
-        except Exception as exc:  # noqa: BLE001 - a definition mcap_ros2 cannot parse: the topic is left out
+        except Exception as exc:  # a definition mcap_ros2 cannot parse: the topic is left out
             decoder, why = None, f"{type(exc).__name__}: {exc}"
         else:
             why = f"message encoding {topic.message_encoding!r}, schema encoding {topic.schema_encoding!r}"
@@ -114,7 +114,7 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
         rel = info.topics[msg.topic]
         try:
             decoded = decoders[msg.topic](msg.data)
-        except Exception:  # noqa: BLE001 - bytes that do not decode with their definition: counted, skipped
+        except Exception:  # bytes that do not decode with their definition: counted, skipped
             undecodable[msg.topic] = undecodable.get(msg.topic, 0) + 1
             continue
         info.counts[rel] = info.counts.get(rel, 0) + 1

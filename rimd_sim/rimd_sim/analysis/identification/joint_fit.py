@@ -318,7 +318,7 @@ class JointFit:
             try:
                 config = model_config(self.base, values, seg.schedule, states[s])
                 runs.append(run_schedule(config, seg.schedule, ks, seg.t1 - seg.t0)[0])
-            except Exception:  # noqa: BLE001 - a trial point where the core refuses or fails: a large residual
+            except Exception:  # a trial point where the core refuses or fails: a large residual
                 runs.append(None)
         return runs
 
@@ -414,7 +414,7 @@ class JointFit:
         return out
 
     def _segment_residuals(self, s: int, run: SegmentRun | None, values: dict[str, float],
-                           pulse: tuple) -> list[np.ndarray]:  # noqa: ANN001
+                           pulse: tuple) -> list[np.ndarray]:
         """The scaled residuals of segment ``s``: displacement, cart, onsets, scales.
 
         ``pulse``: :meth:`pulse_part` with the matches of :meth:`_match` in ``pulse[5:]``.
@@ -508,7 +508,7 @@ class JointFit:
         return jac
 
     def solve(self, x0: np.ndarray, *, max_iterations: int = 60, loss: str = "linear", f_scale: float = 3.0,
-              log=None) -> JointResult:  # noqa: ANN001
+              log: Callable[[str], None] | None = None) -> JointResult:
         """Least squares from ``x0`` until converged (or ``max_iterations`` Jacobians: then not converged).
 
         ``loss``: ``linear`` (least squares) or a robust loss of ``least_squares`` (``soft_l1``, ``cauchy``) with

@@ -21,6 +21,7 @@ in order and hands the results to the joint fit (:mod:`rimd_sim.analysis.identif
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -386,8 +387,8 @@ GRAZING = 0.25
 
 
 def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.ndarray, captures: list[rec.Capture],
-                  y_t: np.ndarray, y: np.ndarray, laser_keep: np.ndarray, accel, length: float,  # noqa: ANN001
-                  sigma_free: float, free_mass: bool, mass: float | None) -> ContactEstimate | None:
+                  y_t: np.ndarray, y: np.ndarray, laser_keep: np.ndarray, accel: Callable[[float], float],
+                  length: float, sigma_free: float, free_mass: bool, mass: float | None) -> ContactEstimate | None:
     """The contact's local estimates (see the module doc); None when no complete impact is left.
 
     ``accel(t)``: the hammer's free acceleration relative to the cart at ``t`` (m/s^2) for ``eps``;

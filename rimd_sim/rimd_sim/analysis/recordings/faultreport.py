@@ -27,7 +27,7 @@ FAULTS = "/rig/faults"
 CAPTURE_FORCE = "/rig/capture/force"
 
 
-def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.ndarray,  # noqa: ANN001
+def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.ndarray,
                  origin_ns: int) -> dict:
     """The report of a :class:`~rimd_sim.io.reader.Recording` (see the module docstring).
 
@@ -59,7 +59,7 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
                 events.append(deserialize_message(msg.data, msgs.FaultEvent))
             else:
                 captures.append(deserialize_message(msg.data, msgs.Capture))
-        except Exception:  # noqa: BLE001 - damaged bytes: the main analysis counts them
+        except Exception:  # damaged bytes: the main analysis counts them
             continue
     report: dict = {"channels": {}, "faults": [], "drift": None, "captures": None}
     for topic, bl in blocks.items():

@@ -154,7 +154,7 @@ def loss_text(loss: dict) -> str | None:
     return "; ".join(parts)
 
 
-def _stamp_ns(header) -> int:  # noqa: ANN001
+def _stamp_ns(header) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
@@ -198,7 +198,7 @@ def load(path: str | Path) -> RecordedData:
             continue
         try:
             decoded = deserialize_message(msg.data, kinds[msg.topic])
-        except Exception:  # noqa: BLE001 - damaged bytes inside a readable record: count, do not stop
+        except Exception:  # damaged bytes inside a readable record: count, do not stop
             undecodable[msg.topic] = undecodable.get(msg.topic, 0) + 1
             continue
         counts[msg.topic] = counts.get(msg.topic, 0) + 1

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from rimd_sim.cli import nonnegative_float, positive_float
 
@@ -45,7 +46,7 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def __getattr__(name: str):  # noqa: ANN202 - the names this module held before issue 26, for old callers
+def __getattr__(name: str) -> Any:   # the names this module held before, for old callers
     """``analyze`` and ``print_report`` moved to :mod:`rimd_sim.analysis.recordings.report` (imported on first use)."""
     if name == "analyze":
         from rimd_sim.analysis.recordings.report import analyze

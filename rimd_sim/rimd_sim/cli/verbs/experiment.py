@@ -15,9 +15,13 @@ import argparse
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rimd_sim.cli import CommandError, nonnegative_float, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import add_frequency_grid
+
+if TYPE_CHECKING:   # rclpy and the ROS layer are imported when the verb runs
+    from rimd_sim.ros.clients.experiment import ExperimentPlan
 
 HERTZ = nonnegative_float("--frequencies", "Hz")
 
@@ -53,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "band-A steps spread across the band (rimd_sim.analysis.identification.design)")
 
 
-def plan(args: argparse.Namespace):  # noqa: ANN201 - rimd_sim.ros.clients.experiment.ExperimentPlan
+def plan(args: argparse.Namespace) -> ExperimentPlan:
     """The experiment the options describe, checked as a whole (each number's rule is its option's).
 
     Raises:

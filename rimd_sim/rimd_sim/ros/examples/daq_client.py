@@ -283,7 +283,8 @@ def main(argv: list[str] | None = None) -> int:
         truth.append({"event": m.event, "id": m.id, "channel": m.channel, "kind": m.kind,
                       "at": _ns(m.header.stamp) / 1e9})
 
-    subs = {t: node.create_subscription(SampleBlock, t, functools.partial(on_block, topic=t), qos) for t in CHANNELS}
+    subs = {t: node.create_subscription(SampleBlock, t, functools.partial(on_block, topic=t), qos)
+            for t in CHANNELS}
     node.create_subscription(MotorState, "/rig/motor/state", on_motor, qos)
     node.create_subscription(FaultEvent, "/rig/faults", on_fault, latched)
     node.create_subscription(RigSession, "/rig/session", on_session, latched)

@@ -168,7 +168,7 @@ class _ServiceForwarder:
         client, srv = self._clients[service.name]
         try:
             message = deserialize_message(request, srv.Request)
-        except Exception as exc:  # noqa: BLE001 - rclpy raises a bare error for undecodable bytes
+        except Exception as exc:  # rclpy raises a bare error for undecodable bytes
             raise ServiceCallError(f"{service.name}: the request is not a CDR {service.type_name} request ({exc})") \
                 from None
         if not client.wait_for_service(timeout_sec=min(self._timeout, 1.0)):
@@ -399,7 +399,7 @@ class FoxgloveRelay:
             self._own[topic] = self._polled.create(msg_type, topic, qos, self._forward(topic))
 
     def _forward(self, topic: str) -> Callable[[bytes, dict], None]:
-        def handler(data: bytes, info: dict) -> None:  # noqa: ARG001 - the message info is not used
+        def handler(data: bytes, info: dict) -> None:  # the message info is not used
             self.on_message(topic, data)
 
         return handler

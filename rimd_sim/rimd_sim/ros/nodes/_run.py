@@ -129,7 +129,7 @@ class PolledSubscriptions:
             try:
                 with handle:
                     taken = handle.take_message(sub.msg_type, True)
-            except Exception:  # noqa: BLE001 - the subscription is being destroyed
+            except Exception:  # the subscription is being destroyed
                 return n
             if taken is None:
                 return n

@@ -213,7 +213,7 @@ class RecorderNode(PollingNode):
         for info in self.get_subscriptions_info_by_topic(PROGRESS_TOPIC):
             try:
                 topics = self.get_publisher_names_and_types_by_node(info.node_name, info.node_namespace)
-            except Exception:  # noqa: BLE001 - the node left the graph meanwhile
+            except Exception:  # the node left the graph meanwhile
                 return False
             if any(self._wanted(t) and t not in self._subs and t not in self._unknown for t, _ in topics):
                 return False
@@ -275,7 +275,7 @@ class RecorderNode(PollingNode):
         self._params_done = True
 
     # -- services ---------------------------------------------------------------------------------------------
-    def _on_start(self, request, response):  # noqa: ARG002
+    def _on_start(self, request, response):
         if self._recording:
             response.success, response.message = False, "already recording"
             return response
@@ -284,7 +284,7 @@ class RecorderNode(PollingNode):
         self.get_logger().info(response.message)
         return response
 
-    def _on_stop(self, request, response):  # noqa: ARG002
+    def _on_stop(self, request, response):
         if not self._recording:
             response.success, response.message = False, "not recording"
             return response
@@ -295,14 +295,14 @@ class RecorderNode(PollingNode):
         self.get_logger().info(response.message)
         return response
 
-    def _on_split(self, request, response):  # noqa: ARG002
+    def _on_split(self, request, response):
         info = self._session.split()
         response.success = True
         response.message = f"finished {info.path}; the next message opens a new file" if info else "no file was open"
         self.get_logger().info(response.message)
         return response
 
-    def _on_pause(self, request, response):  # noqa: ARG002
+    def _on_pause(self, request, response):
         if self._paused:
             response.success, response.message = False, "already paused"
         else:
@@ -310,7 +310,7 @@ class RecorderNode(PollingNode):
             response.success, response.message = True, "paused: messages are not recorded until ~/resume"
         return response
 
-    def _on_resume(self, request, response):  # noqa: ARG002
+    def _on_resume(self, request, response):
         if not self._paused:
             response.success, response.message = False, "not paused"
         else:
@@ -323,7 +323,7 @@ class RecorderNode(PollingNode):
         refusal = refuse_unnamed(self, parameter_list)
         return refusal if refusal is not None else super().set_parameters_atomically(parameter_list)
 
-    def _on_set_parameters(self, params) -> SetParametersResult:  # noqa: ANN001
+    def _on_set_parameters(self, params) -> SetParametersResult:
         for param in params:
             # use_sim_time too: switching it would change the recording's log time base in the middle of a file.
             if param.name in PARAMETERS or param.name == "use_sim_time":

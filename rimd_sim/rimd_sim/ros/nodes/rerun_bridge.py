@@ -140,7 +140,7 @@ class RerunBridgeNode(PollingNode):
 
         progress = self._progress
 
-        def on_raw(data: bytes, info: dict) -> None:  # noqa: ARG001 - the message info is not used
+        def on_raw(data: bytes, info: dict) -> None:  # the message info is not used
             if relay is not None:
                 relay.on_message(full, data)
             if self.mapper is not None:

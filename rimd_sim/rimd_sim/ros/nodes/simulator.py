@@ -345,7 +345,7 @@ class SimulatorNode(Node):
         except IntegrationError as exc:  # the model cannot continue: say why, keep the services alive
             self._last_error = str(exc)
             self.get_logger().error(f"simulation stopped: {exc}")
-        except Exception as exc:  # noqa: BLE001 - at shutdown the context goes away while publishing: not an error
+        except Exception as exc:  # at shutdown the context goes away while publishing: not an error
             if self.context.ok():   # a defect: say so where a user looks (log, /diagnostics ERROR), keep services
                 self._last_error = f"internal error {type(exc).__name__}: {exc}"
                 self.get_logger().error(f"simulation stopped by an internal error (please report it):\n"
@@ -890,7 +890,7 @@ class SimulatorNode(Node):
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``rimd_simulator`` executable (also ``rimd node simulator``)."""
 
-    def spin(node: SimulatorNode, executor, stop) -> None:  # noqa: ANN001
+    def spin(node: SimulatorNode, executor, stop) -> None:
         node.start()
         spin_until_stopped(executor, stop)
 
