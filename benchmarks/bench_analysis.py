@@ -29,8 +29,8 @@ import numpy as np  # noqa: E402
 
 from rimd_sim.analysis.dynamics.peterka import peterka  # noqa: E402
 from rimd_sim.analysis.dynamics.sweep import sweep  # noqa: E402
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import SimConfig  # noqa: E402
 
 
 def main() -> None:

@@ -28,8 +28,8 @@ sys.path.insert(0, str(ROOT / "rimd_sim"))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from rimd_sim.instruments.rig_simulator import RigSimulator  # noqa: E402
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import SimConfig  # noqa: E402
 
 POINTS = [(0.0, 3.75), (0.0, 5.5), (0.0, 7.25), (1.0e-3, 3.0), (2.4e-3, 5.25)]
 

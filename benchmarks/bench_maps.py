@@ -42,10 +42,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
 
-from rimd_sim.analysis import peterka as pk  # noqa: E402
+from rimd_sim.analysis.dynamics import peterka as pk  # noqa: E402
 from rimd_sim.analysis.executor import run_tasks  # noqa: E402
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import SimConfig
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import SimConfig  # noqa: E402
 
 
 def load() -> str:

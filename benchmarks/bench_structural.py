@@ -34,8 +34,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_core import time_simulator  # noqa: E402
 
-from rimd_sim.model.rig_model import RigModel
-from rimd_sim.settings.config import (
+from rimd_sim.model.rig_model import RigModel  # noqa: E402
+from rimd_sim.settings.config import (  # noqa: E402
     SimConfig,
     find_config_file,  # noqa: E402
     load_config,

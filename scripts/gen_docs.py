@@ -7,7 +7,8 @@ Every parameter table (name, default, type, rule, description) and every ``rimd`
 - the simulator's parameters: ``rimd_sim.settings.config.PARAMETERS`` (type, rule, description) and
   ``SimConfig().to_parameters()`` (defaults);
 - the recorder's: ``rimd_sim.settings.recording.PARAMETERS`` (and the rules that module checks);
-- the replay's: ``rimd_sim.ros.nodes.replay.PARAMETERS``; the Rerun bridge's: ``rimd_sim.ros.nodes.rerun_bridge.PARAMETERS``;
+- the replay's: ``rimd_sim.ros.nodes.replay.PARAMETERS``; the Rerun bridge's:
+  ``rimd_sim.ros.nodes.rerun_bridge.PARAMETERS``;
 - the verbs: ``rimd_sim.cli.VERBS`` and each verb's argparse parser (``add_arguments``).
 
 A generated section sits between two markers in a page::

@@ -1,4 +1,7 @@
-"""``rimd analyze`` on bad input, and the pure routines of ``rimd_sim.analysis.recordings.recorded`` on known signals."""
+"""``rimd analyze`` on bad input, and the pure routines of the recorded analyses on known signals.
+
+The routines: ``rimd_sim.analysis.recordings.recorded``.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""The one spring-dashpot pulse of the analyses (rimd_sim.analysis.recordings.contact_pulse) against the core's integrator.
+"""The one spring-dashpot pulse of the analyses against the core's integrator.
+
+The pulse: rimd_sim.analysis.recordings.contact_pulse.
 
 Hypotheses, each against an independent reference (the simulator's event-exact Filippov integrator, sampled at
 1 MHz by ``rimd_sim.analysis.dynamics.pulse.pulse``, the library of ``rimd pulse``):

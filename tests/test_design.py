@@ -1,4 +1,6 @@
-"""Experiment design for identification (rimd_sim.analysis.identification.design, ``rimd experiment --for-identification``).
+"""Experiment design for identification (``rimd experiment --for-identification``).
+
+The design: rimd_sim.analysis.identification.design.
 
 Hypotheses:
 

@@ -2,10 +2,10 @@
 
 The rigs are drawn by ``tests/harness/ident_rigs.py`` (the battery of ``benchmarks/bench_identify.py`` runs 14;
 these are a few well-chosen ones); the steps are those ``rimd experiment --for-identification`` picks for the rig
-(rimd_sim.analysis.identification.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the measured channels.
-Hypotheses (issue 24):
+(rimd_sim.analysis.identification.design). ``rimd identify`` starts from ``config/rimd.yaml`` and reads only the
+measured channels. Hypotheses:
 
-* a rig like the issue's "second rig" (every value changed, an overdamped contact, a 1.1 mm gap), run as the
+* a "second rig" (every value changed, an overdamped contact, a 1.1 mm gap), run as the
   simulator process and recorded by ``rimd experiment`` with a velocity kick in free flight, is identified: every
   parameter within 1 % (the gap within 0.02 mm), or named by the verdict; its 95 % intervals cover the truth; the
   kick is found; ``identified.yaml`` runs the simulator node; and the validation reads the recording exactly as

@@ -1,4 +1,6 @@
-"""The joint fit of ``rimd identify`` (rimd_sim.analysis.identification.joint_fit.JointFit) on a short recording of a known rig.
+"""The joint fit of ``rimd identify`` on a short recording of a known rig.
+
+The fit: rimd_sim.analysis.identification.joint_fit.JointFit.
 
 The recording is the core's run of a rig that differs from the defaults (battery rig 5 of
 ``tests/harness/ident_rigs.py``), two motor steps of 5 s, instrument noise on, written as the recorder writes it;

@@ -16,9 +16,9 @@ what was still in flight), having written ``OUT.pkl``:
   impacts), plus the holes in ``first_index`` (expected, received) and the count of stamps off the nominal
   grid ``first_index / sample_rate``: enough for a 600 s run without keeping 24 million samples.
 
-With ``--lockstep NAME`` it is a lockstep consumer (``rimd_sim.ros.clients.progress.ProgressReporter``, one line): it works
-``--work-ms`` per block (plus a random ``--jitter-ms``, seeded), reports each block done, and also writes
-``OUT.pkl.timing`` (JSON): its busy time, the wall time from its first block to its last, and the simulation
+With ``--lockstep NAME`` it is a lockstep consumer (``rimd_sim.ros.clients.progress.ProgressReporter``, one
+line): it works ``--work-ms`` per block (plus a random ``--jitter-ms``, seeded), reports each block done, and also
+writes ``OUT.pkl.timing`` (JSON): its busy time, the wall time from its first block to its last, and the simulation
 time covered, so a test can tell whether the rig went as fast as this client allowed.
 """
 

@@ -11,8 +11,9 @@ The models are data: :data:`MODELS` is the one place that picks one. Each entry 
 first use. ``RigModel``, the simulator, the ensemble of the maps and every analysis look the model up there.
 
 Commands act *now*, at the model's current time :attr:`RigModel.time`: the current integration step is
-ended exactly there (see :func:`~rimd_sim.model.kernel.truncate`). :class:`~rimd_sim.instruments.rig_simulator.RigSimulator`
-schedules commands at stated simulation times on top of this.
+ended exactly there (see :func:`~rimd_sim.model.kernel.truncate`).
+:class:`~rimd_sim.instruments.rig_simulator.RigSimulator` schedules commands at stated simulation times on top of
+this.
 """
 
 from __future__ import annotations

@@ -16,9 +16,8 @@ from typing import Any
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 
-__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings", "check_parameter",
-           "check_recorder_parameters",
-           "compile_patterns"]
+__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings",
+           "check_parameter", "check_recorder_parameters", "compile_patterns"]
 
 #: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
 #: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.

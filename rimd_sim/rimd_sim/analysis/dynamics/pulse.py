@@ -1,4 +1,4 @@
-"""One impact at a given velocity, seen by the instruments at a high sample rate (``rimd pulse``, issue 15).
+"""One impact at a given velocity, seen by the instruments at a high sample rate (``rimd pulse``).
 
 The cart is at rest and the hammer arrives at the force sensor with the given velocity; the force sensor and
 the accelerometer are sampled (noise-free) at ``rate`` from just before contact. The summary reads the pulse

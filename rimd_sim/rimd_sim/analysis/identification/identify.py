@@ -3,17 +3,18 @@
 :func:`identify` runs stages, each returning typed estimates (docs/identification.md says what determines
 what, and the references):
 
-1. **Reading** (:func:`rimd_sim.analysis.recordings.reading.read`): the impacts in the force channel, the motor's steps and
-   the windows to leave out: holes in ``first_index``, faults seen in the data, faults named on ``/rig/faults``.
-   Every later stage leaves those windows out and the result says which.
-2. **Motor and amplitude** (:mod:`rimd_sim.analysis.identification.local`): the recorded schedule, A0 from the cart laser.
+1. **Reading** (:func:`rimd_sim.analysis.recordings.reading.read`): the impacts in the force channel, the motor's
+   steps and the windows to leave out: holes in ``first_index``, faults seen in the data, faults named on
+   ``/rig/faults``. Every later stage leaves those windows out and the result says which.
+2. **Motor and amplitude** (:mod:`rimd_sim.analysis.identification.local`): the recorded schedule, A0 from the cart
+   laser.
 3. **Free flight**: ``f_n`` and ``zeta`` from the relative displacement between impacts; velocity kicks.
 4. **Contact**: the common spring-dashpot pulse of all impacts (any damping; from the 1 MHz triggered
    captures when the recording has them), each impact's onset and scale ``m v0 / cos(theta)``; with the laser's
    impact velocity: the mass, ``k``, ``c`` and the gap.
-5. **Joint fit** (:class:`rimd_sim.analysis.identification.joint_fit.JointFit`): everything at once with the core's integrator,
-   multiple shooting, until converged; when the local estimates are uncertain or the fit does not reach the
-   lasers' noise, more starts across the local estimates' uncertainty (:data:`STARTS`), the best kept.
+5. **Joint fit** (:class:`rimd_sim.analysis.identification.joint_fit.JointFit`): everything at once with the core's
+   integrator, multiple shooting, until converged; when the local estimates are uncertain or the fit does not reach
+   the lasers' noise, more starts across the local estimates' uncertainty (:data:`STARTS`), the best kept.
 6. **Uncertainty and verdict**: a cluster bootstrap over the excitation cycles (impacts and laser samples
    together) linearised at the solution; 95 % intervals; the verdict: identified, or which parameters are
    poorly determined, why, and what experiment would determine them.

@@ -1,7 +1,7 @@
 """The local stages of ``rimd identify``: each parameter from the data that show it best, with its error.
 
-Each function takes measured arrays and returns a typed estimate; :mod:`rimd_sim.analysis.identification.identify` runs them
-in order and hands the results to the joint fit (:mod:`rimd_sim.analysis.identification.joint_fit`).
+Each function takes measured arrays and returns a typed estimate; :mod:`rimd_sim.analysis.identification.identify`
+runs them in order and hands the results to the joint fit (:mod:`rimd_sim.analysis.identification.joint_fit`).
 
 * :func:`motor_schedule`: the motor as recorded from a motor cycle start: setpoints, when they were commanded
   (where the linear ramp of the recorded frequency starts) and their ramps; :func:`phase_from_cart` without

@@ -1,7 +1,7 @@
-"""What ``rimd identify`` writes and prints: the files of an :class:`~rimd_sim.analysis.identification.identify.Identification`.
+"""What ``rimd identify`` writes and prints: the files of an identification, and the report's lines.
 
-``identified.yaml`` (the base parameter file with the identified values), ``identification.json``,
-``validation.csv``, ``validation.png``, and the report's lines.
+The files of an :class:`~rimd_sim.analysis.identification.identify.Identification`: ``identified.yaml`` (the
+base parameter file with the identified values), ``identification.json``, ``validation.csv``, ``validation.png``.
 """
 
 from __future__ import annotations

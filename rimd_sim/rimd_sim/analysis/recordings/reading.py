@@ -1,12 +1,12 @@
 """One reading of a recording, shared by ``rimd analyze`` and ``rimd identify``'s validation.
 
-:func:`read` turns a :class:`~rimd_sim.analysis.recordings.recorded.RecordedData` into a :class:`Reading`: the impacts
-detected in the force channel (:func:`~rimd_sim.analysis.recordings.recorded.detect_impacts`), their cross-check with the
-recorded events, the motor's dwell steps, the step table (steady peak force and impacts per cycle, from the
-events and from the force channel) and the windows of the recording that no analysis should trust
+:func:`read` turns a :class:`~rimd_sim.analysis.recordings.recorded.RecordedData` into a :class:`Reading`: the
+impacts detected in the force channel (:func:`~rimd_sim.analysis.recordings.recorded.detect_impacts`), their
+cross-check with the recorded events, the motor's dwell steps, the step table (steady peak force and impacts per
+cycle, from the events and from the force channel) and the windows of the recording that no analysis should trust
 (:func:`excluded_windows`): holes in ``first_index`` (dropouts, lost blocks), what the data alone shows
-(:func:`rimd_sim.analysis.recordings.faultscan.scan_channel`: stuck, rail, saturated, outliers, level, noise, late blocks),
-and the faults named on ``/rig/faults``.
+(:func:`rimd_sim.analysis.recordings.faultscan.scan_channel`: stuck, rail, saturated, outliers, level, noise, late
+blocks), and the faults named on ``/rig/faults``.
 
 ``rimd analyze`` prints that step table; ``rimd identify`` compares the twin with the same table of the same
 recording (and reads the twin's simulated channels with the same function), so the two commands cannot give
@@ -65,8 +65,8 @@ class Window:
 def excluded_windows(data: rec.RecordedData, scan: dict | None) -> list[Window]:
     """The windows of ``data`` to leave out (see the module doc), in recording time.
 
-    ``scan``: the fault report of :func:`rimd_sim.analysis.recordings.faultreport.fault_report` (its channel findings are
-    in each channel's own time ``first_index / rate``); None: holes and ``/rig/faults`` only.
+    ``scan``: the fault report of :func:`rimd_sim.analysis.recordings.faultreport.fault_report` (its channel findings
+    are in each channel's own time ``first_index / rate``); None: holes and ``/rig/faults`` only.
     """
     windows: list[Window] = []
     end_all = max([float(c.time[-1]) for c in data.channels.values() if c.time.size] + [0.0])

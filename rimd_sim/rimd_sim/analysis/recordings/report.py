@@ -1,7 +1,7 @@
 """The analysis of a recording alone (``rimd analyze``): tables, figures, summary and the report's lines.
 
-:func:`analyze` reads the recording once (:func:`rimd_sim.analysis.recordings.reading.read`, the reading ``rimd identify``
-validates against) and writes into ``out``:
+:func:`analyze` reads the recording once (:func:`rimd_sim.analysis.recordings.reading.read`, the reading
+``rimd identify`` validates against) and writes into ``out``:
 
 * ``impacts_detected.csv``, ``impact_events.csv`` (the cross-check, each side with its match), ``steps.csv``
   (per dwell step: steady peak force, its mean, spread and smallest, impacts per cycle, from the events and

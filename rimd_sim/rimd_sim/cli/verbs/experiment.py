@@ -1,12 +1,12 @@
 """``rimd experiment``: a stepped frequency sweep of the running rig, recorded, then analysed.
 
 The steps are scheduled on exact stamps of the rig's own time base, so the same schedule gives the same data
-however late the requests travel (:mod:`rimd_sim.ros.clients.experiment`). Unless ``--no-record``, the verb starts its own
-recorder process (node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``); a rig in
+however late the requests travel (:mod:`rimd_sim.ros.clients.experiment`). Unless ``--no-record``, the verb starts
+its own recorder process (node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``); a rig in
 lockstep that names it among its consumers waits for it, so nothing is lost however fast the rig runs. Once
 the recorder has written everything up to the end of the last step it is stopped with SIGINT and the
-recording is analysed into ``OUT`` with the same ``--settle`` (:mod:`rimd_sim.analysis.recordings.report`). The rig is
-never stopped: a refused setpoint ends the experiment with an error naming it, and the rig keeps running.
+recording is analysed into ``OUT`` with the same ``--settle`` (:mod:`rimd_sim.analysis.recordings.report`). The rig
+is never stopped: a refused setpoint ends the experiment with an error naming it, and the rig keeps running.
 """
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""``rimd identify REC --out DIR``: make the twin the recorded rig (the library: :mod:`rimd_sim.analysis.identification.identify`).
+"""``rimd identify REC --out DIR``: make the twin the recorded rig.
+
+The library: :mod:`rimd_sim.analysis.identification.identify`.
 
 Writes into DIR: ``identified.yaml`` (the base parameter file with the identified values replaced, runnable by
 ``rimd rig --config`` and ``--params-file``), ``identification.json`` (estimates, standard errors, 95 %

@@ -17,8 +17,8 @@ injects) and ``/rig/session`` (the run's identity), and keeps, per channel:
   (the trap), not the distance from the baseline. The steady peak of a step is the mean of the peaks after
   ``settle`` seconds, with its spread.
 
-With ``--lockstep NAME`` it reports its progress (:class:`rimd_sim.ros.clients.progress.ProgressReporter`): a rig in lockstep
-never runs ahead of it. At ``--until`` seconds of simulation time it prints one JSON report (also to
+With ``--lockstep NAME`` it reports its progress (:class:`rimd_sim.ros.clients.progress.ProgressReporter`): a rig
+in lockstep never runs ahead of it. At ``--until`` seconds of simulation time it prints one JSON report (also to
 ``--json FILE``) and exits 0.
 """
 
@@ -222,7 +222,8 @@ def _ns(stamp: Any) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the client until ``--until`` seconds of simulation time; print the JSON report."""
-    parser = argparse.ArgumentParser(prog="python -m rimd_sim.ros.examples.daq_client", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m rimd_sim.ros.examples.daq_client",
+                                     description=__doc__.split("\n")[0])
     parser.add_argument("--until", type=float, required=True, help="simulation seconds to acquire")
     parser.add_argument("--lockstep", default="", metavar="NAME", help="report progress under NAME (a lockstep rig)")
     parser.add_argument("--threshold", type=float, default=10.0, help="N above the baseline that make an impact")

@@ -180,7 +180,10 @@ class _ServiceForwarder:
 
 
 class _ReplayControls:
-    """A replay's services as :class:`rimd_sim.runtime.playback_control.ReplayControls` (blocking: never the executor's thread)."""
+    """A replay's services as :class:`rimd_sim.runtime.playback_control.ReplayControls`.
+
+    Blocking: never called from the executor's thread.
+    """
 
     def __init__(self, node: Node, replay: str, timeout: float, stop: threading.Event) -> None:
         self._replay, self._timeout, self._stop = replay, timeout, stop
