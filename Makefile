@@ -17,7 +17,7 @@ help:
 	@echo "make test       set up, build and run the whole test suite (pytest tests, on every core)"
 	@echo "make test-fast  the tests that start no process (core, recording, analyses, config): under a minute"
 	@echo "make setup      only create/refresh the venv ($(VENV)) and build ros_ws"
-	@echo "make lint       ruff check"
+	@echo "make lint       ruff check, lint-imports (the layer contracts) and mypy (the package's types)"
 	@echo "make clean      remove ros_ws build/install/log and the set-up stamps (keeps the venv)"
 
 setup:
@@ -36,8 +36,14 @@ test: setup
 test-fast: setup
 	@RIMD_TEST_FAST=1 bash scripts/run_tests.sh -m "not process and not slow" --dist worksteal $(PYTEST_ARGS)
 
+# The static checks, configured in pyproject.toml: ruff (style), import-linter (the layer contracts) and mypy (the
+# package's types; its cache is .mypy_cache). All three run; any failing fails the target, naming it.
 lint: setup
-	@source ./env.sh && ruff check .
+	@source ./env.sh || exit 1; failed=""; \
+	ruff check . || failed="$$failed ruff"; \
+	lint-imports --no-logo || failed="$$failed lint-imports"; \
+	mypy || failed="$$failed mypy"; \
+	if [ -n "$$failed" ]; then echo "make lint: failed:$$failed" >&2; exit 1; fi
 
 clean:
 	rm -rf ros_ws/build ros_ws/install ros_ws/log .stamps

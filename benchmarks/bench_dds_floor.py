@@ -36,7 +36,7 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
 
-def _qos():  # noqa: ANN202
+def _qos():
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=110, reliability=ReliabilityPolicy.RELIABLE)
@@ -98,7 +98,7 @@ def subscriber(seconds: float) -> None:
             for t in TOPICS:
                 self._polled.create(types.get(t, SampleBlock), f"/bench_dds_floor/{t}", _qos(), self.on)
 
-        def on(self, data: bytes, info: dict) -> None:  # noqa: ARG002
+        def on(self, data: bytes, info: dict) -> None:
             self.count += 1
 
     rclpy.init()

@@ -57,7 +57,7 @@ def core(seconds: float) -> dict[str, float]:
     return out
 
 
-def real_time(node, args: list[str], seconds: float) -> float:  # noqa: ANN001
+def real_time(node, args: list[str], seconds: float) -> float:
     import rclpy
 
     proc = start(*args)
@@ -68,7 +68,7 @@ def real_time(node, args: list[str], seconds: float) -> float:  # noqa: ANN001
         stop(proc)
 
 
-def fast(node, args: list[str], seconds: float) -> tuple[float, int]:  # noqa: ANN001
+def fast(node, args: list[str], seconds: float) -> tuple[float, int]:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock

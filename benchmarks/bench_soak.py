@@ -232,7 +232,7 @@ def process_figures(s: Series) -> dict:
 
 # ---- the rig -----------------------------------------------------------------------------------------------
 
-def lease_domain():  # noqa: ANN201 - harness.domains.DomainLease
+def lease_domain():  # harness.domains.DomainLease
     """A ROS_DOMAIN_ID no test run on this machine uses while we hold it (the test suite's leases)."""
     sys.path.insert(0, str(REPO / "tests"))
     from harness.domains import lease_domain_id
@@ -503,7 +503,7 @@ def rerun_memory_limit() -> str:
 
     try:
         return str(read_ros_parameters(find_config_file("rimd.yaml"), node="rimd_rerun").get("memory_limit", "?"))
-    except Exception:  # noqa: BLE001 - only a note in the report
+    except Exception:  # only a note in the report
         return "?"
 
 

@@ -213,8 +213,8 @@ def _verb_parsers() -> dict[str, argparse.ArgumentParser]:
     from rimd_sim import cli
 
     parser = cli.build_parser()
-    for action in parser._actions:  # noqa: SLF001 - argparse keeps sub-parsers there only
-        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+    for action in parser._actions:  # argparse keeps sub-parsers there only
+        if isinstance(action, argparse._SubParsersAction):
             return dict(action.choices)
     return {}
 
@@ -250,11 +250,11 @@ def _option_default(action: argparse.Action) -> str:
 
 
 def _option_help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
-    formatter = parser._get_formatter()  # noqa: SLF001 - expands %(default)s and friends like --help does
-    text = formatter._expand_help(action) if action.help else ""  # noqa: SLF001
-    for group in parser._mutually_exclusive_groups:  # noqa: SLF001
-        if action in group._group_actions:  # noqa: SLF001
-            others = [o.option_strings[0] for o in group._group_actions if o is not action and o.option_strings]  # noqa: SLF001
+    formatter = parser._get_formatter()  # expands %(default)s and friends like --help does
+    text = formatter._expand_help(action) if action.help else ""
+    for group in parser._mutually_exclusive_groups:
+        if action in group._group_actions:
+            others = [o.option_strings[0] for o in group._group_actions if o is not action and o.option_strings]
             if others:
                 text += f" (not with {', '.join(others)})"
     return _cell(text)
@@ -264,8 +264,8 @@ def render_verb(name: str) -> str:
     """The options table of ``rimd NAME``, from its parser."""
     parser = _verb_parsers()[name]
     rows = [[_option_name(a), _option_default(a), _option_help(parser, a)]
-            for a in parser._actions  # noqa: SLF001
-            if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)]  # noqa: SLF001
+            for a in parser._actions
+            if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)]
     usage = " ".join(parser.format_usage().split())
     usage = usage.removeprefix("usage: ")
     return f"`{_cell(usage)}`\n\n" + _table(["option", "default", "help"], rows)

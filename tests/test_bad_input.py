@@ -382,7 +382,7 @@ def check_services(executor: Any, node: Any, name: str, namespace: str, covered:
     def own() -> set[str]:
         try:
             found = node.get_service_names_and_types_by_node(name, namespace)
-        except Exception:  # noqa: BLE001 - not discovered yet
+        except Exception:  # not discovered yet
             return set()
         return {service for service, types in found
                 if not any(t.startswith(("rcl_interfaces/", "type_description_interfaces/")) for t in types)}

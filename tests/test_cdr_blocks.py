@@ -38,7 +38,7 @@ SAMPLES = st.lists(FLOATS, max_size=64).map(lambda xs: np.array(xs, dtype=np.flo
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
-def _same(a: np.ndarray, b) -> bool:  # noqa: ANN001 - array.array or ndarray
+def _same(a: np.ndarray, b: array.array | np.ndarray) -> bool:
     return np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
 
 
@@ -119,7 +119,7 @@ def _rosbags_typestore():
 STORE = _rosbags_typestore()
 
 
-def _rosbags_block(kind: str, frame: str, first: int, rate: float, arrays: dict, sec: int, nanosec: int):  # noqa: ANN202
+def _rosbags_block(kind: str, frame: str, first: int, rate: float, arrays: dict, sec: int, nanosec: int):
     Time, Header = STORE.types["builtin_interfaces/msg/Time"], STORE.types["std_msgs/msg/Header"]
     cls = STORE.types[kind]
     header = Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame)

@@ -1,4 +1,6 @@
-"""The one spring-dashpot pulse of the analyses (rimd_sim.analysis.recordings.contact_pulse) against the core's integrator.
+"""The one spring-dashpot pulse of the analyses against the core's integrator.
+
+The pulse: rimd_sim.analysis.recordings.contact_pulse.
 
 Hypotheses, each against an independent reference (the simulator's event-exact Filippov integrator, sampled at
 1 MHz by ``rimd_sim.analysis.dynamics.pulse.pulse``, the library of ``rimd pulse``):
@@ -51,7 +53,7 @@ def test_the_closed_form_pulse_is_the_cores_force(m, k, c):
     assert abs(shape_at_release) < 1e-9 * model.shape(np.array([0.0]))[0]
 
 
-def _core_force(ref, t: np.ndarray) -> np.ndarray:  # noqa: ANN001
+def _core_force(ref, t: np.ndarray) -> np.ndarray:
     """The core's force at times ``t`` from the contact start: 0 outside the contact, inside it interpolated
     between the 1 MHz samples (linearly extrapolated over the < 1 us from the onset to the first sample: the
     force jumps at the onset)."""

@@ -26,7 +26,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.timeout(90)]
 TOPIC = "/rig/impact/force"
 
 
-def _ns(stamp) -> int:  # noqa: ANN001
+def _ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
@@ -90,7 +90,7 @@ def test_sample_blocks_and_the_motor_service_across_processes(ros_processes, ros
     assert rig.stop() == 0, f"the simulator did not shut down cleanly on SIGINT:\n{rig.tail()}"
 
 
-def _time(ns: int):  # noqa: ANN202
+def _time(ns: int):
     from builtin_interfaces.msg import Time
 
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)

@@ -24,7 +24,7 @@ from rimd_sim.ros.clients.experiment import RECORDER_NODE
 pytestmark = pytest.mark.ros
 
 
-def _rimd(ros_processes, rig, *args: str, name: str):  # noqa: ANN001
+def _rimd(ros_processes, rig, *args: str, name: str):
     executable = shutil.which("rimd")
     assert executable is not None, "rimd is not on PATH: source env.sh"
     return ros_processes.start([executable, *args], name=name, env=rig.env)
@@ -34,20 +34,20 @@ def _rimd(ros_processes, rig, *args: str, name: str):  # noqa: ANN001
 START = 10.0
 
 
-def _rig(rimd_rig, gap: float, f0: float, *, experiment_records: bool):  # noqa: ANN001
+def _rig(rimd_rig, gap: float, f0: float, *, experiment_records: bool):
     """A paused rig in lockstep with the experiment's recorder (``experiment_records``), else the rig's own."""
     return rimd_rig(consumers=[RECORDER_NODE] if experiment_records else [], record=not experiment_records,
                     parameters={"gap": gap, "motor.initial_frequency": f0, "motor.initial_setpoint": f0,
                                 "start_paused": True})
 
 
-def _resume_when_scheduled(experiment, rig) -> None:  # noqa: ANN001
+def _resume_when_scheduled(experiment, rig) -> None:
     """Resume the paused rig once the experiment says its steps are scheduled."""
     experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
     assert rig.resume().success
 
 
-def _stamp(t) -> int:  # noqa: ANN001 - builtin_interfaces/Time
+def _stamp(t) -> int:  # builtin_interfaces/Time
     return int(t.sec) * 1_000_000_000 + int(t.nanosec)
 
 
@@ -56,7 +56,7 @@ def _steps(out: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def _assert_recording_is_the_core_run(recording: Path, config, freqs: list[float], ramp: float,  # noqa: ANN001
+def _assert_recording_is_the_core_run(recording: Path, config, freqs: list[float], ramp: float,
                                       starts_ns: list[int]) -> None:
     """The recorded force channel and events equal the core's offline run of the schedule, sample for sample."""
     from fractions import Fraction

@@ -86,7 +86,7 @@ EXTRA = ["--extra", "/rig/faults", "/rig/capture/force", "/rig/capture/accelerat
 
 
 @pytest.fixture(scope="module")
-def fault_runs(tmp_path_factory):  # noqa: ANN001
+def fault_runs(tmp_path_factory):
     """Messages of a run without faults and of two runs with the scenario (same seed), in lockstep."""
     tmp = tmp_path_factory.mktemp("fault_runs")
     rigs = RigFactory(tmp)
@@ -103,7 +103,7 @@ def fault_runs(tmp_path_factory):  # noqa: ANN001
     return runs
 
 
-def _blocks(messages, *, raw: bool = False):  # noqa: ANN001
+def _blocks(messages, *, raw: bool = False):
     """Blocks received up to END_S (the runs go on a little, by different amounts, until stopped)."""
     from rclpy.serialization import deserialize_message
 
@@ -121,7 +121,7 @@ def _blocks(messages, *, raw: bool = False):  # noqa: ANN001
     return out
 
 
-def _events(messages):  # noqa: ANN001
+def _events(messages):
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import FaultEvent

@@ -200,7 +200,7 @@ def test_foxglove_s_timeline_drives_a_replay(ros_processes, ros_executor, tmp_pa
     collector = RawCollector(ros_executor)
     node = collector.node
 
-    def replay_call(srv, name, request=None):  # noqa: ANN001, ANN202 - as `ros2 service call /rimd_replay/NAME`
+    def replay_call(srv, name, request=None):  # as `ros2 service call /rimd_replay/NAME`
         return call_service(ros_executor, node, node.create_client(srv, f"/rimd_replay/{name}"),
                             request or srv.Request(), timeout=10)
 
@@ -223,7 +223,7 @@ def test_foxglove_s_timeline_drives_a_replay(ros_processes, ros_executor, tmp_pa
         force = client.wait_for(lambda r: client.channel("/rig/impact/force"), 20, "the force channel")
         subscription = client.subscribe(force["id"])
 
-        def request(play: bool, speed: float, seek_ns: int | None, rid: str):  # noqa: ANN202
+        def request(play: bool, speed: float, seek_ns: int | None, rid: str):
             client.playback_control(play, speed, seek_ns, rid)
             return client.wait_for(client.playback_reply(rid), 15, f"the answer to {rid}")
 

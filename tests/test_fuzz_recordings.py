@@ -61,7 +61,7 @@ GAUGE = "lab_msgs/msg/Gauge"
 CASES: Counter[str] = Counter()
 
 
-def fuzz(max_examples: int):  # noqa: ANN201
+def fuzz(max_examples: int):
     """Reproducible hypothesis settings: a fixed number of cases, drawn the same way every run."""
     return settings(max_examples=max_examples, derandomize=True, database=None, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -96,7 +96,7 @@ class Source:
         return f"Source({self.path.name}: {len(self.data)} bytes, {len(self.records)} records, " \
                f"{len(self.chunks)} chunks, {len(self.messages)} messages)"
 
-    def _repr_pretty_(self, printer, cycle) -> None:  # noqa: ANN001 - hypothesis prints failing cases with it
+    def _repr_pretty_(self, printer, cycle) -> None:  # hypothesis prints failing cases with it
         printer.text(repr(self))
 
     @property
@@ -205,7 +205,7 @@ def _rerecord(core: Path, out: Path, *, until_s: float, chunk_size: int, foreign
 
 
 @pytest.fixture(scope="module")
-def sources(tmp_path_factory) -> dict[str, Source]:  # noqa: ANN001
+def sources(tmp_path_factory) -> dict[str, Source]:
     """``small``: 0.3 s of the rig in 8 KiB zstd chunks (reader cases; also ``small_lz4`` and ``small_none``);
     ``rig``: 1 s in 16 KiB chunks (verbs, replay); ``gauge`` and ``foreign_events``: valid files with a foreign
     type beside and instead of a rig topic."""
@@ -223,7 +223,7 @@ def sources(tmp_path_factory) -> dict[str, Source]:  # noqa: ANN001
 
 
 @pytest.fixture(scope="module")
-def work(tmp_path_factory) -> Path:  # noqa: ANN001
+def work(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("fuzz_cases")
 
 
@@ -395,7 +395,7 @@ def test_valid_file_with_a_foreign_type(sources, work):
 # ---- rimd analyze and rimd rerun -----------------------------------------------------------------------------
 
 @st.composite
-def damaged_file(draw, source: Source) -> tuple[str, bytes]:  # noqa: ANN001
+def damaged_file(draw, source: Source) -> tuple[str, bytes]:
     """One damaged copy of ``source``: (what was done, bytes)."""
     kind = draw(st.sampled_from(["cut", "boundary", "chunk", "summary", "length"]))
     data = source.data

@@ -1,4 +1,6 @@
-"""The joint fit of ``rimd identify`` (rimd_sim.analysis.identification.joint_fit.JointFit) on a short recording of a known rig.
+"""The joint fit of ``rimd identify`` on a short recording of a known rig.
+
+The fit: rimd_sim.analysis.identification.joint_fit.JointFit.
 
 The recording is the core's run of a rig that differs from the defaults (battery rig 5 of
 ``tests/harness/ident_rigs.py``), two motor steps of 5 s, instrument noise on, written as the recorder writes it;
@@ -36,13 +38,13 @@ def prepared(tmp_path_factory):
     return local_stages(rec.load(path), SimConfig(), {})
 
 
-def _fit(prepared):  # noqa: ANN001, ANN202
+def _fit(prepared):
     from rimd_sim.analysis.identification.joint_fit import JointFit
 
     return JointFit(SimConfig(), list(prepared.estimates), {}, prepared.segments, prepared.obs)
 
 
-def _truth_x(fit, prepared):  # noqa: ANN001, ANN202
+def _truth_x(fit, prepared):
     """The unknowns at the true parameters, each shot's initial state (and kicks) fitted."""
     from scipy.optimize import least_squares
 

@@ -41,7 +41,7 @@ CHANNELS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/accel
 DATA_TOPICS = (*CHANNELS, "/rig/truth", "/rig/motor/state", "/rig/impact/events", "/rig/faults", "/clock")
 
 
-def daq(rig, out: Path, until: float, *extra: str) -> subprocess.CompletedProcess:  # noqa: ANN001
+def daq(rig, out: Path, until: float, *extra: str) -> subprocess.CompletedProcess:
     """Run the harness DAQ client against ``rig`` (a lockstep consumer named ``daq``) until ``until`` s."""
     return subprocess.run([sys.executable, DAQ, str(out), "--until", str(until), "--lockstep", "daq", *extra],
                           env=rig.env, capture_output=True, text=True, timeout=200)
@@ -145,7 +145,7 @@ def test_a_replay_in_lockstep_gives_a_slow_subscriber_every_message(ros_processe
         assert got == sent[:len(got)] and len(got) >= len(due), f"{topic}: {len(got)} of the {len(due)} due"
 
 
-def _wait_for(condition, timeout: float) -> float | None:  # noqa: ANN001
+def _wait_for(condition, timeout: float) -> float | None:
     """Seconds until ``condition()`` held (polled every 10 ms), or None after ``timeout``."""
     start = time.monotonic()
     while time.monotonic() - start < timeout:

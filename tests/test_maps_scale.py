@@ -121,7 +121,7 @@ class Cluster:
                                   "--no-dashboard", "--no-show"])
 
     def _start(self, name: str, argv: list[str]) -> subprocess.Popen:
-        log = open(self.tmp / f"{name}-{len(self.procs)}.log", "wb")  # noqa: SIM115 - closed with the process
+        log = open(self.tmp / f"{name}-{len(self.procs)}.log", "wb")  # closed with the process
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=self.env, start_new_session=True,
                                 cwd=self.tmp)
         self.procs.append(proc)

@@ -44,7 +44,7 @@ def _handlers_installed(pid: int) -> bool:
     return False
 
 
-def _wait_handlers(process, timeout: float = 60.0) -> None:  # noqa: ANN001
+def _wait_handlers(process, timeout: float = 60.0) -> None:
     deadline = time.monotonic() + timeout
     while not _handlers_installed(process.pid):
         assert process.is_running(), f"{process.name} exited early:\n{process.tail()}"
@@ -53,7 +53,7 @@ def _wait_handlers(process, timeout: float = 60.0) -> None:  # noqa: ANN001
 
 
 def _stop_at_random_moments(ros_processes, executable: str, args: list[str], ready: str, offset: int,
-                            check=None) -> list[str]:  # noqa: ANN001
+                            check=None) -> list[str]:
     """Start ``executable`` STOPS_PER_NODE times; stop each at a random moment (the first half from the fixed
     seed, the second from the clock's; ``offset`` tells the nodes apart); return what was done."""
     done = []
@@ -83,7 +83,7 @@ def _stop_at_random_moments(ros_processes, executable: str, args: list[str], rea
     return done
 
 
-def _fast_simulator(ros_processes):  # noqa: ANN001
+def _fast_simulator(ros_processes):
     sim = ros_processes.start_node("rimd_simulator", "--ros-args", "-p", "real_time_factor:=0.0",
                                    "-p", "motor.initial_setpoint:=3.75", name="fast_simulator")
     sim.wait_for_output(r"rig ready", timeout=60)

@@ -18,7 +18,7 @@ from rimd_sim.cli import main
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
 
-def rimd(capsys, *argv: str) -> tuple[int, str, str]:  # noqa: ANN001
+def rimd(capsys, *argv: str) -> tuple[int, str, str]:
     try:
         code = main(list(argv))
     except SystemExit as exc:   # argparse refusals

@@ -97,7 +97,7 @@ def test_the_declaration_refuses_what_breaks_its_rule_and_accepts_what_keeps_it(
 
     @SWEEP
     @given(bad_values(p))
-    def refused(value) -> None:   # noqa: ANN001
+    def refused(value) -> None:
         with pytest.raises(ConfigError) as info:
             p.validate(value)
         text = str(info.value)

@@ -94,7 +94,7 @@ def recording(tmp_path_factory):
     return open_recording(path)
 
 
-def replay(recording, **values):  # noqa: ANN001, ANN201
+def replay(recording, **values):
     clock = FakeClock()
     player = Player(recording, recording.topics, build(ReplaySettings, {"file": "rig.mcap", **values}), clock=clock)
     player.start()
@@ -107,7 +107,7 @@ def f32(x: float) -> float:
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
-def state(**changes) -> PlayerState:  # noqa: ANN003
+def state(**changes) -> PlayerState:
     base = {"start_ns": 0, "end_ns": 10 * S, "position_ns": 2 * S, "paused": True, "ended": False, "rate": 1.0,
             "passes": 1, "seeks": 0}
     return PlayerState(**{**base, **changes})

@@ -33,7 +33,7 @@ def recording(tmp_path_factory):
     return open_recording(path)
 
 
-def player(recording, clock=None, **values):  # noqa: ANN001, ANN201
+def player(recording, clock=None, **values):
     settings = build(ReplaySettings, {"file": "rig.mcap", **values})
     return Player(recording, recording.topics, settings, clock=clock or FakeClock())
 

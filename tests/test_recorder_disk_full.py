@@ -157,11 +157,11 @@ def test_writer_stops_at_enospc_keeps_a_clean_prefix_and_retries(tiny_disk):
     assert [m.data for m in recording.messages()] == given[:n_ok] + given[:300]
 
 
-def _not_written(status) -> int:  # noqa: ANN001
+def _not_written(status) -> int:
     return int(re.search(r"\((\d+) messages not written\)$", status.message).group(1))
 
 
-def _statuses(store: list):  # noqa: ANN202
+def _statuses(store: list):
     from diagnostic_msgs.msg import DiagnosticArray
 
     def callback(msg: DiagnosticArray) -> None:
@@ -190,7 +190,7 @@ def test_disk_full_while_recording_the_rig(small_disk, ros_processes, ros_execut
     assert failed_file.parent == out and "the node keeps running" in log and "~/split" in log
 
     # /diagnostics: ERROR, saying so, with the count of messages not written.
-    def error_status():  # noqa: ANN202
+    def error_status():
         return next((s for s in reversed(statuses) if s.level == DiagnosticStatus.ERROR), None)
     assert spin_until(ros_executor, lambda: error_status() is not None, 5), [s.message for s in statuses]
     status = error_status()

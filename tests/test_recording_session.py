@@ -47,7 +47,7 @@ class FakeFile:
         self._fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self.size = 0
 
-    def write(self, data) -> int:  # noqa: ANN001
+    def write(self, data) -> int:
         room = self.disk.capacity - self.disk.used
         view = memoryview(data)
         chunk = view[:max(0, room)]
@@ -82,7 +82,7 @@ def block(index: int, n: int = 100) -> bytes:
                                                   for k in range(n)]))
 
 
-def session(tmp_path: Path, disk: FakeDisk | None = None, **kwargs):  # noqa: ANN201
+def session(tmp_path: Path, disk: FakeDisk | None = None, **kwargs):
     log: list[tuple[str, str]] = []
     written: list[dict[str, int]] = []
     bag = BagWriter(tmp_path / "rec", chunk_size=8192, opener=disk.opener if disk else None)

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory) -> Path:  # noqa: ANN001
+def recording(tmp_path_factory) -> Path:
     """A recording of 3 s of the rig at gap 0, 3.75 Hz (impacting), made with the real nodes."""
     import os
 
@@ -59,7 +59,7 @@ def _recorded(path: Path) -> dict[str, list[tuple[int, bytes]]]:
     return got
 
 
-def _replay(ros_processes, ros_executor, collector, *params: str, expected: int, timeout: float = 30.0):  # noqa: ANN001
+def _replay(ros_processes, ros_executor, collector, *params: str, expected: int, timeout: float = 30.0):
     """Run a replay to its end; return it once the collector holds the ``expected`` messages it published (they
     travel after the node has exited: a wait on what arrived, not on time)."""
     args = ["--ros-args", "-p", "wait_for_subscribers:=1"]
@@ -72,11 +72,11 @@ def _replay(ros_processes, ros_executor, collector, *params: str, expected: int,
     return replay
 
 
-def _count(recorded, topics=RIG_TOPICS) -> int:  # noqa: ANN001
+def _count(recorded, topics=RIG_TOPICS) -> int:
     return sum(len(recorded.get(t, [])) for t in topics)
 
 
-def _timing_errors(recorded, collector, rate: float) -> list[float]:  # noqa: ANN001
+def _timing_errors(recorded, collector, rate: float) -> list[float]:
     """Receive time minus due time (recorded log time / rate), centred on the median offset, in s."""
     pairs = []
     for topic, items in recorded.items():

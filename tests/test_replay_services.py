@@ -33,7 +33,7 @@ def recording(tmp_path_factory):
     return path
 
 
-def _call(ros_executor, node, srv, name, request=None):  # noqa: ANN001, ANN202
+def _call(ros_executor, node, srv, name, request=None):
     client = node.create_client(srv, f"/rimd_replay/{name}")
     return call_service(ros_executor, node, client, request or srv.Request(), timeout=10)
 

@@ -16,9 +16,9 @@ what was still in flight), having written ``OUT.pkl``:
   impacts), plus the holes in ``first_index`` (expected, received) and the count of stamps off the nominal
   grid ``first_index / sample_rate``: enough for a 600 s run without keeping 24 million samples.
 
-With ``--lockstep NAME`` it is a lockstep consumer (``rimd_sim.ros.clients.progress.ProgressReporter``, one line): it works
-``--work-ms`` per block (plus a random ``--jitter-ms``, seeded), reports each block done, and also writes
-``OUT.pkl.timing`` (JSON): its busy time, the wall time from its first block to its last, and the simulation
+With ``--lockstep NAME`` it is a lockstep consumer (``rimd_sim.ros.clients.progress.ProgressReporter``, one
+line): it works ``--work-ms`` per block (plus a random ``--jitter-ms``, seeded), reports each block done, and also
+writes ``OUT.pkl.timing`` (JSON): its busy time, the wall time from its first block to its last, and the simulation
 time covered, so a test can tell whether the rig went as fast as this client allowed.
 """
 
@@ -79,7 +79,7 @@ def main() -> int:
     timing = {"busy_s": 0.0, "first_wall": None, "last_wall": None, "blocks": 0}
     subs = {}
 
-    def on_block(data, topic):  # noqa: ANN001
+    def on_block(data, topic):
         started = time.perf_counter()
         if args.work_ms or args.jitter_ms:
             time.sleep((args.work_ms + rng.uniform(0.0, args.jitter_ms)) / 1e3)
@@ -93,7 +93,7 @@ def main() -> int:
         timing["last_wall"] = now
         timing["blocks"] += 1
 
-    def on_block_work(data, topic):  # noqa: ANN001
+    def on_block_work(data, topic):
         msg = deserialize_message(data, msgs.SampleBlock)
         n = len(msg.samples)
         end = (msg.first_index + n) / msg.sample_rate

@@ -85,7 +85,7 @@ class Written:
     blocks: dict[str, int] = field(default_factory=dict)
 
 
-def rig_config(params: Mapping[str, float], schedule: Schedule):  # noqa: ANN201 - SimConfig
+def rig_config(params: Mapping[str, float], schedule: Schedule):  # SimConfig
     """The simulator's configuration for ``params`` (flat names over the defaults) run under ``schedule``."""
     from rimd_sim.settings.config import SimConfig
 
@@ -131,7 +131,7 @@ def write_core_recording(path: Path, params: Mapping[str, float], schedule: Sche
     def ns_of(t: Fraction) -> int:
         return round(t * 10**9)
 
-    def stamp(msg, ns: int) -> None:  # noqa: ANN001
+    def stamp(msg, ns: int) -> None:
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
 
     n_blocks = round(schedule.end * 100)
@@ -187,7 +187,7 @@ def write_core_recording(path: Path, params: Mapping[str, float], schedule: Sche
     return out
 
 
-def record_through_rig(rigs, out: Path, params: Mapping[str, float], schedule: Schedule, *,  # noqa: ANN001
+def record_through_rig(rigs, out: Path, params: Mapping[str, float], schedule: Schedule, *,
                        timeout: float = 240.0) -> Path:
     """Record ``schedule`` on the running rig ``params`` as a user would; return the recording directory.
 

@@ -11,7 +11,7 @@ def _refuse(token: str) -> None:
     raise ValueError(f"not JSON: the bare token {token} (JSON has no NaN or infinity; the product writes null)")
 
 
-def read_json(path: Path) -> Any:  # noqa: ANN401 - any JSON document
+def read_json(path: Path) -> Any:  # any JSON document
     """The JSON document at ``path``, parsed strictly: ``NaN``, ``Infinity`` and ``-Infinity`` are refused.
 
     Python's ``json`` reads those tokens, but jq, browsers and most other readers do not, so every test that

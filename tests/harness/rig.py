@@ -22,7 +22,7 @@ BLOCK_TOPICS = [t for t, kind in RIG_TOPICS.items() if kind in ("SampleBlock", "
 class RawCollector:
     """A node in the test process holding the serialized bytes of every message of the rig topics."""
 
-    def __init__(self, executor, topics=RIG_TOPICS, remap=None, name: str = "test_collector"):  # noqa: ANN001
+    def __init__(self, executor, topics=RIG_TOPICS, remap=None, name: str = "test_collector"):
         from rclpy.node import Node
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -35,7 +35,7 @@ class RawCollector:
         qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
         self.subscriptions = []
         for topic, kind in topics.items():
-            def callback(data, topic=topic):  # noqa: ANN001
+            def callback(data, topic=topic):
                 self.messages[topic].append(data)
                 self.times[topic].append(time.monotonic())
             name = (remap or {}).get(topic, topic)
@@ -50,14 +50,14 @@ class Diagnostics:
     subscribers`` (matched subscriptions); the recorder ``<topic> written``; both publish about once a second.
     """
 
-    def __init__(self, node) -> None:  # noqa: ANN001
+    def __init__(self, node) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
 
         self.values: dict[str, dict[str, str]] = {}
         self.received: dict[str, float] = {}   # status name -> monotonic time of its last report
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 100)
 
-    def _on(self, msg) -> None:  # noqa: ANN001
+    def _on(self, msg) -> None:
         for status in msg.status:
             self.values[status.name] = {kv.key: kv.value for kv in status.values}
             self.received[status.name] = time.monotonic()
@@ -71,7 +71,7 @@ class Diagnostics:
         return out
 
 
-def wait_until_matched(executor, collector: RawCollector, diagnostics: Diagnostics, readers: int,  # noqa: ANN001
+def wait_until_matched(executor, collector: RawCollector, diagnostics: Diagnostics, readers: int,
                        timeout: float = 30.0) -> None:
     """Wait until the collector's subscriptions have matched their publishers and the simulator's publishers
     of those topics have matched ``readers`` subscriptions each (the collector, the recorder...), so that the
@@ -87,7 +87,7 @@ def wait_until_matched(executor, collector: RawCollector, diagnostics: Diagnosti
         + ", simulator " + str({k: v for k, v in diagnostics.of("rimd_simulator").items() if "subscribers" in k}))
 
 
-def wait_until_delivered(executor, collector: RawCollector, diagnostics: Diagnostics, paused_at: float,  # noqa: ANN001
+def wait_until_delivered(executor, collector: RawCollector, diagnostics: Diagnostics, paused_at: float,
                          recorder: bool = True, timeout: float = 30.0) -> None:
     """After a pause (at monotonic time ``paused_at``): wait until every message the simulator says it published
     on the collector's topics has reached the collector and, with ``recorder``, reached the recorder (written, or
@@ -111,7 +111,7 @@ def wait_until_delivered(executor, collector: RawCollector, diagnostics: Diagnos
     assert spin_until(executor, delivered, timeout), "published / received / written: " + str(counts())
 
 
-def start_rig(ros_processes, out: Path, *recorder_args: str, paused: bool = True):  # noqa: ANN001
+def start_rig(ros_processes, out: Path, *recorder_args: str, paused: bool = True):
     recorder = ros_processes.start_node("rimd_recorder", "--ros-args", "-p", f"output_dir:={out}",
                                         "-p", "flush_interval:=0.5", *recorder_args)
     recorder.wait_for_output(r"recording .* into", timeout=30)
@@ -123,20 +123,20 @@ def start_rig(ros_processes, out: Path, *recorder_args: str, paused: bool = True
     return recorder, simulator
 
 
-def trigger(executor, node, service: str, timeout: float = 10.0):  # noqa: ANN001
+def trigger(executor, node, service: str, timeout: float = 10.0):
     from std_srvs.srv import Trigger
 
     client = node.create_client(Trigger, service)
     return call_service(executor, node, client, Trigger.Request(), timeout)
 
 
-def run_for(executor, seconds: float) -> None:  # noqa: ANN001
+def run_for(executor, seconds: float) -> None:
     """Spin for ``seconds`` of wall time: how long a rig runs, never a guess at delivery (wait on a condition)."""
     deadline = time.monotonic() + seconds
     spin_until(executor, lambda: time.monotonic() >= deadline, seconds + 1)
 
 
-def record_rig(ros_processes, ros_executor, out: Path, seconds: float, *recorder_args: str):  # noqa: ANN001
+def record_rig(ros_processes, ros_executor, out: Path, seconds: float, *recorder_args: str):
     """Run the rig for ``seconds`` of simulation time with the recorder and a collector; pause it once that
     much reached the collector; return both processes and the collector once every message published has reached
     the collector and been written by the recorder (counted by the simulator and the recorder)."""

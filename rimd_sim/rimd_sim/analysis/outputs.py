@@ -10,6 +10,10 @@ import csv
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rimd_sim.settings.config import SimConfig
 
 from rimd_sim.errors import InputError
 
@@ -31,7 +35,7 @@ def write_csv(path: Path, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
-def jsonable(value):  # noqa: ANN001, ANN201 - any JSON-like tree
+def jsonable(value: Any) -> Any:
     """``value`` as strict JSON data: NumPy scalars as Python numbers, tuples as lists, NaN and ±inf as null.
 
     JSON has no NaN or infinity; Python's ``json`` would write the bare tokens ``NaN`` and ``Infinity``,
@@ -53,7 +57,7 @@ def jsonable(value):  # noqa: ANN001, ANN201 - any JSON-like tree
     return value
 
 
-def write_json(path: Path, data) -> None:  # noqa: ANN001 - any JSON-like tree
+def write_json(path: Path, data: Any) -> None:
     """Write ``data`` to ``path`` as strict JSON (:func:`jsonable`), indented, with a final newline."""
     path.write_text(json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
 
@@ -75,7 +79,7 @@ def nest(flat: dict) -> dict:
     return tree
 
 
-def read_yaml(path: Path):  # noqa: ANN201 - the YAML document
+def read_yaml(path: Path) -> Any:
     """The YAML document of ``path``.
 
     Raises:
@@ -98,7 +102,7 @@ def read_yaml(path: Path):  # noqa: ANN201 - the YAML document
         raise FileFormatError(f"{path}{where}: not valid YAML: {problem}") from None
 
 
-def write_parameter_file(path: Path, base_path: Path, config, header: str) -> None:  # noqa: ANN001
+def write_parameter_file(path: Path, base_path: Path, config: SimConfig, header: str) -> None:
     """The base file with the simulator's section replaced by every value of ``config``.
 
     The section is written as ``/**/rimd_simulator``: the node runs in namespace ``/rig`` and ROS applies a

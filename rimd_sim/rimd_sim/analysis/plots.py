@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -13,8 +15,16 @@ import numpy as np  # noqa: E402
 
 from rimd_sim.analysis.dynamics.sweep import SweepResult  # noqa: E402
 
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa: ANN001
+    from rimd_sim.analysis.recordings.reading import Window
+    from rimd_sim.analysis.recordings.recorded import Channel, Step
+
+
+def _save(fig: Figure, path: Path, title: str, ax: Axes | None = None, dpi: int = 120) -> Path:
     """Title the figure (on ``ax``, else the whole figure), lay it out, write it and close it."""
     if title:
         if ax is not None:
@@ -27,14 +37,14 @@ def _save(fig, path: Path, title: str, ax=None, dpi: int = 120) -> Path:  # noqa
     return path
 
 
-def _force_over_impacts():  # noqa: ANN202 - (figure, force axes, impacts axes)
+def _force_over_impacts() -> tuple[Figure, Axes, Axes]:
     """Two panels sharing the frequency axis: the peak force (3/4 of the height) over impacts per cycle."""
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ax2.set_ylabel("impacts / cycle")
     return fig, ax, ax2
 
 
-def _save_force_over_impacts(fig, ax, ax2, path: Path, title: str, *, force: str, frequency: str,  # noqa: ANN001
+def _save_force_over_impacts(fig: Figure, ax: Axes, ax2: Axes, path: Path, title: str, *, force: str, frequency: str,
                              legend: dict) -> Path:
     """Label and save a :func:`_force_over_impacts` figure.
 
@@ -184,7 +194,7 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
     fig, ax = plt.subplots(figsize=(10, 6))
     _class_image(ax, result.frequency_ratio, result.gap_ratio, result.primary, palette)
     gi, fj = np.nonzero(result.coexisting)
-    marks = []
+    marks: list[Artist] = []
     dense = max(result.primary.shape) > DENSE_CELLS
     if len(gi) and dense:
         from matplotlib.colors import ListedColormap
@@ -225,7 +235,7 @@ _WINDOW_STYLE = {"gap": ("#7e57c2", "..", "hole in first_index"), "data": ("#ff9
                  "/rig/faults": ("#e53935", "//", "fault on /rig/faults")}
 
 
-def _draw_windows(ax, windows, topics=None) -> int:  # noqa: ANN001
+def _draw_windows(ax: Axes, windows: Iterable[Window], topics: Iterable[str] | None = None) -> int:
     """Shade the excluded windows (of ``topics``, or all) on a time axis; returns how many were drawn."""
     drawn, labelled = 0, set()
     for w in windows:
@@ -265,8 +275,8 @@ def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
                                     frequency="motor frequency setpoint (Hz)", legend={"fontsize": 7, "loc": "best"})
 
 
-def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: Path, title: str = "",
-                          windows=()) -> int:  # noqa: ANN001
+def plot_recorded_impacts(events_t: np.ndarray, events_peak: np.ndarray, det_t: np.ndarray, det_peak: np.ndarray,
+                          steps: Iterable[Step], path: Path, title: str = "", windows: Iterable[Window] = ()) -> int:
     """Peak force of every impact over time (events and force-channel detections), steps and left-out windows.
 
     Returns the number of windows drawn.
@@ -287,7 +297,8 @@ def plot_recorded_impacts(events_t, events_peak, det_t, det_peak, steps, path: P
     return drawn
 
 
-def plot_recorded_channels(channels: dict, windows, path: Path, title: str = "", bins: int = 1500) -> int:  # noqa: ANN001
+def plot_recorded_channels(channels: dict[str, Channel], windows: Sequence[Window], path: Path, title: str = "",
+                           bins: int = 1500) -> int:
     """The recorded channels over time (envelope of each time bin: min to max), left-out windows shaded.
 
     ``channels``: label -> :class:`~rimd_sim.analysis.recordings.recorded.Channel` (its ``topic`` selects its windows).

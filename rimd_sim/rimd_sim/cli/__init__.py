@@ -23,6 +23,7 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 from rimd_sim import __version__
 
@@ -81,13 +82,14 @@ def number(option: str, unit: str = "", *, ge: float | None = None, gt: float | 
         return value
 
     convert.__name__ = "integer" if integer else "number"   # what argparse says for a value it cannot convert
-    convert.option, convert.rule = option, rule               # for the tests that sweep every verb's options
+    # For the tests that sweep every verb's options (mypy types no attribute of a function).
+    convert.option, convert.rule = option, rule  # type: ignore[attr-defined]
     return convert
 
 
 def count(option: str, minimum: int = 1, maximum: int | None = None) -> Callable[[str], int]:
     """An integer >= ``minimum`` (and <= ``maximum``), see :func:`number`."""
-    return number(option, ge=minimum, le=maximum, integer=True)
+    return cast(Callable[[str], int], number(option, ge=minimum, le=maximum, integer=True))   # integer: int()
 
 
 def simulator_parameter(option: str, name: str, *, scale: float = 1.0,

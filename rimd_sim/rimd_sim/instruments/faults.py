@@ -428,6 +428,7 @@ class FaultLayer:
                     signs = np.where(u[where] < 0.5 * p, -1.0, 1.0)
                     x[a + where] += signs * 0.25 * (hi_range - lo_range)
             elif kind == "saturate":
+                assert lim_lo is not None and lim_hi is not None   # n > 0 here: a < b <= n
                 np.maximum(lim_lo[a:b], -m, out=lim_lo[a:b])
                 np.minimum(lim_hi[a:b], m, out=lim_hi[a:b])
             elif kind == "disconnect":

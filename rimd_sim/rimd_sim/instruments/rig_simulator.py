@@ -349,7 +349,7 @@ class RigSimulator:
             cap_rate = Fraction(repr(self._capture.config.sample_rate))
         truth_all = None
         if parts[0].truth is not None:
-            truth_all = (parts[0].truth[0], np.concatenate([p.truth[1] for p in parts], axis=1))
+            truth_all = (parts[0].truth[0], np.concatenate([_truth(p)[1] for p in parts], axis=1))
             truth_cuts = _split_index(truth_all[0], truth_all[1].shape[1],
                                       [samples_before(b, truth_rate) for b in bounds])
         impacts = sorted([i for p in parts for i in p.impacts] + extra, key=lambda i: i.index)
@@ -382,6 +382,12 @@ class RigSimulator:
             ))
             prev = b
         return blocks
+
+
+def _truth(part: ModelOutput) -> tuple[int, np.ndarray]:
+    """The truth of an advance of a model that gives it (every advance does when the first does)."""
+    assert part.truth is not None
+    return part.truth
 
 
 def _split_index(first: int, n: int, cuts: list[int]) -> list[tuple[int, int]]:

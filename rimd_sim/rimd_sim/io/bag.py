@@ -116,8 +116,9 @@ class WriteFailure:
     @property
     def headline(self) -> str:
         """What happened, in two words: ``disk full``, ``file too large``, ``disk quota exceeded``, ``write error``."""
-        return {errno.ENOSPC: "disk full", errno.EFBIG: "file too large",
-                errno.EDQUOT: "disk quota exceeded"}.get(self.error.errno, "write error")
+        code = self.error.errno
+        names = {errno.ENOSPC: "disk full", errno.EFBIG: "file too large", errno.EDQUOT: "disk quota exceeded"}
+        return names.get(code, "write error") if code is not None else "write error"
 
     @property
     def reason(self) -> str:
@@ -150,11 +151,13 @@ class _UnbufferedFile:
         self._fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self.bytes_written = 0
 
-    def write(self, data) -> int:  # noqa: ANN001
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        fd = self._fd
+        assert fd is not None, "write after close"
         view = memoryview(data)
         try:
             while view:
-                n = os.write(self._fd, view)
+                n = os.write(fd, view)
                 self.bytes_written += n
                 view = view[n:]
         except OSError as exc:
@@ -227,7 +230,8 @@ class McapFile:
         self._committed = 0
         self._raw = (opener or _UnbufferedFile)(path)
         try:
-            self._writer = Writer(self._raw, chunk_size=chunk_size, compression=_COMPRESSION_TYPES[compression])
+            # mcap's Writer takes any object with write() and tell() (its annotation names only files).
+            self._writer = Writer(self._raw, chunk_size=chunk_size, compression=_COMPRESSION_TYPES[compression])  # type: ignore[arg-type]
             self._writer.start(profile="ros2", library=library)
             self._compression = compression
             self._channels: dict[str, int] = {}
@@ -252,10 +256,12 @@ class McapFile:
         if not messages or not self._pending:
             return
         info = self.info
-        if info.start_ns is None or self._pending_start < info.start_ns:
-            info.start_ns = self._pending_start
-        if info.end_ns is None or self._pending_end > info.end_ns:
-            info.end_ns = self._pending_end
+        start, end = self._pending_start, self._pending_end
+        assert start is not None and end is not None   # set with the first pending message
+        if info.start_ns is None or start < info.start_ns:
+            info.start_ns = start
+        if info.end_ns is None or end > info.end_ns:
+            info.end_ns = end
         for topic, count in self._pending.items():
             info.message_count += count
             info.topic_counts[topic] = info.topic_counts.get(topic, 0) + count

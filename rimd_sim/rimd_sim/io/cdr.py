@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -77,7 +78,7 @@ class CdrReader:
         self.data, self.order, self.pos = data, byte_order(data), 0
         self._p = _PRIMITIVES[self.order]
 
-    def _primitive(self, code: str) -> int | float:
+    def _primitive(self, code: str) -> Any:   # an int or a float, by ``code``
         s = self._p[code]
         self.pos = _aligned(self.pos, s.size)
         try:
@@ -138,7 +139,8 @@ class CdrWriter:
     __slots__ = ("order", "parts", "pos", "_p")
 
     def __init__(self, order: str = "<", *, at: int = 0) -> None:
-        self.order, self.parts, self.pos = order, [], at
+        self.parts: list[bytes] = []
+        self.order, self.pos = order, at
         self._p = _PRIMITIVES[order]
 
     def _pad(self, size: int) -> None:
@@ -323,6 +325,7 @@ def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays
         names = names[:arrays]
     r = CdrReader(data)
     header, first_index, sample_rate = _read_block_head(r)
+    assert header is not None   # read: header=True
     return BlockView(header, first_index, sample_rate, {name: r.f64_array() for name in names})
 
 

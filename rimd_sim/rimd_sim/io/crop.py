@@ -21,7 +21,7 @@ import yaml
 
 from rimd_sim.io.bag import ROSBAG2_METADATA_NAME, BagWriter
 from rimd_sim.io.msgdefs import MessageDefinition, MessageDefinitionError, message_definition
-from rimd_sim.io.reader import RecordingError, open_recording
+from rimd_sim.io.reader import Recording, RecordingError, open_recording
 
 __all__ = ["CropError", "CropResult", "crop"]
 
@@ -65,12 +65,13 @@ def _qos_profiles(text: str) -> list[dict]:
     return [dict(p) for p in profiles if isinstance(p, dict)] if isinstance(profiles, list) else []
 
 
-def _bounds(recording) -> tuple[int, int] | None:  # noqa: ANN001 - reader.Recording
-    first = last = None
+def _bounds(recording: Recording) -> tuple[int, int] | None:
+    first: int | None = None
+    last: int | None = None
     for msg in recording.messages():
         first = msg.log_time if first is None else min(first, msg.log_time)
         last = msg.log_time if last is None else max(last, msg.log_time)
-    return None if first is None else (first, last)
+    return None if first is None or last is None else (first, last)
 
 
 def crop(source: str | Path, output_dir: str | Path, *, start: float = 0.0, end: float | None = None,

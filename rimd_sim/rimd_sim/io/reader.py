@@ -15,9 +15,10 @@ from __future__ import annotations
 import io
 import struct
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile
@@ -35,9 +36,9 @@ _MAGIC = b"\x89MCAP0\r\n"
 #: Largest record (and decompressed chunk) accepted: a longer one is taken for a damaged length field.
 _RECORD_LIMIT = 1 << 30
 #: The records the reader needs, parsed; any other (indexes, attachments, summary offsets) is skipped by length.
-_PARSED = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read, Opcode.CHUNK: Chunk.read,
-           Opcode.METADATA: Metadata.read, Opcode.DATA_END: DataEnd.read, Opcode.FOOTER: Footer.read,
-           Opcode.STATISTICS: Statistics.read}
+_PARSED: dict[int, Callable[[ReadDataStream], Any]] = {
+    Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read, Opcode.CHUNK: Chunk.read, Opcode.METADATA: Metadata.read,
+    Opcode.DATA_END: DataEnd.read, Opcode.FOOTER: Footer.read, Opcode.STATISTICS: Statistics.read}
 #: Where each record may stand (MCAP spec; the Header only first): a record found elsewhere has a damaged opcode.
 #: Private records (opcodes 0x80 and up) may stand anywhere and are skipped, as the spec says.
 _DATA_SECTION = {Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE, Opcode.CHUNK, Opcode.MESSAGE_INDEX, Opcode.ATTACHMENT,
@@ -171,7 +172,7 @@ class _Body(ReadDataStream):
         return data
 
 
-def _parse(opcode: int, body: bytes):  # noqa: ANN202
+def _parse(opcode: int, body: bytes) -> Any:
     """The record of ``opcode`` from its body, or None for a record the reader does not need."""
     if opcode == Opcode.MESSAGE_INDEX:
         # Not needed, but cheap to check: its entries (16 bytes each) must fill its length. Damaged bytes taken
@@ -291,7 +292,7 @@ def _records(path: Path, report: FileReport | None) -> Iterator[tuple[object, in
                 inner = _chunk_records(record) if isinstance(record, Chunk) else ()
             except CRCValidationError:
                 return damaged(f"damaged chunk at byte {position}: its contents do not match its CRC")
-            except Exception as exc:  # noqa: BLE001 - any failure to read a record is damage, reported
+            except Exception as exc:  # any failure to read a record is damage, reported
                 name = Opcode(opcode).name.lower() if opcode < 0x80 else f"0x{opcode:02x}"
                 return damaged(f"unreadable {name} record at byte {position}: {type(exc).__name__}: "
                                f"{str(exc) or 'damaged'}")
@@ -316,7 +317,7 @@ def _records(path: Path, report: FileReport | None) -> Iterator[tuple[object, in
                 return
 
 
-def _check_end(stream, footer_end: int, size: int, footer: Footer, data_end: int | None,  # noqa: ANN001
+def _check_end(stream: BinaryIO, footer_end: int, size: int, footer: Footer, data_end: int | None,
                data_end_record: DataEnd | None, data_crc: int) -> tuple[str | None, int]:
     """What is wrong with a file read to its footer, and up to which byte it is good.
 
@@ -330,7 +331,7 @@ def _check_end(stream, footer_end: int, size: int, footer: Footer, data_end: int
         return "damaged end of file: the footer is not followed by the MCAP magic bytes", footer_end
     if footer_end + len(_MAGIC) != size:
         return f"{size - footer_end - len(_MAGIC)} bytes after the end of the MCAP data", footer_end + len(_MAGIC)
-    if data_end is None:
+    if data_end is None or data_end_record is None:   # found together
         return "damaged file: no DataEnd record before the footer", footer_end
     if data_end_record.data_section_crc not in (0, data_crc):
         return "the data section's CRC does not match: a record outside the chunks is damaged", data_end
@@ -406,7 +407,7 @@ def _summary_ok(path: Path) -> bool:
     try:
         with path.open("rb") as stream:
             return make_reader(stream).get_summary() is not None
-    except Exception:  # noqa: BLE001 - any failure means: no usable summary, scan instead
+    except Exception:  # any failure means: no usable summary, scan instead
         return False
 
 

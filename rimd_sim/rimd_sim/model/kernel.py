@@ -86,6 +86,7 @@ import math
 import os
 import sys
 import types
+from typing import Any
 
 import numpy as np
 
@@ -108,8 +109,11 @@ if os.environ.get("RIMD_NO_JIT") == "1":  # pragma: no cover - exercised by a su
         return tup[:index] + (value,) + tup[index + 1:]
 else:
     from numba import njit
-    from numba.cpython.unsafe.tuple import tuple_setitem as tuple_set
-    from numba.np.unsafe.ndarray import to_fixed_tuple as to_tuple
+
+    # numba types an @intrinsic by its typing function (with the typing context first), not by its call in
+    # jitted code, which is what the pure-Python versions above give.
+    from numba.cpython.unsafe.tuple import tuple_setitem as tuple_set  # type: ignore[assignment]
+    from numba.np.unsafe.ndarray import to_fixed_tuple as to_tuple  # type: ignore[assignment]
 
     def _jit(func):
         return njit(cache=True, fastmath=False, nogil=True)(func)
@@ -527,8 +531,11 @@ def jit_for(scope: str):
     return compiled
 
 
-def _namespace(name: str, doc: str) -> types.ModuleType:
-    """A module registered in ``sys.modules`` (so numba's cache key pickles it by its name)."""
+def _namespace(name: str, doc: str) -> Any:
+    """A module registered in ``sys.modules`` (so numba's cache key pickles it by its name).
+
+    Typed ``Any``: its attributes (the compiled functions, ...) are set after it is made.
+    """
     ns = types.ModuleType(name, doc)
     sys.modules[name] = ns
     return ns

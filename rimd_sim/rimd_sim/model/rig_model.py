@@ -80,7 +80,7 @@ class Impact(NamedTuple):
     excitation_frequency: float
     excitation_phase: float
     cycle_index: int
-    index: int
+    index: int  # type: ignore[assignment]  # the field's name shadows tuple.index on purpose (impact.index)
     t_end: float
     contacts: int
 

@@ -301,7 +301,7 @@ class StopSignals:
         self.requested = False
         self._previous: dict[int, Any] = {}
 
-    def _on_signal(self, signum: int, frame: Any) -> None:  # noqa: ARG002
+    def _on_signal(self, signum: int, frame: Any) -> None:
         self.requested = True
 
     def __enter__(self) -> StopSignals:
@@ -348,7 +348,7 @@ class Rig:
             out: Any = None
             if self.log_dir is not None:
                 self.log_dir.mkdir(parents=True, exist_ok=True)
-                out = open(self.log_dir / f"{node.name}.log", "w")   # noqa: SIM115 - closed in stop()
+                out = open(self.log_dir / f"{node.name}.log", "w")   # closed in stop()
                 self._logs.append(out)
             self.processes[node.name] = subprocess.Popen(
                 node.command(), start_new_session=True, env=dict(self.env) if self.env is not None else None,
@@ -486,8 +486,7 @@ def _resume_when_connected(consumers: tuple[str, ...], procs: Mapping[str, subpr
     from std_srvs.srv import Trigger
 
     context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO,
-               **({} if domain_id is None else {"domain_id": domain_id}))
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = rclpy.create_node("rimd_rig", context=context, start_parameter_services=False)
         executor = rclpy.executors.SingleThreadedExecutor(context=context)

@@ -182,6 +182,13 @@ class ConsumerStatus:
         """The lowest data time it has finished with over its topics (None: not joined)."""
         return min(self.done.values()) if self.done else None
 
+    @property
+    def done_s(self) -> float:
+        """``done_ns`` in seconds, for the log lines about a consumer that has joined."""
+        done_ns = self.done_ns
+        assert done_ns is not None, f"consumer '{self.name}' has not joined"
+        return done_ns / 1e9
+
 
 @dataclass(frozen=True)
 class ProgressVerdict:
@@ -264,7 +271,7 @@ class Lockstep:
             if c.left:
                 return ProgressVerdict(True)
             c.dropped, c.left, c.timed_out, c.held_since = True, True, False, None
-            where = f" at {c.done_ns / 1e9:.9f} s" if c.joined else " before joining"
+            where = f" at {c.done_s:.9f} s" if c.joined else " before joining"
             return ProgressVerdict(True, f"consumer '{consumer}' left{where} (it stopped cleanly): the run goes on "
                                          "without it until it reports again", "left")
         report = {ALL_TOPICS: int(done_ns)} if not topics else {t: int(v) for t, v in topics.items()}
@@ -295,12 +302,12 @@ class Lockstep:
             c.done = {t: max(v, self._published(t)) for t, v in report.items()}
             c.instance, c.last_heard, c.dropped, c.left, c.timed_out = instance, now, False, False, False
             c.joins += 1
-            return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_ns / 1e9:.9f} s"
+            return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_s:.9f} s"
                                    + (f"; {note}" if note else ""), joined=True)
         back = sorted(t or "all topics" for t, v in report.items() if v < c.done.get(t, v))
         if back:
             return ProgressVerdict(False, f"progress from '{consumer}' ignored: done_through goes back on "
-                                          f"{', '.join(back)} (from {c.done_ns / 1e9:.9f} s; a restart must report a "
+                                          f"{', '.join(back)} (from {c.done_s:.9f} s; a restart must report a "
                                           "new instance)", "back")
         advanced = any(v > c.done.get(t, -1) for t, v in report.items())
         c.done = dict(report)   # a report is the consumer's whole state: a topic it no longer names does not hold
@@ -308,7 +315,7 @@ class Lockstep:
         if advanced:   # a report that repeats itself (a heartbeat) is no progress: the timeout runs on
             c.last_heard, c.timed_out = now, False
         if returned:
-            return ProgressVerdict(True, f"consumer '{consumer}' answers again at {c.done_ns / 1e9:.9f} s")
+            return ProgressVerdict(True, f"consumer '{consumer}' answers again at {c.done_s:.9f} s")
         return ProgressVerdict(True, note, "topics" if note else "")
 
     def limit(self, c: ConsumerStatus) -> float:

@@ -184,8 +184,11 @@ class PlaybackControl:
 
     def _report(self, did_seek: bool = False) -> PlaybackReport:
         state = self._state
+        assert state is not None   # called once the replay has answered
         status = "ended" if self._gone else state.status
-        report = PlaybackReport(status, self.now_ns(), state.rate, did_seek)
+        now = self.now_ns()
+        assert now is not None
+        report = PlaybackReport(status, now, state.rate, did_seek)
         self._told = (status, state.rate, (state.passes, state.seeks))
         return report
 
@@ -223,6 +226,7 @@ class PlaybackControl:
             naming the replay and the call, with the replay's own words.
         """
         errors: list[str] = []
+        state: PlayerState | None
         with self._busy:
             try:   # the calls are planned on the state now, not as last read (someone may have acted since)
                 state = self._controls.state()

@@ -156,7 +156,8 @@ class RecordingSession:
         Raises:
             TimeoutError: The writer did not get to it in time.
         """
-        done, result = threading.Event(), []
+        done = threading.Event()
+        result: list[Any] = []
         self._queue.put(("call", function, done, result))
         if self._thread is None:   # no thread: everything queued is processed here, in order
             self.process()
@@ -251,7 +252,7 @@ class RecordingSession:
                 _, function, done, result = item
                 try:
                     result.append(function())
-                except Exception as exc:  # noqa: BLE001 - reported to the service caller
+                except Exception as exc:  # reported to the service caller
                     result.append(exc)
                 done.set()
             if self.bag.failure is not self._reported:   # a new write error, or cleared by a split
@@ -291,7 +292,7 @@ class RecordingSession:
         """
         try:
             function(*args)
-        except Exception as exc:  # noqa: BLE001 - a bug must not kill the writer silently
+        except Exception as exc:  # a bug must not kill the writer silently
             self.write_errors += 1
             if self.write_errors <= 5:
                 self._log(ERROR, f"writing the recording failed: {type(exc).__name__}: {exc}")

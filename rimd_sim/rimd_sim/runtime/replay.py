@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from rimd_sim.errors import ConfigError
 from rimd_sim.io.cdr import HEADER_FIRST_TYPES, header_stamp, with_header_stamp
 from rimd_sim.io.reader import RecordedMessage, Recording
-from rimd_sim.runtime.pacing import Go, Hold, Pacer, Wait
+from rimd_sim.runtime.pacing import Go, Hold, Pacer, ProgressVerdict, Wait
 from rimd_sim.settings.lockstep import LockstepSettings
 from rimd_sim.settings.params import BAD_REGEX_LISTS, group, param, parameters, regex_list_problem
 
@@ -160,11 +160,11 @@ class Player:
         self._lock = threading.RLock()
         self.settings = settings
         self.rate = settings.rate
-        first = recording.start_ns
-        if first is None:
+        first, last = recording.start_ns, recording.end_ns   # both None, or neither
+        if first is None or last is None:
             raise ConfigError("file", settings.file, "must be a recording with at least one readable message")
         self.first_ns = first
-        self.last_ns = recording.end_ns
+        self.last_ns = last
         self.start_ns = first + round(settings.start_offset * 1e9)
         self.end_ns = (self.start_ns + round(settings.playback_duration * 1e9) if settings.playback_duration
                        else self.last_ns)
@@ -213,6 +213,11 @@ class Player:
 
     def _advance(self) -> None:
         self._next = next(self._iter, None) if self._iter is not None else None
+
+    def _due(self) -> RecordedMessage:
+        """The next message, while there is one (not :meth:`_ended`)."""
+        assert self._next is not None
+        return self._next
 
     def _ended(self) -> bool:
         return self._next is None or (self.end_ns is not None and self._next.log_time > self.end_ns)
@@ -263,13 +268,13 @@ class Player:
             if not isinstance(decision, Go):
                 return decision
             # Every message due now goes in one batch (each is decided on its own: the reader is a stream).
-            out = [self._out(self._next)]
+            out = [self._out(self._due())]
             while len(out) < MAX_BATCH and not self._ended() and isinstance(self._decide(), Go):
-                out.append(self._out(self._next))
+                out.append(self._out(self._due()))
             return out
 
     def _decide(self) -> Go | Wait | Hold:
-        msg = self._next
+        msg = self._due()
         stamp = self._stamp(msg)
         if stamp is not None and self.settings.restamp:   # decided on the stamp it will leave with, as reported
             stamp += self._offset if self._offset is not None else time.time_ns() - stamp
@@ -286,11 +291,16 @@ class Player:
             lockstep = self._pacer.lockstep
             return lockstep.take_events() if lockstep is not None else []
 
-    def progress(self, consumer: str, done_ns: int, instance: str = "", topics: dict[str, int] | None = None,  # noqa: ANN201
-                 leaving: bool = False):
-        """A lockstep consumer's report (see :meth:`rimd_sim.runtime.pacing.Lockstep.progress`)."""
+    def progress(self, consumer: str, done_ns: int, instance: str = "", topics: dict[str, int] | None = None,
+                 leaving: bool = False) -> ProgressVerdict:
+        """A lockstep consumer's report (see :meth:`rimd_sim.runtime.pacing.Lockstep.progress`).
+
+        Only for a player with lockstep (the node takes reports only then).
+        """
         with self._lock:
-            return self._pacer.lockstep.progress(consumer, done_ns, instance, topics, leaving)
+            lockstep = self._pacer.lockstep
+            assert lockstep is not None
+            return lockstep.progress(consumer, done_ns, instance, topics, leaving)
 
     def holders_text(self) -> str:
         """Who holds the run (lockstep), for a person."""
@@ -389,7 +399,7 @@ class Player:
         with self._lock:
             if not self._paused or self._ended():
                 return None
-            out = self._out(self._next)
+            out = self._out(self._due())
             self._anchor(self._next.log_time if self._next is not None else out.log_time)
             return out
 
@@ -398,7 +408,7 @@ class Player:
         with self._lock:
             out: list[Outgoing] = []
             while self._paused and len(out) < count and not self._ended():
-                out.append(self._out(self._next))
+                out.append(self._out(self._due()))
             if out:
                 self._anchor(self._next.log_time if self._next is not None else out[-1].log_time)
             return out

@@ -632,8 +632,8 @@ class SimulatorRuntime:
             stamp = stamp_ns(t0, cap.trigger_time)
             for which, values, channel in (("force", cap.force, "impact_force"),
                                            ("acceleration", cap.acceleration, "rimd_acceleration")):
-                ch = self._config.channel(channel)
-                self._send(f"capture/{which}", encode_capture(stamp, ch.frame_id, ch.unit, cap, values), stamp)
+                sensor = self._config.channel(channel)
+                self._send(f"capture/{which}", encode_capture(stamp, sensor.frame_id, sensor.unit, cap, values), stamp)
         for event in block.fault_events:
             spec = event.fault
             stamp = stamp_ns(t0, event.time)
@@ -697,10 +697,11 @@ class SimulatorRuntime:
             level = WARN
             message += f", {self._overruns} overruns (blocks later than one block period)"
         holding = ""
-        if self._lockstep is not None and self._pacer.held:
+        lockstep = self._pacer.lockstep
+        if self._lockstep is not None and lockstep is not None and self._pacer.held:
             now = self._clock()
             with self._pace_lock:
-                holders = self._pacer.lockstep.holders()
+                holders = lockstep.holders()
                 since = min((c.held_since for c in holders if c.held_since is not None), default=now)
                 timed_out = any(c.timed_out for c in holders)
             if now - since >= HOLD_REPORT_S:
@@ -733,10 +734,10 @@ class SimulatorRuntime:
             topic = self._topics[out.key]
             values[f"{topic} published"] = str(self._sent.get(topic, 0))
             values[f"{topic} subscribers"] = str(subscribers.get(topic, 0))
-        if self._lockstep is not None:
+        if self._lockstep is not None and lockstep is not None:
             values["lockstep_waiting_for"] = holding
             with self._pace_lock:
-                for c in self._pacer.lockstep.consumers.values():
+                for c in lockstep.consumers.values():
                     values[f"lockstep {c.name} done_through_s"] = "" if c.done_ns is None else f"{c.done_ns / 1e9:.6f}"
                     values[f"lockstep {c.name} state"] = (
                         "left" if c.left else "dropped" if c.dropped else "timed out" if c.timed_out

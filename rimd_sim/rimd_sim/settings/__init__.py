@@ -1,1 +1,1 @@
-"""settings"""
+"""The settings: parameter declarations, SimConfig, lockstep, capture and recording settings, YAML, paths."""

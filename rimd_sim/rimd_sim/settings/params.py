@@ -26,7 +26,7 @@ import math
 import sys
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from rimd_sim.errors import ConfigError
 
@@ -230,6 +230,16 @@ def keyed(prefix: str, instances: tuple[Any, ...], key: str = "name") -> Any:
 _TABLES: dict[type, dict[str, Param]] = {}
 
 
+def _group_class(f: dataclasses.Field[Any]) -> type:
+    """The settings class of a :func:`group` field: its default factory."""
+    return cast(type, f.default_factory)
+
+
+def _keyed_defaults(f: dataclasses.Field[Any]) -> tuple[Any, ...]:
+    """The default instances of a :func:`keyed` field: its default."""
+    return cast(tuple[Any, ...], f.default)
+
+
 def parameters(cls: type) -> dict[str, Param]:
     """Every parameter of the settings class ``cls`` (nested groups included), by full name, in declaration order."""
     table = _TABLES.get(cls)
@@ -247,11 +257,11 @@ def _walk(cls: type, prefix: str, path: tuple[str, ...], instance: Any) -> Itera
             yield dataclasses.replace(decl, name=prefix + (decl.name or f.name), default=default,
                                       attr=(*path, f.name))
         elif _GROUP in meta:
-            yield from _walk(f.default_factory, prefix + meta[_GROUP], (*path, f.name),
+            yield from _walk(_group_class(f), prefix + meta[_GROUP], (*path, f.name),
                              None if instance is None else getattr(instance, f.name))
         elif _KEYED in meta:
             fmt, key = meta[_KEYED]
-            items = f.default if instance is None else getattr(instance, f.name)
+            items = _keyed_defaults(f) if instance is None else getattr(instance, f.name)
             for i, item in enumerate(items):
                 yield from _walk(type(item), prefix + fmt.format(getattr(item, key)), (*path, f.name, str(i)), item)
 
@@ -311,11 +321,11 @@ def _construct(cls: type, prefix: str, flat: Mapping[str, Any], template: Any) -
         if _PARAM in meta:
             kwargs[f.name] = flat[prefix + (meta[_PARAM].name or f.name)]
         elif _GROUP in meta:
-            kwargs[f.name] = _construct(f.default_factory, prefix + meta[_GROUP], flat, None)
+            kwargs[f.name] = _construct(_group_class(f), prefix + meta[_GROUP], flat, None)
         elif _KEYED in meta:
             fmt, key = meta[_KEYED]
             kwargs[f.name] = tuple(_construct(type(item), prefix + fmt.format(getattr(item, key)), flat, item)
-                                   for item in f.default)
+                                   for item in _keyed_defaults(f))
         elif template is not None:   # a field of a keyed item that is not a parameter (its key)
             kwargs[f.name] = getattr(template, f.name)
     return cls(**kwargs)

@@ -215,7 +215,7 @@ class FoxgloveSink:
             capabilities.append(Capability.Services)
         if parameter_backend is not None:
             capabilities.append(Capability.Parameters)
-        self._options = {"name": name, "host": host, "capabilities": capabilities,
+        self._options: dict[str, Any] = {"name": name, "host": host, "capabilities": capabilities,
                          "server_listener": _Listener(self) if parameter_backend or playback else None,
                          "supported_encodings": [MESSAGE_ENCODING],
                          "services": [self._service(s) for s in self._services] or None, "context": self._context}
@@ -230,7 +230,7 @@ class FoxgloveSink:
         while True:
             try:
                 return foxglove.start_server(port=port, playback_time_range=self.playback_range, **self._options)
-            except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types (e.g. address in use)
+            except Exception as exc:  # the SDK raises its own error types (e.g. address in use)
                 if time.monotonic() < deadline:
                     time.sleep(0.005)
                     continue
@@ -312,6 +312,7 @@ class FoxgloveSink:
 
     def handle_playback(self, request: Any) -> Any:
         """The SDK's PlaybackControlRequest carried out: its errors shown as error statuses; the state answered."""
+        assert self._playback is not None   # the listener takes playback requests only then
         report, errors = self._playback.handle(PlaybackRequest(
             play=request.playback_command == PlaybackCommand.Play, speed=float(request.playback_speed),
             seek_ns=None if request.seek_time is None else int(request.seek_time),
@@ -333,6 +334,7 @@ class FoxgloveSink:
             response=MessageSchema(encoding=MESSAGE_ENCODING, schema=Schema(
                 name=response.type_name, encoding=SCHEMA_ENCODING, data=response.text.encode())))
         backend = self._service_backend
+        assert backend is not None   # checked in __init__: services come with their backend
 
         def handler(request_msg: Any) -> bytes:
             # Runs in one of the SDK's threads; an exception's text becomes the client's failure message.
@@ -369,9 +371,14 @@ class FoxgloveSink:
             value = [float(v) for v in value]
         return ParameterEntry(parameter.name, kind, value)
 
+    def _parameters(self) -> ParameterBackend:
+        """The parameter backend (parameters are served only with one)."""
+        assert self._parameter_backend is not None
+        return self._parameter_backend
+
     def get_parameters(self, names: Sequence[str]) -> list[Any]:
         """The SDK's parameters for a client's get request (the listener's work, also callable directly)."""
-        return [self._parameter(e) for e in self._parameter_backend.get(list(names))]
+        return [self._parameter(e) for e in self._parameters().get(list(names))]
 
     def set_parameters(self, parameters: Sequence[Any]) -> list[Any]:
         """Set what a client asked; report refusals as error statuses; return the values now in force."""
@@ -381,7 +388,7 @@ class FoxgloveSink:
                 entries.append(self._entry(parameter))
             except ValueError as exc:
                 self.status(f"{parameter.name}: {exc}", error=True, status_id=f"parameter {parameter.name}")
-        results = self._parameter_backend.set(entries) if entries else []
+        results = self._parameters().set(entries) if entries else []
         for name, accepted, reason in results:
             if not accepted:
                 self.status(f"parameter {name} refused: {reason}", error=True, status_id=f"parameter {name}")
@@ -418,15 +425,15 @@ class _Listener(ServerListener):
         """``call()``; should it raise, ``failed: <exception>`` is shown to the clients and ``fallback`` returned."""
         try:
             return call()
-        except Exception as exc:  # noqa: BLE001 - shown to the client, never raised into the SDK's thread
+        except Exception as exc:  # shown to the client, never raised into the SDK's thread
             self._sink.status(f"{failed}: {exc}", error=True, status_id=status_id)
             return fallback
 
-    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
+    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:
         return self._shown(lambda: self._sink.get_parameters(param_names), "parameters could not be read",
                            "parameters", [])
 
-    def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:  # noqa: ARG002
+    def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:
         return self._shown(lambda: self._sink.set_parameters(parameters), "parameters could not be set",
                            "parameters", [])
 

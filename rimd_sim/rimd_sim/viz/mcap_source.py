@@ -107,7 +107,7 @@ def read_rig_messages(path: str | Path, *, namespace: str = "/rig",
         rel = info.topics[msg.topic]
         try:
             decoded = decoders[msg.topic](msg.data)
-        except Exception:  # noqa: BLE001 - bytes that do not decode with their definition: counted, skipped
+        except Exception:  # bytes that do not decode with their definition: counted, skipped
             undecodable[msg.topic] = undecodable.get(msg.topic, 0) + 1
             continue
         info.counts[rel] = info.counts.get(rel, 0) + 1

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -21,7 +22,7 @@ class EntityData:
     """Rows of one entity, sorted by time: ``times`` (int64 ns of sim time) and arrow list columns."""
 
     times: np.ndarray
-    columns: dict[str, object] = field(default_factory=dict)  # component -> pyarrow ListArray (one row each)
+    columns: dict[str, Any] = field(default_factory=dict)  # component -> pyarrow ListArray (one row each)
 
     def scalars(self, component: str = "Scalars:scalars") -> np.ndarray:
         """One float per row (Scalars, AnyValues numbers)."""
@@ -50,7 +51,7 @@ def load_rrd(path: str | Path) -> dict[str, EntityData]:
     import pyarrow as pa
     from rerun.chunk import RrdReader
 
-    parts: dict[str, list[tuple[np.ndarray, dict[str, object]]]] = {}
+    parts: dict[str, list[tuple[np.ndarray, dict[str, Any]]]] = {}
     for chunk in RrdReader(str(path)).stream():
         if chunk.is_static or TIMELINE not in chunk.timeline_names:
             continue

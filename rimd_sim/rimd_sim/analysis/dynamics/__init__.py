@@ -1,1 +1,1 @@
-"""analysis/dynamics"""
+"""Analyses of the model's dynamics: sweeps, bifurcation, Peterka map, Lyapunov exponent, one impact."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -161,7 +162,8 @@ def _within(rows: list[dict]) -> bool:
 
 
 def fit_table(base: SimConfig, entries: list[TableEntry], parameters: tuple[str, ...] = FIT_PARAMETERS, *,
-              max_evaluations: int = 20, cycles: int = 150, measure: int = 50, log=None) -> dict:  # noqa: ANN001
+              max_evaluations: int = 20, cycles: int = 150, measure: int = 50,
+              log: Callable[[str], None] | None = None) -> dict:
     """Fit ``parameters`` of ``base`` to the table; returns the fitted config, the rows and the evaluations."""
     from scipy.optimize import least_squares
 

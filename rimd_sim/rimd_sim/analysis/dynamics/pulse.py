@@ -71,11 +71,12 @@ def ring_frequency(acc: np.ndarray, rate: float, floor: float = 0.05) -> float:
     spec = np.abs(np.fft.rfft(x * np.hanning(x.size), n))
     spec[0] = 0.0
     i = int(np.argmax(spec))
+    peak: float = i
     if 0 < i < spec.size - 1:
         a, b, c = spec[i - 1], spec[i], spec[i + 1]
         den = a - 2 * b + c
-        i = i + (0.5 * (a - c) / den if den != 0 else 0.0)
-    return float(i * rate / n)
+        peak = i + (0.5 * (a - c) / den if den != 0 else 0.0)
+    return float(peak * rate / n)
 
 
 def pulse(config: SimConfig, velocity: float, rate: float = 1e6, span: float = PULSE_SPAN) -> PulseResult:

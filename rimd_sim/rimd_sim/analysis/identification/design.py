@@ -29,14 +29,19 @@ it cannot: a contact too short for the 20 kHz channel needs the triggered captur
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rimd_sim.analysis.recordings.recorded import settled
 from rimd_sim.errors import AnalysisError
 from rimd_sim.settings.config import SimConfig
+
+if TYPE_CHECKING:   # the model (and numba) is imported when a prediction runs
+    from rimd_sim.model.rig_model import Impact
 
 __all__ = ["Design", "DesignError", "StepPrediction", "identification_steps", "predict", "steps_for_identification"]
 
@@ -78,7 +83,7 @@ class Design:
                     for p in self.predictions) + ("; " + "; ".join(self.notes) if self.notes else ""))
 
 
-def _read(impacts, t_from: float, t_end: float, f: float) -> StepPrediction:  # noqa: ANN001
+def _read(impacts: Sequence[Impact], t_from: float, t_end: float, f: float) -> StepPrediction:
     times = np.array([i.t_start for i in impacts if t_from <= i.t_start < t_end])
     peaks = np.array([i.peak_force for i in impacts if t_from <= i.t_start < t_end])
     v0 = np.array([i.impact_velocity for i in impacts if t_from <= i.t_start < t_end])

@@ -31,6 +31,7 @@ reads the peaks with the contact law the metadata names when there is one; see d
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -215,6 +216,7 @@ def _segments(motor: dict, t_first: float, t_end: float, avoid: np.ndarray, lase
     full = loc.motor_schedule(motor, t_first, t_end)
     wanted = [t_first] + [full.t0 + tc - 0.3 for tc, _, _ in full.commands]
     starts: list[float] = []
+    z: float | None
     for target in sorted(wanted):
         z = target
         while True:
@@ -291,8 +293,9 @@ class Prepared:
     length: float
 
 
-def local_stages(data: rec.RecordedData, base: SimConfig, fixed: dict[str, float], *,  # noqa: C901
-                 threshold: float = rec.DEFAULT_THRESHOLD, settle: float = 2.0, say=None) -> Prepared:  # noqa: ANN001
+def local_stages(data: rec.RecordedData, base: SimConfig, fixed: dict[str, float], *,
+                 threshold: float = rec.DEFAULT_THRESHOLD, settle: float = 2.0,
+                 say: Callable[[str], None] | None = None) -> Prepared:
     """Stages 1-4 (see the module doc): the reading, the motor, the local estimates, the joint fit's data.
 
     Raises:
@@ -427,7 +430,7 @@ def local_stages(data: rec.RecordedData, base: SimConfig, fixed: dict[str, float
 
 
 def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float = rec.DEFAULT_THRESHOLD,
-             settle: float = 2.0, resamples: int = 400, log=None) -> Identification:  # noqa: ANN001
+             settle: float = 2.0, resamples: int = 400, log: Callable[[str], None] | None = None) -> Identification:
     """Identify the free parameters of ``base`` from the recording at ``path`` (see the module doc).
 
     Raises:
@@ -551,7 +554,8 @@ def _split(seg: Segment, motor: dict, avoid: np.ndarray, lasers: Lasers, length:
 
 def _joint_stage(base: SimConfig, names: list[str], fixed: dict[str, float], segments: list[Segment],
                  obs: Observations, params: dict[str, float], estimates: dict[str, Estimate], lasers: Lasers,
-                 motor: dict, avoid: np.ndarray, length: float, say, log):  # noqa: ANN001, ANN202
+                 motor: dict, avoid: np.ndarray, length: float, say: Callable[[str], None],
+                 log: Callable[[str], None]) -> tuple[JointFit, JointResult, list[Window]]:
     """The joint fit from the local estimates; the fit, its result and the windows it left out.
 
     A robust loss first with adaptive multiple shooting (shots the model does not follow are cut shorter; those it
@@ -624,8 +628,8 @@ def _good(result: JointResult) -> bool:
     return bool(result.converged and chi2 is not None and chi2 <= GOOD_FIT_CHI2)
 
 
-def _verdict(estimates: dict[str, Estimate], result: JointResult, contact, force,  # noqa: ANN001
-             obs: Observations) -> Verdict:
+def _verdict(estimates: dict[str, Estimate], result: JointResult, contact: loc.ContactEstimate | None,
+             force: rec.Channel | None, obs: Observations) -> Verdict:
     """Each parameter against its target (:data:`TARGETS`), with the reason and the experiment that would help."""
     verdict = Verdict()
     if not result.converged:
@@ -639,7 +643,7 @@ def _verdict(estimates: dict[str, Estimate], result: JointResult, contact, force
     # how many samples the contact spans at the rate of the samples its shape came from (captures: their own)
     rate = None if contact is None else (1.0 / min(p.dt for p in contact.samples) if "captures" in contact.source
                                          and contact.samples else force.rate if force is not None else None)
-    samples = (math.pi / contact.pulse.w0 * rate) if rate else None
+    samples = (math.pi / contact.pulse.w0 * rate) if rate and contact is not None else None
     for p, e in estimates.items():
         kind, target = TARGETS[p]
         hw = e.half_width_95
@@ -684,6 +688,7 @@ def twin_reading(reading: Reading, ident: Identification, segments: list[Segment
     rate = force.rate if force is not None else 100.0
     config = model_config(ident.config, {}, schedule, result.states[0], force_rate=rate)
     run, fch = run_schedule(config, schedule, [(t - seg0.t0, v) for t, v in result.kicks], t_end - seg0.t0, force=True)
+    assert fch is not None   # force=True
     t_f, v_f = fch
     twin_force = rec.Channel(rec.FORCE, rate, np.arange(v_f.size), t_f, v_f)
     pulse = None
@@ -719,7 +724,7 @@ def validate(reading: Reading, ident: Identification, segments: list[Segment], r
         lo, hi = rr["steady_from_s"], rr["end_s"]
         ysel = inside & (ty >= lo) & (ty < hi)
 
-        def diff(a, b):  # noqa: ANN001, ANN202
+        def diff(a: float | None, b: float | None) -> float | None:
             return (b / a - 1.0) if (a and b is not None) else None
 
         # the difference: of the events' exact peaks where the recording has events, else of the channel's readings

@@ -42,8 +42,11 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from fractions import Fraction
+from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -56,6 +59,9 @@ from rimd_sim.analysis.recordings.contact_pulse import (
     pulse_residuals,
 )
 from rimd_sim.settings.config import SimConfig
+
+if TYPE_CHECKING:   # the model (and numba) is imported when a fit runs
+    from rimd_sim.model.rig_model import Impact, ModelOutput
 
 __all__ = ["CART_RATE", "FIT_RATE", "JointFit", "JointResult", "Observations", "Segment", "SegmentRun", "run_schedule"]
 
@@ -146,7 +152,7 @@ class SegmentRun:
     onsets: np.ndarray       # impact starts (recording time)
     v0: np.ndarray           # impact velocities (m/s)
     peaks: np.ndarray        # peak forces (N)
-    impacts: list            # rimd_sim.model.rig_model.Impact, model time
+    impacts: list[Impact]    # model time
 
 
 def model_config(base: SimConfig, params: dict[str, float], schedule: Schedule, initial: tuple[float, float],
@@ -174,7 +180,7 @@ def model_config(base: SimConfig, params: dict[str, float], schedule: Schedule, 
 
 
 def run_schedule(config: SimConfig, schedule: Schedule, kicks: list[tuple[float, float]], t_end: float,
-                 force: bool = False):  # noqa: ANN201 - (SegmentRun, force samples or None)
+                 force: bool = False) -> tuple[SegmentRun, tuple[np.ndarray, np.ndarray] | None]:
     """Run the core's integrator under ``schedule`` (commands and kicks at their model times) to ``t_end``.
 
     With ``force``, also the force channel's samples (model time, values) at its configured rate.
@@ -182,12 +188,15 @@ def run_schedule(config: SimConfig, schedule: Schedule, kicks: list[tuple[float,
     from rimd_sim.model.rig_model import RigModel
 
     model = RigModel(config, channels=True, truth=False)
-    events = sorted([(tc, "motor", (f, r)) for tc, f, r in schedule.commands if tc < t_end]
-                    + [(tk, "kick", v) for tk, v in kicks if 0 < tk < t_end], key=lambda e: e[0])
-    parts, impacts = [], []
-    for when, kind, arg in events:
+    # (model time, the command): motor commands, then kicks, in time order (a stable sort).
+    events: list[tuple[float, Callable[[], list[Impact]]]] = sorted(
+        [(tc, partial(model.set_motor_frequency, f, r)) for tc, f, r in schedule.commands if tc < t_end]
+        + [(tk, partial(model.perturb, v)) for tk, v in kicks if 0 < tk < t_end], key=lambda e: e[0])
+    parts: list[ModelOutput] = []
+    impacts: list[Impact] = []
+    for when, command in events:
         parts.append(model.advance(Fraction(repr(float(when)))))
-        impacts += model.set_motor_frequency(*arg) if kind == "motor" else model.perturb(arg)
+        impacts += command()
     parts.append(model.advance(Fraction(repr(float(t_end)))))
     rate = config.channel("rimd_displacement").sample_rate
     first = parts[0].channels["rimd_displacement"][0]
@@ -219,7 +228,7 @@ class JointResult:
     jacobians: int
     converged: bool
     message: str
-    chi2: dict[str, float]          # per part: mean square of the scaled residuals
+    chi2: dict[str, float | None]   # per part: mean square of the scaled residuals (None: the part is empty)
     counts: dict[str, int]
     starts: int = 1
 
@@ -309,7 +318,7 @@ class JointFit:
             try:
                 config = model_config(self.base, values, seg.schedule, states[s])
                 runs.append(run_schedule(config, seg.schedule, ks, seg.t1 - seg.t0)[0])
-            except Exception:  # noqa: BLE001 - a trial point where the core refuses or fails: a large residual
+            except Exception:  # a trial point where the core refuses or fails: a large residual
                 runs.append(None)
         return runs
 
@@ -363,9 +372,11 @@ class JointFit:
         rig = self.base.rig
         cos_t, m, sigma_free = self._geometry(values)
         wn = 2 * math.pi * values.get("natural_frequency", rig.natural_frequency)
-        accel = (values.get("amplitude", rig.amplitude) * obs.omega ** 2 * np.sin(obs.phase)
+        phase, omega = obs.phase, obs.omega
+        assert phase is not None and omega is not None   # filled by Observations.__post_init__
+        accel = (values.get("amplitude", rig.amplitude) * omega ** 2 * np.sin(phase)
                  - wn ** 2 * values.get("gap", rig.gap))
-        jerk = values.get("amplitude", rig.amplitude) * obs.omega ** 3 * np.cos(obs.phase)
+        jerk = values.get("amplitude", rig.amplitude) * omega ** 3 * np.cos(phase)
         fallback = np.array([p.eps for p in obs.impacts])
         fallback1 = np.array([p.eps1 for p in obs.impacts])
         if v0_model is None:
@@ -403,7 +414,7 @@ class JointFit:
         return out
 
     def _segment_residuals(self, s: int, run: SegmentRun | None, values: dict[str, float],
-                           pulse: tuple) -> list[np.ndarray]:  # noqa: ANN001
+                           pulse: tuple) -> list[np.ndarray]:
         """The scaled residuals of segment ``s``: displacement, cart, onsets, scales.
 
         ``pulse``: :meth:`pulse_part` with the matches of :meth:`_match` in ``pulse[5:]``.
@@ -497,7 +508,7 @@ class JointFit:
         return jac
 
     def solve(self, x0: np.ndarray, *, max_iterations: int = 60, loss: str = "linear", f_scale: float = 3.0,
-              log=None) -> JointResult:  # noqa: ANN001
+              log: Callable[[str], None] | None = None) -> JointResult:
         """Least squares from ``x0`` until converged (or ``max_iterations`` Jacobians: then not converged).
 
         ``loss``: ``linear`` (least squares) or a robust loss of ``least_squares`` (``soft_l1``, ``cauchy``) with

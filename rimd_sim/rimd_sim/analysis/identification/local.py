@@ -21,6 +21,7 @@ runs them in order and hands the results to the joint fit (:mod:`rimd_sim.analys
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -223,6 +224,7 @@ def fit_free_flight(y_t: np.ndarray, y: np.ndarray, pieces: list[np.ndarray], mo
         if best is None or fit.cost < best.cost:
             best = fit
     fit = best
+    assert fit is not None   # three tries
     n = fit.fun.size
     s2 = 2 * fit.cost / max(n - 2 - 3 * len(data), 1)
     try:
@@ -386,8 +388,8 @@ GRAZING = 0.25
 
 
 def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.ndarray, captures: list[rec.Capture],
-                  y_t: np.ndarray, y: np.ndarray, laser_keep: np.ndarray, accel, length: float,  # noqa: ANN001
-                  sigma_free: float, free_mass: bool, mass: float | None) -> ContactEstimate | None:
+                  y_t: np.ndarray, y: np.ndarray, laser_keep: np.ndarray, accel: Callable[[float], float],
+                  length: float, sigma_free: float, free_mass: bool, mass: float | None) -> ContactEstimate | None:
     """The contact's local estimates (see the module doc); None when no complete impact is left.
 
     ``accel(t)``: the hammer's free acceleration relative to the cart at ``t`` (m/s^2) for ``eps``;
@@ -406,10 +408,10 @@ def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.
     caps = capture_samples(captures, quiet, limit=MAX_CAPTURES) if captures else []
     joint = list(samples)
     for p in caps:   # the capture of an impact replaces its channel samples; the laser's velocity of that impact
-        k = int(np.argmin(np.abs(detected["start"][idx] - p.onset_hi))) if idx.size else -1
-        if k >= 0 and abs(detected["start"][idx][k] - p.onset_hi) < 1e-3:
-            p.eps, p.eps1 = samples[k].eps, samples[k].eps1
-            joint[k] = p
+        nearest = int(np.argmin(np.abs(detected["start"][idx] - p.onset_hi))) if idx.size else -1
+        if nearest >= 0 and abs(detected["start"][idx][nearest] - p.onset_hi) < 1e-3:
+            p.eps, p.eps1 = samples[nearest].eps, samples[nearest].eps1
+            joint[nearest] = p
     caps = [p for p in joint if p.dt < 0.5 / force.rate]
     if len(caps) >= 3:
         shape_set = caps if len(caps) <= 40 else [caps[k] for k in
@@ -441,6 +443,7 @@ def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.
     if free_mass:
         m, m_se = robust_mean(np.where(v0 > 0.005, scales * cos_t / v0, np.nan))
     else:
+        assert mass is not None   # the caller gives the mass it holds fixed
         m, m_se = float(mass), 0.0
     if not math.isfinite(m):
         raise LocalError("the hammer laser shows no impact velocity at the impacts: mass cannot be identified; "

@@ -3,11 +3,18 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
-def _figure(rows: int, cols: int, size: tuple[float, float]):  # noqa: ANN202
+    from rimd_sim.analysis.identification.identify import Identification
+
+
+def _figure(rows: int, cols: int, size: tuple[float, float]) -> tuple[Any, Figure, Any]:
+    """Import pyplot (on the Agg backend); return it, a figure and the figure's ``rows`` x ``cols`` axes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -16,7 +23,7 @@ def _figure(rows: int, cols: int, size: tuple[float, float]):  # noqa: ANN202
     return plt, *plt.subplots(rows, cols, figsize=size)
 
 
-def plot_validation(result, path: Path, title: str) -> Path:  # noqa: ANN001
+def plot_validation(result: Identification, path: Path, title: str) -> Path:
     """Recording and twin side by side.
 
     The displacement, the peak force of every impact (left-out windows shaded), the steady peaks per step and the

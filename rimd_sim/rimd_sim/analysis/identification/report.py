@@ -8,8 +8,13 @@ base parameter file with the identified values), ``identification.json``, ``vali
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rimd_sim.analysis.outputs import write_csv, write_json, write_parameter_file
+
+if TYPE_CHECKING:   # the identification is imported when it runs
+    from rimd_sim.analysis.identification.identify import Identification
+    from rimd_sim.settings.config import SimConfig
 
 __all__ = ["DETERMINED_BY", "format_identification", "parse_fix", "write_outputs"]
 
@@ -50,7 +55,7 @@ def parse_fix(items: list[str]) -> dict[str, float]:
     return fixed
 
 
-def write_outputs(result, base_path: Path, out: Path, recording: Path, seconds: float) -> None:  # noqa: ANN001
+def write_outputs(result: Identification, base_path: Path, out: Path, recording: Path, seconds: float) -> None:
     """identified.yaml, identification.json, validation.csv and validation.png.
 
     Raises:
@@ -85,7 +90,7 @@ def write_outputs(result, base_path: Path, out: Path, recording: Path, seconds: 
     identify_plots.plot_validation(result, out / "validation.png", f"identification of {Path(recording).name}")
 
 
-def format_identification(result, base) -> list[str]:  # noqa: ANN001
+def format_identification(result: Identification, base: SimConfig) -> list[str]:
     """The lines ``rimd identify`` prints: loss, windows left out, estimates with 95 % intervals, verdict, steps."""
     from rimd_sim.analysis.recordings.recorded import loss_text
 

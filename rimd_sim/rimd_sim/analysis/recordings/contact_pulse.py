@@ -44,7 +44,8 @@ __all__ = ["PulseFit", "PulseSamples", "SpringDashpotPulse", "fit_onsets", "fit_
            "pulse_residuals", "pulse_of", "pulse_peaks"]
 
 
-def _state(s: np.ndarray, sigma: float, w0: float, eps, eps1=0.0) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+def _state(s: np.ndarray, sigma: float, w0: float, eps: float | np.ndarray,
+           eps1: float | np.ndarray = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """``delta`` and ``delta'`` per unit ``v0`` at ``s`` (``eps``, ``eps1`` broadcast against ``s``).
 
     The free acceleration is ``v0 (eps + eps1 s)``: particular solution ``p0 + p1 s``, ``p1 = eps1 / w0^2``,
@@ -73,7 +74,8 @@ def _state(s: np.ndarray, sigma: float, w0: float, eps, eps1=0.0) -> tuple[np.nd
     return delta, ddelta
 
 
-def _shape(s: np.ndarray, sigma: float, w0: float, eps, sigma_free: float, eps1=0.0) -> np.ndarray:  # noqa: ANN001
+def _shape(s: np.ndarray, sigma: float, w0: float, eps: float | np.ndarray, sigma_free: float,
+           eps1: float | np.ndarray = 0.0) -> np.ndarray:
     delta, ddelta = _state(s, sigma, w0, eps, eps1)
     return w0 * w0 * delta + 2.0 * (sigma - sigma_free) * ddelta
 
@@ -87,7 +89,8 @@ RELEASE_HORIZON = float(RELEASE_GRID[-1])
 RELEASE_CHECK = np.linspace(0.0, 1.0, 33)[1:-1]
 
 
-def _release(sigma: float, w0: float, eps, sigma_free: float, eps1=0.0) -> np.ndarray:  # noqa: ANN001
+def _release(sigma: float, w0: float, eps: float | np.ndarray, sigma_free: float,
+             eps1: float | np.ndarray = 0.0) -> np.ndarray:
     """Time from the onset to the release (the force's first fall through 0), per ``eps`` and ``eps1`` (arrays).
 
     Without free acceleration, the closed form (module doc). With it, Newton's method from the closed form, kept

@@ -11,6 +11,8 @@ times are unknown in a recording, so a delay shows only where it put blocks out 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rimd_sim.analysis.recordings.faultscan import Block, drift_fit, drift_window, impact_times, scan_channel
@@ -28,7 +30,7 @@ FAULTS = "/rig/faults"
 CAPTURE_FORCE = "/rig/capture/force"
 
 
-def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.ndarray,  # noqa: ANN001
+def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.ndarray,
                  origin_ns: int) -> dict:
     """The report of a :class:`~rimd_sim.io.reader.Recording` (see the module docstring).
 
@@ -44,7 +46,7 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
     events, captures = [], []
     types = {**dict.fromkeys(CHANNEL_TOPICS, "rimd_msgs/msg/SampleBlock"), FAULTS: "rimd_msgs/msg/FaultEvent",
              CAPTURE_FORCE: "rimd_msgs/msg/Capture"}
-    decoders = {}
+    decoders: dict[str, Any] = {}
     for msg in recording.messages(list(types)):
         if msg.type_name and msg.type_name != types[msg.topic]:
             continue    # another type under a rig topic name: the main analysis reports it

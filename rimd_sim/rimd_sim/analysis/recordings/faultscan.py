@@ -69,7 +69,7 @@ def stream(blocks: Sequence[Block]) -> tuple[np.ndarray, np.ndarray]:
 
 def _windows(flags: list[tuple[int, int]], rate: float, merge_samples: int, kind: str, what: str) -> list[Finding]:
     """Merge flagged sample ranges ``[a, b)`` closer than ``merge_samples`` into findings."""
-    out = []
+    out: list[list[int]] = []
     for a, b in sorted(flags):
         if out and a - out[-1][1] <= merge_samples:
             out[-1][1] = max(out[-1][1], b)
@@ -153,11 +153,11 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
     spread = float(np.median(np.abs(medians - center))) * 1.4826 if medians.size else 0.0
     level_limit = max(level_sigmas * ref_noise, 6.0 * spread)
     if ref_noise > 0:
-        for (a, b, x), med in zip(chunks, medians, strict=True):
+        for (start, end, x), med in zip(chunks, medians, strict=True):
             if abs(med - center) > level_limit:
-                level.append((a, b))
+                level.append((start, end))
             if _noise(x) > noise_ratio * ref_noise:
-                noisy.append((a, b))
+                noisy.append((start, end))
     findings += _windows(rail, rate, merge_samples, "rail", "block(s) on the rail")
     findings += _windows(sat, rate, merge_samples, "saturated", "block(s) with clipped samples")
     findings += _windows(level, rate, merge_samples, "level", "block(s) off the reference level")
@@ -177,9 +177,9 @@ def scan_channel(blocks: Sequence[Block], rate: float, range_min: float, range_m
             ends = np.flatnonzero(edges == -1) + 1
             if same[-1]:
                 ends = np.r_[ends, seg_v.size]
-            for a, b in zip(starts, ends, strict=False):
-                if b - a >= stuck_min and seg_v[a] != range_max:
-                    stuck.append((int(seg_i[a]), int(seg_i[b - 1]) + 1))
+            for run_start, run_end in zip(starts, ends, strict=False):
+                if run_end - run_start >= stuck_min and seg_v[run_start] != range_max:
+                    stuck.append((int(seg_i[run_start]), int(seg_i[run_end - 1]) + 1))
             if seg_v.size >= 5:
                 padded = np.pad(seg_v, 2, mode="edge")
                 windows = np.lib.stride_tricks.sliding_window_view(padded, 5)

@@ -1,12 +1,12 @@
 """One reading of a recording, shared by ``rimd analyze`` and ``rimd identify``'s validation.
 
-:func:`read` turns a :class:`~rimd_sim.analysis.recordings.recorded.RecordedData` into a :class:`Reading`: the impacts
-detected in the force channel (:func:`~rimd_sim.analysis.recordings.recorded.detect_impacts`), their cross-check with the
-recorded events, the motor's dwell steps, the step table (steady peak force and impacts per cycle, from the
-events and from the force channel) and the windows of the recording that no analysis should trust
+:func:`read` turns a :class:`~rimd_sim.analysis.recordings.recorded.RecordedData` into a :class:`Reading`: the
+impacts detected in the force channel (:func:`~rimd_sim.analysis.recordings.recorded.detect_impacts`), their
+cross-check with the recorded events, the motor's dwell steps, the step table (steady peak force and impacts per
+cycle, from the events and from the force channel) and the windows of the recording that no analysis should trust
 (:func:`excluded_windows`): holes in ``first_index`` (dropouts, lost blocks), what the data alone shows
-(:func:`rimd_sim.analysis.recordings.faultscan.scan_channel`: stuck, rail, saturated, outliers, level, noise, late blocks),
-and the faults named on ``/rig/faults``.
+(:func:`rimd_sim.analysis.recordings.faultscan.scan_channel`: stuck, rail, saturated, outliers, level, noise, late
+blocks), and the faults named on ``/rig/faults``.
 
 ``rimd analyze`` prints that step table; ``rimd identify`` compares the twin with the same table of the same
 recording (and reads the twin's simulated channels with the same function), so the two commands cannot give
@@ -65,8 +65,8 @@ class Window:
 def excluded_windows(data: rec.RecordedData, scan: dict | None) -> list[Window]:
     """The windows of ``data`` to leave out (see the module doc), in recording time.
 
-    ``scan``: the fault report of :func:`rimd_sim.analysis.recordings.faultreport.fault_report` (its channel findings are
-    in each channel's own time ``first_index / rate``); None: holes and ``/rig/faults`` only.
+    ``scan``: the fault report of :func:`rimd_sim.analysis.recordings.faultreport.fault_report` (its channel findings
+    are in each channel's own time ``first_index / rate``); None: holes and ``/rig/faults`` only.
     """
     windows: list[Window] = []
     end_all = max([float(c.time[-1]) for c in data.channels.values() if c.time.size] + [0.0])
@@ -151,14 +151,14 @@ def step_rows(steps: list[rec.Step], events: dict[str, np.ndarray], detected: di
             times, peaks = events.get("time"), events.get("peak_force")
             if (times is None or times.size == 0) and detected["start"].size:   # no events recorded
                 times, peaks = detected["start"][ok], detected["peak_force"][ok]
-            if times is not None:
+            if times is not None and peaks is not None:   # the event columns come together
                 verdict = rec.settled(times, peaks, s.steady_from, s.end, s.setpoint)
         row["settled"] = verdict
         for label, times, peaks in (("events", events.get("time"), events.get("peak_force")),
                                     ("channel", detected["start"][ok], detected["peak_force"][ok])):
             keys = (f"peak_force_{label}_n", f"impacts_{label}", f"impacts_per_cycle_{label}",
                     f"peak_force_{label}_mean_n", f"peak_force_{label}_std_n", f"peak_force_{label}_min_n")
-            if s.steady_from is None or times is None or (label == "channel" and force is None):
+            if s.steady_from is None or times is None or peaks is None or (label == "channel" and force is None):
                 row.update(dict.fromkeys(keys))
                 if label == "channel":
                     row["peak_force_channel_largest_sample_n"] = None

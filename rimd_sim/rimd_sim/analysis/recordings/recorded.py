@@ -161,7 +161,7 @@ def loss_text(loss: dict) -> str | None:
     return "; ".join(parts)
 
 
-def _stamp_ns(header) -> int:  # noqa: ANN001
+def _stamp_ns(header) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
@@ -357,7 +357,7 @@ def detect_impacts(force: Channel, threshold: float = DEFAULT_THRESHOLD,
         estimate), ``peak_force_sample`` (N, largest sample), ``fitted`` (1.0 when ``peak_force`` comes from
         the pulse fit), ``duration`` (s above the threshold), ``impulse`` (N s, over the run), ``complete``.
     """
-    rows = []
+    rows: list[list[float]] = []
     fits: list[tuple[int, PulseSamples]] = []
     dt = 1.0 / force.rate
     quiet = 5.0 * force_noise(force)
@@ -391,7 +391,7 @@ def detect_impacts(force: Channel, threshold: float = DEFAULT_THRESHOLD,
                     lo, hi = j - 1, min(b + 1, v.size)
                     fits.append((len(rows), PulseSamples(t[lo:hi], v[lo:hi], dt, float(t[j - 1]), float(t[j]))))
             rows.append([start, t[k], v[k], v[k], 0.0, (b - a) * dt, float(v[a:b].sum()) * dt, float(complete)])
-    if fits:
+    if fits and pulse is not None:   # fits are made only with a pulse
         peaks = pulse_peaks(pulse, [p for _, p in fits])
         for (i, _), estimate in zip(fits, peaks, strict=True):
             if np.isfinite(estimate) and estimate >= rows[i][3]:

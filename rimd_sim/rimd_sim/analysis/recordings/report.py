@@ -21,7 +21,9 @@ and a threshold that hides most impacts is said in a ``WARNING`` line.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +43,7 @@ class ReportError(AnalysisError):
 
 
 def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float = rec.DEFAULT_THRESHOLD,
-            peak: str = "onset-fit", log=None) -> dict:  # noqa: ANN001
+            peak: str = "onset-fit", log: Callable[[str], None] | None = None) -> dict:
     """Analyse ``recording`` into ``out``; return the summary (also written as ``summary.json``).
 
     Raises:
@@ -174,13 +176,15 @@ def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path) -> 
     """Phase planes and Poincare maps over each step's steady window (figure at ``path``); the Poincare rows."""
     from rimd_sim.analysis import plots
 
-    panels, poincare_rows = [], []
+    panels: list[dict] = []
+    poincare_rows: list[dict] = []
     rimd, cart = data.channels.get(rec.RIMD_X), data.channels.get(rec.CART_X)
     if rimd is None or cart is None:
         return poincare_rows
     t, x, v = rec.phase_plane(rimd, cart)
     strobe = rec.poincare_points(t, x, v, rec.poincare_times(data.motor))
-    windows = [(s, s.steady_from, s.end) for s in steps if s.steady_from is not None]
+    windows: list[tuple[rec.Step | None, float, float]] = [(s, s.steady_from, s.end) for s in steps
+                                                            if s.steady_from is not None]
     if not windows:   # no motor states: the whole recording is one window
         finite = t[np.isfinite(t)]
         windows = [(None, finite[0], finite[-1])] if finite.size else []
@@ -226,8 +230,9 @@ def pulse_zoom(reading: Reading, before: float = 0.5e-3, after: float = 1.5e-3) 
     median = float(np.median(det["peak_force"][pool]))
     i = int(pool[np.argmin(np.abs(det["peak_force"][pool] - median))])
     onset = float(det["start"][i])
-    zoom = {"onset": onset, "peak": float(det["peak_force"][i]), "step": int(step_of[i]), "captured": False,
-            "force": None, "acceleration": None, "capture_force": None, "model_force": None}
+    zoom: dict[str, Any] = {"onset": onset, "peak": float(det["peak_force"][i]), "step": int(step_of[i]),
+                            "captured": False, "force": None, "acceleration": None, "capture_force": None,
+                            "model_force": None}
     sel = (force.time >= onset - before) & (force.time <= onset + after)
     zoom["force"] = (force.time[sel], force.values[sel])
     acc = data.channels.get(rec.ACC)
@@ -286,7 +291,7 @@ def acceleration_spectra(reading: Reading, seconds_per_segment: float = 4.0) -> 
 
 def format_steps(rows: list[dict]) -> list[str]:
     """The step table as text lines."""
-    def num(value, fmt):  # noqa: ANN001
+    def num(value: float | None, fmt: str) -> str:
         return "-" if value is None else format(value, fmt)
 
     verdicts = {True: "yes", False: "NO", None: "-"}
@@ -335,9 +340,9 @@ def format_report(summary: dict) -> list[str]:
     return lines
 
 
-def _event_index(events, i):  # noqa: ANN001
+def _event_index(events: dict[str, np.ndarray], i: int) -> int | None:
     return int(events["index"][i]) if i >= 0 else None
 
 
-def _at(columns, name, i):  # noqa: ANN001
+def _at(columns: dict[str, np.ndarray], name: str, i: int) -> float | None:
     return float(columns[name][i]) if i >= 0 else None

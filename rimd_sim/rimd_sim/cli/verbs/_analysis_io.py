@@ -11,7 +11,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from rimd_sim.analysis.outputs import jsonable, write_csv, write_json, write_summary  # noqa: F401 - re-exported
 from rimd_sim.cli import CommandError
@@ -117,7 +117,7 @@ class Progress:
         self.unit = f" {what}"
         self.interval = interval
         self._file = file
-        self._bar = None
+        self._bar: Any = None   # a tqdm bar (tqdm has no type annotations)
         self._t0 = self._last_line = time.monotonic()
         self._started = False
         self._done = 0

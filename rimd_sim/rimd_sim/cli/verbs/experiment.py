@@ -5,8 +5,8 @@ however late the requests travel (:mod:`rimd_sim.ros.clients.experiment`). Unles
 its own recorder process (node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``); a rig in
 lockstep that names it among its consumers waits for it, so nothing is lost however fast the rig runs. Once
 the recorder has written everything up to the end of the last step it is stopped with SIGINT and the
-recording is analysed into ``OUT`` with the same ``--settle`` (:mod:`rimd_sim.analysis.recordings.report`). The rig is
-never stopped: a refused setpoint ends the experiment with an error naming it, and the rig keeps running.
+recording is analysed into ``OUT`` with the same ``--settle`` (:mod:`rimd_sim.analysis.recordings.report`). The rig
+is never stopped: a refused setpoint ends the experiment with an error naming it, and the rig keeps running.
 """
 
 from __future__ import annotations
@@ -15,9 +15,13 @@ import argparse
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rimd_sim.cli import CommandError, nonnegative_float, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import add_frequency_grid
+
+if TYPE_CHECKING:   # rclpy and the ROS layer are imported when the verb runs
+    from rimd_sim.ros.clients.experiment import ExperimentPlan
 
 HERTZ = nonnegative_float("--frequencies", "Hz")
 
@@ -53,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "band-A steps spread across the band (rimd_sim.analysis.identification.design)")
 
 
-def plan(args: argparse.Namespace):  # noqa: ANN201 - rimd_sim.ros.clients.experiment.ExperimentPlan
+def plan(args: argparse.Namespace) -> ExperimentPlan:
     """The experiment the options describe, checked as a whole (each number's rule is its option's).
 
     Raises:

@@ -65,6 +65,7 @@ def main(args: argparse.Namespace) -> int:
     print("rimd poincare: largest Lyapunov exponent...", file=sys.stderr, flush=True)
     lyap = largest_lyapunov(base, f, theta0=args.theta0, theta_dot0=args.theta_dot0,
                             transient_cycles=args.transient_cycles, cycles=args.cycles)
+    assert shown.truth is not None  # the model was built with truth=True
     first_truth, truth = shown.truth
     rows = {name: truth[i] for i, name in enumerate(TRUTH_FIELDS)}
     t = (first_truth + np.arange(truth.shape[1])) / cfg.truth_rate

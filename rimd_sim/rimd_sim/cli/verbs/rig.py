@@ -52,6 +52,7 @@ def main(args: argparse.Namespace) -> int:
                     real_time_factor=args.real_time_factor)
     rig = Rig(plan)
     config = plan.config
+    assert config is not None   # plan_rig reads one (only a replay's plan has none)
 
     def announce() -> None:
         if plan.foxglove_address:

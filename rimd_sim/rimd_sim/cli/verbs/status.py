@@ -1,4 +1,7 @@
-"""``rimd status``: a live one-screen view of the running rig (library: rimd_sim.ros.clients.status); ``--once`` for scripts."""
+"""``rimd status``: a live one-screen view of the running rig; ``--once`` for scripts.
+
+The library: rimd_sim.ros.clients.status.
+"""
 
 from __future__ import annotations
 

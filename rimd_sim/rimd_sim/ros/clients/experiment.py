@@ -143,9 +143,11 @@ class ExperimentRecorder:
         """
         node = self._client.node
         excluded = compile_patterns("exclude", RecorderSettings().exclude)   # it never records those
+        proc = self.proc
+        assert proc is not None, "launch() first"
 
         def subscribed() -> bool:
-            if self.proc.poll() is not None:
+            if proc.poll() is not None:
                 return True
             topics = [name for name, _ in node.get_topic_names_and_types()
                       if name.startswith("/rig/") and node.count_publishers(name) > 0
@@ -155,8 +157,8 @@ class ExperimentRecorder:
                 for t in topics)
 
         ok = self._client.spin_until(subscribed, timeout)
-        if self.proc.poll() is not None:
-            raise CommandError(f"the recorder exited with status {self.proc.returncode}: {self.tail()}")
+        if proc.poll() is not None:
+            raise CommandError(f"the recorder exited with status {proc.returncode}: {self.tail()}")
         if not ok:
             self.stop()
             raise CommandError(f"the recorder did not subscribe to the rig topics within {timeout:g} s: "
@@ -301,6 +303,7 @@ class ExperimentRun:
     def _first_step(self, f: float, n: int) -> tuple[int, Any]:
         """Schedule the first step at a cycle start a lead ahead; double the lead while the rig was faster."""
         lead = FIRST_LEAD_S
+        assert self.stamp_ns is not None   # wait_for_motor() first
         for _ in range(MAX_LEAD_DOUBLINGS):
             start = self._cycle_start_after(self.stamp_ns + round(lead * 1e9))
             response = self._request(f, start, 0, n, late_ok=True)

@@ -186,7 +186,7 @@ class ProgressReporter:
         self._pub.publish(msg)
         try:
             return bool(self._pub.wait_for_all_acked(Duration(nanoseconds=round(timeout * 1e9))))
-        except Exception:  # noqa: BLE001 - the context is going down: best effort
+        except Exception:  # the context is going down: best effort
             return False
 
     def _can_join(self) -> bool:

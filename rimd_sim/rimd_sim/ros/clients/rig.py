@@ -12,9 +12,12 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rimd_sim.errors import CommandError
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
 
 __all__ = ["RigClient", "TRIGGERS"]
 
@@ -64,7 +67,7 @@ class RigClient:
         self.namespace = namespace.rstrip("/")
         self.timeout = timeout
         self.domain_id = int(os.environ.get("ROS_DOMAIN_ID", "0") or 0) if domain_id is None else domain_id
-        self.context = rclpy.Context()
+        self.context: Context | None = rclpy.Context()   # None once closed
         rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.context, start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import statistics
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,7 +71,8 @@ class RigMonitor:
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
 
     # -- what comes in --------------------------------------------------------------------------------------
-    def _block_callback(self, topic: str):  # noqa: ANN202 - rclpy passes the message info to two-argument callbacks
+    def _block_callback(self, topic: str) -> Callable[[bytes, Any], None]:
+        # Two arguments: rclpy passes the message info to a callback that takes it.
         def on_block(data: bytes, info: Any) -> None:
             self._on_block(topic, data, info)
         return on_block

@@ -17,8 +17,8 @@ injects) and ``/rig/session`` (the run's identity), and keeps, per channel:
   (the trap), not the distance from the baseline. The steady peak of a step is the mean of the peaks after
   ``settle`` seconds, with its spread.
 
-With ``--lockstep NAME`` it reports its progress (:class:`rimd_sim.ros.clients.progress.ProgressReporter`): a rig in lockstep
-never runs ahead of it. At ``--until`` seconds of simulation time it prints one JSON report (also to
+With ``--lockstep NAME`` it reports its progress (:class:`rimd_sim.ros.clients.progress.ProgressReporter`): a rig
+in lockstep never runs ahead of it. At ``--until`` seconds of simulation time it prints one JSON report (also to
 ``--json FILE``) and exits 0.
 """
 
@@ -78,7 +78,8 @@ class Continuity:
         return self._drain(rate)
 
     def _drain(self, rate: float) -> list[tuple[int, int]]:
-        lost = []
+        assert self.next_index is not None   # set by add() before it drains
+        lost: list[tuple[int, int]] = []
         while True:
             if self.next_index in self.pending:   # the next block had come ahead of a hole now closed
                 self.next_index += self.pending.pop(self.next_index)
@@ -221,7 +222,8 @@ def _ns(stamp: Any) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the client until ``--until`` seconds of simulation time; print the JSON report."""
-    parser = argparse.ArgumentParser(prog="python -m rimd_sim.ros.examples.daq_client", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m rimd_sim.ros.examples.daq_client",
+                                     description=__doc__.split("\n")[0])
     parser.add_argument("--until", type=float, required=True, help="simulation seconds to acquire")
     parser.add_argument("--lockstep", default="", metavar="NAME", help="report progress under NAME (a lockstep rig)")
     parser.add_argument("--threshold", type=float, default=10.0, help="N above the baseline that make an impact")
@@ -231,6 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=300.0, help="wall seconds before giving up")
     args = parser.parse_args(argv)
 
+    import functools
     import time
 
     import rclpy
@@ -277,18 +280,21 @@ def main(argv: list[str] | None = None) -> int:
                 c.restart()
         runs.append(msg.run_id)
 
-    subs = {t: node.create_subscription(SampleBlock, t, lambda m, t=t: on_block(m, t), qos) for t in CHANNELS}
+    def on_fault(m: FaultEvent) -> None:
+        truth.append({"event": m.event, "id": m.id, "channel": m.channel, "kind": m.kind,
+                      "at": _ns(m.header.stamp) / 1e9})
+
+    subs = {t: node.create_subscription(SampleBlock, t, functools.partial(on_block, topic=t), qos)
+            for t in CHANNELS}
     node.create_subscription(MotorState, "/rig/motor/state", on_motor, qos)
-    node.create_subscription(FaultEvent, "/rig/faults", lambda m: truth.append(
-        {"event": m.event, "id": m.id, "channel": m.channel, "kind": m.kind, "at": _ns(m.header.stamp) / 1e9}),
-        latched)
+    node.create_subscription(FaultEvent, "/rig/faults", on_fault, latched)
     node.create_subscription(RigSession, "/rig/session", on_session, latched)
     reporter = ProgressReporter(node, args.lockstep, subscriptions=list(subs.values())) if args.lockstep else None
     deadline = time.monotonic() + args.timeout
     while min(reached.values()) < args.until and time.monotonic() < deadline:
         rclpy.spin_once(node, timeout_sec=0.05)
 
-    report = {
+    report: dict[str, Any] = {
         "reached_s": min(reached.values()),
         "runs": runs,
         "channels": {CHANNELS[t]: {"blocks": c.blocks, "lost_blocks": c.lost_blocks, "lost_samples": c.lost_samples,

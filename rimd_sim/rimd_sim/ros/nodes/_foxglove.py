@@ -141,9 +141,9 @@ def entry_to_value(entry: ParameterEntry, current: int | None = None) -> Paramet
         wanted = _KINDS.get(current)
         if (kind, wanted) in (("integer", "double"), ("integer_array", "double_array")):
             kind = wanted
-    value = ParameterValue(type=_TYPES.get(kind, ParameterType.PARAMETER_NOT_SET))
     if kind is None:
-        return value
+        return ParameterValue(type=ParameterType.PARAMETER_NOT_SET)
+    value = ParameterValue(type=_TYPES.get(kind, ParameterType.PARAMETER_NOT_SET))
     data = entry.value
     if kind == "double":
         data = float(data)
@@ -168,7 +168,7 @@ class _ServiceForwarder:
         client, srv = self._clients[service.name]
         try:
             message = deserialize_message(request, srv.Request)
-        except Exception as exc:  # noqa: BLE001 - rclpy raises a bare error for undecodable bytes
+        except Exception as exc:  # rclpy raises a bare error for undecodable bytes
             raise ServiceCallError(f"{service.name}: the request is not a CDR {service.type_name} request ({exc})") \
                 from None
         if not client.wait_for_service(timeout_sec=min(self._timeout, 1.0)):
@@ -180,7 +180,10 @@ class _ServiceForwarder:
 
 
 class _ReplayControls:
-    """A replay's services as :class:`rimd_sim.runtime.playback_control.ReplayControls` (blocking: never the executor's thread)."""
+    """A replay's services as :class:`rimd_sim.runtime.playback_control.ReplayControls`.
+
+    Blocking: never called from the executor's thread.
+    """
 
     def __init__(self, node: Node, replay: str, timeout: float, stop: threading.Event) -> None:
         self._replay, self._timeout, self._stop = replay, timeout, stop
@@ -399,7 +402,7 @@ class FoxgloveRelay:
             self._own[topic] = self._polled.create(msg_type, topic, qos, self._forward(topic))
 
     def _forward(self, topic: str) -> Callable[[bytes, dict], None]:
-        def handler(data: bytes, info: dict) -> None:  # noqa: ARG001 - the message info is not used
+        def handler(data: bytes, info: dict) -> None:  # the message info is not used
             self.on_message(topic, data)
 
         return handler
@@ -407,16 +410,18 @@ class FoxgloveRelay:
     def _watch_playback(self) -> None:
         """Read the replay's state every PLAYBACK_POLL_S: offer its range, tell the clients of every change."""
         log = self._node.get_logger()
+        playback = self.playback
+        assert playback is not None   # the watcher runs only with one
         while not self._stop.is_set():
-            report, line = self.playback.poll()
-            span = self.playback.time_range
+            report, line = playback.poll()
+            span = playback.time_range
             if span is not None and span != self.sink.playback_range:
                 try:
                     self.sink.set_playback_range(*span)
-                    log.info(f"foxglove: playback control of {self.playback.name} over its recording's log times "
+                    log.info(f"foxglove: playback control of {playback.name} over its recording's log times "
                              f"{span[0] / 1e9:.9f} to {span[1] / 1e9:.9f} s ({self.url})")
                 except FoxgloveError as exc:
-                    log.error(f"foxglove: playback control of {self.playback.name} not offered: {exc}")
+                    log.error(f"foxglove: playback control of {playback.name} not offered: {exc}")
             if report is not None:
                 self.sink.broadcast_playback(report)
             if line:

@@ -23,7 +23,7 @@ class StopRequest:
         self.signal: int | None = None
         self.count = 0
 
-    def __call__(self, signum: int, frame: object) -> None:  # noqa: ARG002 - signal handler signature
+    def __call__(self, signum: int, frame: object) -> None:  # signal handler signature
         """The signal handler: record the request (no exception, no ROS call).
 
         The first signal asks for a clean stop; a second one says so on stderr; the third ends the process at

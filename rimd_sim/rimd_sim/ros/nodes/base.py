@@ -34,7 +34,7 @@ import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import rclpy
 import yaml
@@ -248,9 +248,10 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
     status = 0
     runner = executor()
     try:
+        caught: tuple[type[BaseException], ...] = (*refused, rclpy.exceptions.ParameterException)
         try:
             node = make_node()
-        except (*refused, rclpy.exceptions.ParameterException) as exc:
+        except caught as exc:
             print(f"{name}: {refused_prefix}{exc}", file=sys.stderr)
             return refused_status
         problem = params_file_problem(node, sys.argv if args is None else args)
@@ -344,6 +345,11 @@ class RimdNode(Node):
     @classmethod
     def main(cls, args: list[str] | None = None) -> int:
         """Run this node until it ends, Ctrl-C, SIGTERM or an external shutdown; return the exit status."""
+        def spin(node: Node, executor: Executor, stop: StopRequest) -> None:
+            cast(RimdNode, node).spin_node(executor, stop)
+
+        def close(node: Node) -> int | None:
+            return cast(RimdNode, node).finish()
+
         return run_node(cls.NODE_NAME, cls, cls.REFUSED, args=args, refused_status=cls.REFUSED_STATUS,
-                        refused_prefix=cls.REFUSED_PREFIX, spin=lambda node, executor, stop: node.spin_node(
-                            executor, stop), close=lambda node: node.finish())
+                        refused_prefix=cls.REFUSED_PREFIX, spin=spin, close=close)

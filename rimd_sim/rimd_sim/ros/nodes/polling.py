@@ -37,7 +37,8 @@ class PolledSubscriptions:
 
     def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None]) -> Any:
         """Create a raw subscription of the node whose messages go to ``handler(data, info)``."""
-        sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}), qos, raw=True)
+        sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}),  # type: ignore[arg-type]
+                                             qos, raw=True)  # raw=True hands bytes, not the annotated message
         self._hidden.add(id(sub))
         self._subs.append((sub, handler))
         return sub
@@ -76,7 +77,7 @@ class PollingNode(RimdNode):
     _polled: PolledSubscriptions | None = None   # None until the subclass creates it
 
     @property
-    def subscriptions(self) -> list:
+    def subscriptions(self) -> list:  # type: ignore[override]  # rclpy's is an iterator; executors only iterate
         """The subscriptions the executor takes: all but the polled ones."""
         subs = super().subscriptions
         return list(subs) if self._polled is None else self._polled.visible(subs)

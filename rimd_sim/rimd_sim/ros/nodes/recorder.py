@@ -51,6 +51,7 @@ from rclpy.duration import Duration
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from rimd_sim import __version__
@@ -161,7 +162,7 @@ class RecorderNode(PollingNode):
             self.create_service(Trigger, f"~/{name}", handler)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._params_client = AsyncParameterClient(self, p.rig_node) if p.rig_node else None
-        self._params_future = None
+        self._params_future: Future | None = None
         self._params_done = self._params_client is None
         self.create_timer(p.discovery_period, self._discover)
         self.create_timer(1.0, self._publish_diagnostics)
@@ -200,6 +201,7 @@ class RecorderNode(PollingNode):
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self._session.add_topic(topic, type_name, offered)
+            assert self._polled is not None   # made in __init__
             self._subs[topic] = sub = self._polled.create(msg_type, topic, qos, self._make_handler(topic, type_name))
             self._progress.add_subscription(sub)
             self.get_logger().info(f"recording {topic} ({type_name}, "
@@ -214,7 +216,7 @@ class RecorderNode(PollingNode):
         for info in self.get_subscriptions_info_by_topic(PROGRESS_TOPIC):
             try:
                 topics = self.get_publisher_names_and_types_by_node(info.node_name, info.node_namespace)
-            except Exception:  # noqa: BLE001 - the node left the graph meanwhile
+            except Exception:  # the node left the graph meanwhile
                 return False
             if any(self._wanted(t) and t not in self._subs and t not in self._unknown for t, _ in topics):
                 return False
@@ -257,6 +259,7 @@ class RecorderNode(PollingNode):
         if self._params_done:
             return
         client, future = self._params_client, self._params_future
+        assert client is not None   # else _params_done
         if future is None:
             if client.services_are_ready():
                 self._params_future = client.list_parameters()
@@ -275,7 +278,7 @@ class RecorderNode(PollingNode):
         self._params_done = True
 
     # -- services ---------------------------------------------------------------------------------------------
-    def _on_start(self, request, response):  # noqa: ARG002
+    def _on_start(self, request, response):
         if self._recording:
             response.success, response.message = False, "already recording"
             return response
@@ -284,7 +287,7 @@ class RecorderNode(PollingNode):
         self.get_logger().info(response.message)
         return response
 
-    def _on_stop(self, request, response):  # noqa: ARG002
+    def _on_stop(self, request, response):
         if not self._recording:
             response.success, response.message = False, "not recording"
             return response
@@ -295,14 +298,14 @@ class RecorderNode(PollingNode):
         self.get_logger().info(response.message)
         return response
 
-    def _on_split(self, request, response):  # noqa: ARG002
+    def _on_split(self, request, response):
         info = self._session.split()
         response.success = True
         response.message = f"finished {info.path}; the next message opens a new file" if info else "no file was open"
         self.get_logger().info(response.message)
         return response
 
-    def _on_pause(self, request, response):  # noqa: ARG002
+    def _on_pause(self, request, response):
         if self._paused:
             response.success, response.message = False, "already paused"
         else:
@@ -310,7 +313,7 @@ class RecorderNode(PollingNode):
             response.success, response.message = True, "paused: messages are not recorded until ~/resume"
         return response
 
-    def _on_resume(self, request, response):  # noqa: ARG002
+    def _on_resume(self, request, response):
         if not self._paused:
             response.success, response.message = False, "not paused"
         else:

@@ -60,7 +60,7 @@ class ReplayError(InputError):
     """The replay cannot start; the message says why (bad parameter, unreadable file, unknown types)."""
 
 
-def _message_class(type_name: str):  # noqa: ANN202
+def _message_class(type_name: str):
     pkg, _, name = type_name.partition("/msg/")
     if not pkg or not name:
         raise ImportError(type_name)
@@ -335,29 +335,29 @@ class ReplayNode(RimdNode):
         self._wake.set()
 
     # -- services ---------------------------------------------------------------------------------------------
-    def _on_pause(self, request, response):  # noqa: ARG002
+    def _on_pause(self, request, response):
         response.success = self.player.pause()
         count = f"{self.player.published} messages published"   # taken: each reaches its subscribers
         response.message = f"paused after {count}" if response.success else f"already paused ({count})"
         return response
 
-    def _on_resume(self, request, response):  # noqa: ARG002
+    def _on_resume(self, request, response):
         response.success = self.player.resume()
         response.message = "resumed" if response.success else "not paused"
         self._wake.set()
         return response
 
-    def _on_toggle(self, request, response):  # noqa: ARG002
+    def _on_toggle(self, request, response):
         paused = self.player.toggle()
         response.success, response.message = True, "paused" if paused else "resumed"
         self._wake.set()
         return response
 
-    def _on_is_paused(self, request, response):  # noqa: ARG002
+    def _on_is_paused(self, request, response):
         response.paused = self.player.paused
         return response
 
-    def _on_get_rate(self, request, response):  # noqa: ARG002
+    def _on_get_rate(self, request, response):
         response.rate = float(self.player.rate)
         return response
 
@@ -376,7 +376,7 @@ class ReplayNode(RimdNode):
         stamp = request.time.sec * 1_000_000_000 + request.time.nanosec
         return self._answer(response, lambda: f"sought: {self.player.seek(stamp)}", "time")
 
-    def _answer(self, response, call, field: str):  # noqa: ANN001, ANN202
+    def _answer(self, response, call, field: str):
         """Answer a player request: ``call()``'s message, or the refusal naming the request's ``field``."""
         try:
             message = call()
@@ -387,7 +387,7 @@ class ReplayNode(RimdNode):
         self._wake.set()
         return response
 
-    def _on_get_state(self, request, response):  # noqa: ARG002
+    def _on_get_state(self, request, response):
         state = self.player.state()
         for stamp, value in ((response.start, state.start_ns), (response.end, state.end_ns),
                              (response.position, state.position_ns)):
@@ -396,7 +396,7 @@ class ReplayNode(RimdNode):
         response.passes, response.seeks, response.published = state.passes, state.seeks, state.published
         return response
 
-    def _on_play_next(self, request, response):  # noqa: ARG002
+    def _on_play_next(self, request, response):
         out = self.player.play_next()
         if out is not None:
             self._publish(out)

@@ -136,7 +136,7 @@ class RerunBridgeNode(PollingNode):
 
         progress = self._progress
 
-        def on_raw(data: bytes, info: dict) -> None:  # noqa: ARG001 - the message info is not used
+        def on_raw(data: bytes, info: dict) -> None:  # the message info is not used
             if relay is not None:
                 relay.on_message(full, data)
             if self.mapper is not None:
@@ -179,6 +179,7 @@ class RerunBridgeNode(PollingNode):
 
         def on_message(msg: Any) -> None:
             self._received += 1
+            assert self.mapper is not None   # called only with Rerun on
             start = time.perf_counter()
             self.mapper.log_message(topic, msg)
             self._slowest = max(self._slowest, time.perf_counter() - start)
@@ -219,7 +220,7 @@ class RerunBridgeNode(PollingNode):
         if self.foxglove is not None:
             print(f"rimd_rerun: closed the Foxglove server {self.foxglove.url}: {self.foxglove.forwarded} messages "
                   "forwarded", flush=True)
-        if self.mapper is not None:
+        if self.mapper is not None and self.stream is not None:
             s = self.mapper.stats
             print(f"rimd_rerun: closed {self.stream.viewer_url}: "
                   + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
@@ -237,6 +238,7 @@ class RerunBridgeNode(PollingNode):
             self.foxglove.close()
         if self.stream is None:
             return ""
+        assert self.mapper is not None   # made with the stream
         self.mapper.flush()
         return self.stream.close()
 

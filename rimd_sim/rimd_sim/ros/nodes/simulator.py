@@ -15,11 +15,13 @@ commands, the run's identity, diagnostics) and serializes every message; this no
 
 from __future__ import annotations
 
+import functools
 import importlib
 import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from typing import Any
 
 from builtin_interfaces.msg import Time
@@ -95,7 +97,7 @@ class SimulatorNode(RimdNode):
         self.create_service(Perturb, "perturb", self._on_perturb)
         for name, call in (("reset", self._rt.reset), ("pause", self._rt.pause), ("resume", self._rt.resume),
                            ("clear_faults", self._rt.clear_faults)):
-            self.create_service(Trigger, name, lambda request, response, call=call: self._answer(call(), response))
+            self.create_service(Trigger, name, functools.partial(self._on_trigger, call))
         self.create_service(InjectFault, "inject_fault", self._on_inject_fault)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._publish_diagnostics)
@@ -196,6 +198,10 @@ class SimulatorNode(RimdNode):
         self._pub_diag.publish(arr)
 
     # ---- services and parameters -------------------------------------------------------------------
+
+    def _on_trigger(self, call: Callable[[], Answer], request: Any, response: Any) -> Any:
+        """A Trigger service (reset, pause, resume, clear_faults): the runtime's answer."""
+        return self._answer(call(), response)
 
     @staticmethod
     def _answer(answer: Answer, response: Any) -> Any:
