@@ -6,7 +6,7 @@ Prints, in one run:
   * a Peterka map of 200 gaps x 200 frequencies (the ``rimd peterka`` defaults otherwise: three starts per
     cell: 60 + 36 cycles from rest and from a kick, 30 + 36 continued) on all cores (target <= 5 min);
   * the time of one point (150 cycles from rest, gap 0, 3.75 Hz) with the compiled core and with the
-    independent scipy ``solve_ivp`` (DOP853) reference of tests/core/reference.py, and the projected times
+    independent scipy ``solve_ivp`` (DOP853) reference of tests/harness/reference.py, and the projected times
     of both runs with scipy on the same cores.
 
 The machine is shared: figures are noisy. Run: .venv/bin/python benchmarks/bench_analysis.py [--peterka N]
@@ -67,7 +67,7 @@ def main() -> None:
     for _ in range(20):
         RigModel(cfg, channels=False, truth=False).advance(150 / 3.75)
     ours = (time.perf_counter() - t0) / 20
-    from core import reference
+    from harness import reference
 
     t0 = time.perf_counter()
     reference.simulate(frequency=3.75, gap=0.0, duration=150 / 3.75, rtol=1e-7, atol=1e-9)

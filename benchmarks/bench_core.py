@@ -95,7 +95,7 @@ def main() -> None:
         pb = max(i.peak_force for i in b if i.t_start > 16.0)
         diffs.append(f"{gap * 1e3:g} mm/{freq:g} Hz {abs(pa / pb - 1):.0e}")
     print("accuracy of the default tolerances (steady peak force vs rtol 1e-10): " + ", ".join(diffs))
-    from core import reference
+    from harness import reference
 
     ref_s = min(s, 20.0)
     t = time.perf_counter()

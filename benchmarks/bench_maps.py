@@ -19,7 +19,7 @@ the load average is printed with each figure):
    trajectory's own speed in the core.
 5. The single-trajectory core as users meet it: ``rimd sweep --workers 1`` (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300
    cycles from rest) in real-time factor, and the scipy ``solve_ivp`` event-driven reference
-   (tests/core/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
+   (tests/harness/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
 
 Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
 [--sections 1,2,3,4,5]
@@ -211,7 +211,7 @@ def single_trajectory(config):
     wall = time.perf_counter() - t0
     simulated = res.simulated_seconds
     print(f"  {len(freqs)} points, {simulated:.0f} s simulated in {wall:.1f} s: {simulated / wall:.0f}x real time")
-    from core import reference
+    from harness import reference
 
     sample = freqs[:: max(1, len(freqs) // 6)][:6]
     t0 = time.perf_counter()

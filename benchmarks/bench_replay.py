@@ -7,7 +7,7 @@ own process on a ROS domain of its own, to a subscriber in this process that not
 Printed, per rate: the timing error (arrival minus due time, the due time being the recorded log time over
 the rate, centred on the median offset) median and p99 in ms (target: median <= 1 ms), and the ratio of the
 replay's duration to the recording's (target: 1/rate within 3 %); every message checked to arrive.
-These were assertions of tests/test_replay_node.py; on a shared machine they belong here (the test keeps
+These were assertions of tests/ros/test_replay_node.py; on a shared machine they belong here (the test keeps
 coarse bounds).
 
 Run (after ``source env.sh``, from the repository root; the machine otherwise idle):

@@ -8,7 +8,7 @@ The other revision is exported with ``git archive REV`` into a temporary directo
 the repository). Each part runs both trees in separate interpreters, each importing its own ``rimd_sim``:
 
 * ``identity``: a probe runs the same public calls in both trees (``RigModel`` on the reference points of
-  ``tests/core/test_physics.py``, ``RigSimulator`` with commands and noise for both models and with the
+  ``tests/model/test_physics.py``, ``RigSimulator`` with commands and noise for both models and with the
   triggered capture, ``pulse``,
   ``steady_orbit``, ``sweep``, ``bifurcation``, ``peterka``, ``basins``, ``largest_lyapunov``) and prints a
   SHA-256 digest of every output (arrays by their bytes, impacts by their repr); the table says which differ.

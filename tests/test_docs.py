@@ -130,12 +130,12 @@ def test_relative_links_point_to_existing_files_and_headings(page):
 
 
 def test_the_documented_daq_test_is_the_one_the_suite_runs(repo_root):
-    """docs/testing.md shows a complete DAQ test; tests/test_daq_client.py runs that very test."""
+    """docs/testing.md shows a complete DAQ test; tests/ros/test_daq_client.py runs that very test."""
     import re
 
     doc = (repo_root / "docs" / "testing.md").read_text()
     shown = re.search(r"<!-- BEGIN EXAMPLE: daq-test -->\n```python\n(.*?)```\n<!-- END EXAMPLE", doc, re.S).group(1)
-    suite = (repo_root / "tests" / "test_daq_client.py").read_text()
+    suite = (repo_root / "tests" / "ros" / "test_daq_client.py").read_text()
     run = re.search(r"# ---- the documented example.*?\n(def .*?)# ---- end of the documented example", suite,
                     re.S).group(1)
     assert shown == run

@@ -1,7 +1,7 @@
 """One exception family: every exception class of the package derives from RimdError, and crosses processes whole.
 
 The tree is documented in ``rimd_sim/rimd_sim/errors.py``; the CLI renders the family in one place
-(``rimd_sim.cli.main``; the sweep of every verb with bad files is in tests/test_cli.py).
+(``rimd_sim.cli.main``; the sweep of every verb with bad files is in tests/cli/test_cli.py).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@
   recorder writes it (rosbag2 MCAP through :class:`rimd_sim.io.bag.McapFile`, the simulator node's
   messages: the channels' blocks after the block-level faults, impact events, motor states, ``/rig/faults``,
   the triggered captures, the rig's parameters as metadata). For the cases where the point is the
-  identification, not the wiring (faults, captures, many rigs): ``tests/test_experiment.py`` shows that a
+  identification, not the wiring (faults, captures, many rigs): ``tests/ros/test_experiment.py`` shows that a
   recording through the rig equals the core's run of the same schedule sample for sample.
 
 Both follow the timeline of ``rimd experiment --start START``: the rig runs from rest at ``frequencies[0]``;

@@ -18,7 +18,7 @@ how far each topic is written. The recorder node feeds it and reports it.
 
 Time is read from ``clock`` (monotonic seconds) and the session's steps can be driven without the thread
 (:meth:`process`), so the tests need neither DDS, nor root, nor a real full disk
-(``tests/test_recording_session.py``).
+(``tests/runtime/test_recording_session.py``).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ rule, in one place. From that one declaration come
   (:class:`~rimd_sim.errors.ConfigError`);
 * the ROS parameter descriptors and the set-time validation of the nodes (``rimd_sim.ros.nodes.base``);
 * the tables of ``docs/configuration.md`` and the node pages (``scripts/gen_docs.py``);
-* the cases of the bad-input tests (``tests/test_bad_input.py`` reads :func:`parameters`).
+* the cases of the bad-input tests (``tests/ros/test_bad_input.py`` reads :func:`parameters`).
 
 Groups of parameters nest: a field declared with :func:`group` holds another settings class whose parameter
 names take a prefix (``contact.stiffness``); :func:`keyed` holds a tuple of one settings class per key, each

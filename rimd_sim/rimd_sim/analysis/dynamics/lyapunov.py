@@ -33,8 +33,8 @@ the modes' deviation is at the end of a period is not carried into the next. The
 the impacts and die out between them (4.5 and 19 kHz at a damping ratio of 0.05 in the preset: their own
 exponents are about -1,400 and -6,100 1/s), so the expansion of the map over a period is the pendulum's.
 
-Validation (tests/test_lyapunov.py): the linear damped oscillator (large gap, small amplitude, no impact),
-whose exponents are both ``-zeta omega_n``; the undamped linear oscillator (exponent 0); a stable period-1
+Validation (tests/analysis/dynamics/test_lyapunov.py): the linear damped oscillator (large gap, small amplitude,
+no impact), whose exponents are both ``-zeta omega_n``; the undamped linear oscillator (exponent 0); a stable period-1
 impacting orbit (negative).
 
 Chaos criterion

@@ -82,7 +82,8 @@ TOLERANCE = 1e-8
 CART_RATE = 50.0
 #: The pulse model's accuracy, as a fraction of an impact's peak force: what its constant-shape contact leaves out
 #: (the free acceleration's curvature over the contact, the hammer's small rotation): ~1e-4 against the core's
-#: integrator at rest (tests/test_contact_pulse.py), up to ~1e-3 on a driven, strongly damped contact.
+#: integrator at rest (tests/analysis/recordings/test_contact_pulse.py), up to ~1e-3 on a driven, strongly damped
+#: contact.
 PULSE_MODEL_FLOOR = 1e-3
 #: Forward-difference step of the Jacobian (in the unknowns' scaled units): well above the integrator's relative
 #: tolerance (1e-7 by default), well below the parameters' errors.

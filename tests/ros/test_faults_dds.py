@@ -2,7 +2,7 @@
 
 Each kind is seen at its stated time and ended; the other channels untouched; same seed + scenario =
 bit-identical messages; bad requests refused while the rig keeps running. (The +100 ppm clock drift over 600 s
-is a property of the fault layer: tests/core/test_faults.py checks it on the core in seconds; here the
+is a property of the fault layer: tests/instruments/test_faults.py checks it on the core in seconds; here the
 scenario's drift reaches a client and a recording.)
 
 Hypotheses: the fault layer only touches the faulted channel's readings and deliveries (so the other
@@ -237,7 +237,7 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
     findings = [f for f in scan_channel(blocks, RATE, ch.range_min, ch.range_max, late_blocks=7.0)
                 if f.kind == "late"]
     # Coarse (arrival times on a shared machine): a late stretch where the window is, within 3 blocks at each
-    # end. The exact release times of the delayed blocks are tests/core/test_faults.py's, on the core's clock.
+    # end. The exact release times of the delayed blocks are tests/instruments/test_faults.py's, on the core's clock.
     assert any(abs(f.start - start) <= 3 * BLOCK_S + 1e-9 and abs(f.end - (start + duration)) <= 3 * BLOCK_S + 1e-9
                for f in findings), findings
     order = [b.first_index for b in blocks]

@@ -63,7 +63,7 @@ def _mount_small_disk(path: Path, size: str) -> Iterator[SmallDisk]:
     if result.returncode != 0:
         pytest.skip(f"cannot mount a {size} tmpfs to fill (needs root or CAP_SYS_ADMIN): "
                     f"{result.stderr.strip() or f'mount exit status {result.returncode}'}; the recorder's disk-full "
-                    "handling is still tested without privileges by tests/test_recording_session.py")
+                    "handling is still tested without privileges by tests/runtime/test_recording_session.py")
     try:
         assert os.path.ismount(path), f"{path} is not a mount point after mount"
         yield SmallDisk(path)

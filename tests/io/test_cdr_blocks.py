@@ -108,7 +108,7 @@ def _rosbags_typestore():
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    msg_dir = Path(__file__).resolve().parents[1] / "rimd_msgs" / "msg"
+    msg_dir = Path(__file__).resolve().parents[2] / "rimd_msgs" / "msg"
     types = {}
     for name in ("SampleBlock", "RigState"):
         types.update(get_types_from_msg((msg_dir / f"{name}.msg").read_text(), f"rimd_msgs/msg/{name}"))

@@ -7,7 +7,7 @@ Hypotheses, and where the expected values come from:
   ``rimd_sim.model.rig_model.MODELS``), not the paper's: their numbers are the two-mass model's, which differ from the
   rigid model's (the force sensor reads the force through its mount), and every path gives the same trajectory
   as ``RigModel`` with that configuration (the ensemble integrates it with the same driver, bit for bit).
-* Classes from rest are the structural preset's Table 1 (tests/core/test_structural.py, impacts per cycle
+* Classes from rest are the structural preset's Table 1 (tests/model/test_structural.py, impacts per cycle
   counted over 50 cycles): one impact per cycle at 3.75 Hz and one every two cycles at 7.25 Hz (gap 0) and at
   5.25 Hz (gap 2.4 mm).
 * At gap 2.4 mm, 5.25 Hz, coexisting attractors (paper Fig. 12 right; docs/interface.md): an upward sweep stays on

@@ -1,7 +1,7 @@
 """Bad input over DDS: every parameter and every service of every node, called with wrong values, refused.
 
 The rule sweep (every kind of wrong value against every parameter's one declaration, thousands of cases) runs
-without ROS in tests/test_parameter_declarations.py. Here each node runs in its own process and the wiring is
+without ROS in tests/settings/test_parameter_declarations.py. Here each node runs in its own process and the wiring is
 proven: every parameter it declares (enumerated at run time with ``list_parameters``, typed with
 ``describe_parameters``) set through rclpy's parameter services with wrong values generated from its
 declaration (a value of another type, NaN for a real number, a value beyond a bound, outside the choices, one

@@ -7,7 +7,7 @@ message recorded at or after the time (and refuses a time outside the recording,
 ``~/toggle_paused`` resumes; an integer ``rate`` is a rate; ``playback_duration`` stops the replay there;
 ``restamp`` makes the first message's stamp the wall time it left, every other stamp shifted by as much;
 ``wait_for_subscribers`` names the topics it waits for. The pace itself is tested on a fake clock
-(tests/test_player.py); here only a coarse sanity bound of it.
+(tests/runtime/test_player.py); here only a coarse sanity bound of it.
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def test_player_services_as_rosbag2(ros_processes, ros_executor, recording):
     assert _call(ros_executor, node, SetRate, "set_rate", SetRate.Request(rate=4.0)).success
     assert _call(ros_executor, node, GetRate, "get_rate").rate == 4.0
 
-    # Resume (toggle): the rest plays at 4x; a coarse bound on its pace (the exact pace: tests/test_player.py).
+    # Resume (toggle): the rest plays at 4x; a coarse bound on its pace (the exact pace: tests/runtime/test_player.py).
     started = time.monotonic()
     assert _call(ros_executor, node, Trigger, "toggle_paused").message == "resumed"
     assert not _call(ros_executor, node, IsPaused, "is_paused").paused

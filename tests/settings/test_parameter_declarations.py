@@ -147,7 +147,7 @@ def test_adding_a_parameter_is_one_edit(rclpy_context, tmp_path, monkeypatch):
         node.shutdown()
         node.destroy_node()
     # The generated documentation table.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
     try:
         import gen_docs
     finally:

@@ -10,11 +10,10 @@ import math
 import numpy as np
 import pytest
 
+from harness import reference
 from rimd_sim.model.contact import CONTACT_LAWS
 from rimd_sim.model.rig_model import RigModel
 from rimd_sim.settings.config import SimConfig
-
-from . import reference
 
 
 def at_frequency(f: float, **params) -> SimConfig:
@@ -149,7 +148,7 @@ REFERENCE_POINTS = [  # (gap m, frequency Hz, expected impacts per cycle)
 @pytest.mark.parametrize(("gap", "freq", "per_cycle"), REFERENCE_POINTS)
 def test_agrees_with_independent_solve_ivp(gap, freq, per_cycle):
     """The steady peak force and impacts per cycle agree within 1 % with an independent scipy solve_ivp
-    event-driven integration (tests/core/reference.py) from rest, read over the last 20 cycles of 16 s.
+    event-driven integration (tests/harness/reference.py) from rest, read over the last 20 cycles of 16 s.
     """
     t0 = 16.0 - 20.0 / freq
     ref = reference.simulate(frequency=freq, gap=gap, duration=16.0)

@@ -6,8 +6,8 @@ import csv
 
 import numpy as np
 import pytest
-from core import reference
 
+from harness import reference
 from harness.outputs import read_json
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics.sweep import sweep
@@ -17,7 +17,7 @@ from rimd_sim.settings.config import SimConfig
 @pytest.mark.process
 def test_rimd_sweep_writes_summary_csv_and_png(tmp_path, capsys):
     """`rimd sweep` from rest at gap 0, 3.5-4 Hz: band A at 3.75 Hz (paper Table 1) with the steady peak force of
-    the independent solve_ivp integration of the paper's model (tests/core/reference.py, from rest at 3.75 Hz,
+    the independent solve_ivp integration of the paper's model (tests/harness/reference.py, from rest at 3.75 Hz,
     its last 20 cycles of 16 s: 79.16 N), to 1e-4."""
     ref_peak, ref_rate = reference.steady_peak(reference.simulate(frequency=3.75, gap=0.0, duration=16.0), 3.75,
                                                16.0 - 20 / 3.75, 16.0)

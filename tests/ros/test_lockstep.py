@@ -35,7 +35,7 @@ from rimd_sim.io.reader import open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(240)]
 
-DAQ = str(Path(__file__).parent / "harness" / "daq_client.py")
+DAQ = str(Path(__file__).resolve().parents[1] / "harness" / "daq_client.py")
 CHANNELS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force")
 #: Topics whose content is the rig's data (not its run identity, diagnostics or progress).
 DATA_TOPICS = (*CHANNELS, "/rig/truth", "/rig/motor/state", "/rig/impact/events", "/rig/faults", "/clock")

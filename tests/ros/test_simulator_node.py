@@ -194,7 +194,7 @@ def test_real_time_counts_and_exact_stamps(ros_processes, ros_executor):
         rate = RATES[topic]
         # Samples published between the first and the last block heard: rate x elapsed. A coarse bound (real
         # time, neither twice as fast nor stalling), as the machine is shared; the lateness of each block is
-        # tests/test_rig_timing.py's (p50 <= 5 ms) and benchmarks/bench_simulator_node.py's (p99).
+        # tests/ros/test_rig_timing.py's (p50 <= 5 ms) and benchmarks/bench_simulator_node.py's (p99).
         count = blocks[topic][-1].first_index - blocks[topic][0].first_index
         assert elapsed > 4.5
         assert abs(count - rate * elapsed) <= 0.05 * rate * elapsed, (topic, count, rate * elapsed)

@@ -23,11 +23,12 @@ def _files(out, *names):
 
 
 def _reference_class(frequency: float) -> str:
-    """The class of the default rig's motion at gap 0 from the independent integrator (tests/core/reference.py,
+    """The class of the default rig's motion at gap 0 from the independent integrator (tests/harness/reference.py,
     scipy's DOP853 written from the paper's equations): impacts per cycle and distinct peak levels over 24 cycles
     after 60 from rest."""
     import numpy as np
-    from core.reference import simulate
+
+    from harness.reference import simulate
 
     impacts = simulate(frequency=frequency, gap=0.0, duration=84 / frequency)
     last = [i for i in impacts if i.t_start >= 60 / frequency]
@@ -40,7 +41,7 @@ def _reference_class(frequency: float) -> str:
 def test_bifurcation_gap0_shows_the_doubling_window_up_and_down(tmp_path, capsys):
     """Default preset, gap 0: 1/1 at 4.8 Hz and the period-doubled 2/2 motion (alternating peaks) at 5.0 Hz in both
     sweeps, as the independent reference integrator finds from rest (the paper-model preset has the doubling from
-    4.85 Hz: tests/test_dynamics.py)."""
+    4.85 Hz: tests/analysis/dynamics/test_dynamics.py)."""
     low, high = _reference_class(4.8), _reference_class(5.0)    # where the expected classes come from
     assert (low, high) == ("1/1", "2/2")
     out = tmp_path / "bif"
