@@ -44,11 +44,33 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-IDENTITY_PROBE = r"""
+# A revision from before the package's layers (rimd_sim.core, rimd_sim.analysis.sweep, ...) runs the same probe:
+# the layered names the probe imports are aliases of the old modules there.
+LAYOUT_ALIASES = r"""
+import importlib, importlib.util, sys
+if importlib.util.find_spec("rimd_sim.settings") is None:
+    aliases = {
+        "rimd_sim.settings": "rimd_sim.core", "rimd_sim.settings.config": "rimd_sim.core.config",
+        "rimd_sim.settings.capture": "rimd_sim.core.capture", "rimd_sim.model": "rimd_sim.core",
+        "rimd_sim.model.rig_model": "rimd_sim.core.model", "rimd_sim.instruments": "rimd_sim.core",
+        "rimd_sim.instruments.rig_simulator": "rimd_sim.core.simulator",
+        "rimd_sim.analysis.dynamics": "rimd_sim.analysis",
+        "rimd_sim.analysis.dynamics.pulse": "rimd_sim.analysis.pulse",
+        "rimd_sim.analysis.dynamics.steady": "rimd_sim.analysis.dynamics",
+        "rimd_sim.analysis.dynamics.sweep": "rimd_sim.analysis.sweep",
+        "rimd_sim.analysis.dynamics.bifurcation": "rimd_sim.analysis.bifurcation",
+        "rimd_sim.analysis.dynamics.peterka": "rimd_sim.analysis.peterka",
+        "rimd_sim.analysis.dynamics.lyapunov": "rimd_sim.analysis.lyapunov",
+    }
+    sys.modules.update({new: importlib.import_module(old) for new, old in aliases.items()})
+"""
+
+IDENTITY_PROBE = LAYOUT_ALIASES + r"""
 import hashlib, json, math, sys
 from fractions import Fraction
 import numpy as np
-from rimd_sim.model.rig_model import RigModel, SimConfig, load_config
+from rimd_sim.model.rig_model import RigModel
+from rimd_sim.settings.config import SimConfig, load_config
 from rimd_sim.settings.config import find_config_file
 from rimd_sim.instruments.rig_simulator import RigSimulator
 
@@ -169,9 +191,10 @@ for gap, f in [(1.0e-3, 4.6), (0.0, 3.75)]:
 print(json.dumps(out))
 """
 
-COMPILE_PROBE = r"""
+COMPILE_PROBE = """
 import time
 t0 = time.perf_counter()
+""" + LAYOUT_ALIASES + r"""
 import numpy as np
 from rimd_sim.settings.config import SimConfig, load_config
 from rimd_sim.settings.config import find_config_file

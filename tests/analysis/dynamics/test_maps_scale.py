@@ -14,9 +14,9 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -100,6 +100,7 @@ def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
 
 
 def _free_port() -> int:
+    """A port nothing listens on now (for a refusal test: nothing need bind it later)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -115,10 +116,23 @@ class Cluster:
         self.env = {**os.environ, "PYTHONPATH": os.pathsep.join([SRC, os.environ.get("PYTHONPATH", "")]),
                     "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
         self.env.pop("RIMD_DASK_SCHEDULER", None)
-        port = _free_port()
-        self.address = f"tcp://127.0.0.1:{port}"
-        self._start("scheduler", [DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                                  "--no-dashboard", "--no-show"])
+        # The scheduler picks its own free port and writes its address to a file: a port chosen here and bound
+        # later could be taken in between by another test's server (the client then hung on a foreign socket).
+        scheduler_file = tmp / "scheduler.json"
+        self._start("scheduler", [DASK, "scheduler", "--host", "127.0.0.1", "--port", "0", "--scheduler-file",
+                                  str(scheduler_file), "--no-dashboard", "--no-show"])
+        self.address = self._read_address(scheduler_file, deadline_s=60.0)
+
+    def _read_address(self, scheduler_file: Path, deadline_s: float) -> str:
+        deadline = time.monotonic() + deadline_s
+        while time.monotonic() < deadline:
+            try:
+                return json.loads(scheduler_file.read_text())["address"]
+            except (FileNotFoundError, json.JSONDecodeError, KeyError):
+                if self.procs[0].poll() is not None:
+                    raise RuntimeError(f"dask scheduler exited with status {self.procs[0].returncode}") from None
+                time.sleep(0.05)
+        raise TimeoutError(f"dask scheduler wrote no address to {scheduler_file} within {deadline_s} s")
 
     def _start(self, name: str, argv: list[str]) -> subprocess.Popen:
         log = open(self.tmp / f"{name}-{len(self.procs)}.log", "wb")  # closed with the process
