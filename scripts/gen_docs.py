@@ -63,6 +63,7 @@ VERB_PAGES = {
     "fit-table": "docs/identification.md",
     "pulse": "docs/physics.md",
     "info": "docs/development.md",
+    "warmup": "docs/development.md",
     "faults": "docs/faults.md",
     "crop": "docs/recording.md",
     "replay": "docs/recording.md",

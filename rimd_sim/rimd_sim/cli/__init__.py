@@ -190,6 +190,7 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.cli.verbs.crop"),
     Verb("node", "run one node of the rig (NAME), with --ros-args", "rimd_sim.cli.verbs.node"),
     Verb("info", "print the version and facts about the environment", "rimd_sim.cli.verbs.info"),
+    Verb("warmup", "compile the physics once, ahead, into numba's cache (set-up runs it)", "rimd_sim.cli.verbs.warmup"),
 )
 
 
