@@ -154,15 +154,20 @@ class Output:
     qos: Qos
 
 
+#: Seconds of blocks each data publisher keeps at real time for a reliable subscriber that stalls.
+REAL_TIME_HISTORY_S = 3.0
+
+
 def history_depth(config: SimConfig, settings: SimulatorNodeSettings) -> int:
     """The history of each data publisher, in messages.
 
-    One second of blocks at real time; faster than real time, 20 s of simulation time (at 20x that is still one
-    second of wall time for a reliable subscriber, such as the recorder, to fall behind without losing a block;
-    memory: about 3 MB per 20 kHz channel). In lockstep no consumer falls further behind than the window: twice
-    the window and a second.
+    Three seconds of blocks at real time (a reliable subscriber, such as the recorder, may stall that long
+    without losing a block: a stall of 1.1 s on a loaded machine lost five blocks with one second; memory: about
+    0.5 MB per 20 kHz channel); faster than real time, 20 s of simulation time (at 20x that is still one second
+    of wall time; about 3 MB per 20 kHz channel). In lockstep no consumer falls further behind than the window:
+    twice the window and a second.
     """
-    seconds = 1.0 if wall_clock_stamps(config, settings) else 20.0
+    seconds = REAL_TIME_HISTORY_S if wall_clock_stamps(config, settings) else 20.0
     if settings.lockstep.enabled:
         seconds = max(1.0, 2 * settings.lockstep.window + 1.0)
     return max(10, math.ceil(config.block_rate * seconds) + 10)
