@@ -16,8 +16,9 @@ if TYPE_CHECKING:
     from rimd_sim.settings.config import SimConfig
 
 from rimd_sim.errors import InputError
+from rimd_sim.settings.yaml_file import read_yaml
 
-__all__ = ["FileFormatError", "jsonable", "nest", "read_yaml", "write_csv", "write_json", "write_parameter_file",
+__all__ = ["FileFormatError", "jsonable", "nest", "write_csv", "write_json", "write_parameter_file",
            "write_summary"]
 
 
@@ -79,29 +80,6 @@ def nest(flat: dict) -> dict:
     return tree
 
 
-def read_yaml(path: Path) -> Any:
-    """The YAML document of ``path``.
-
-    Raises:
-        FileFormatError: The file cannot be read, or is not YAML: the file, the line and column, the problem.
-    """
-    import yaml
-
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot be read: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(f"{path}: not text (UTF-8): {exc.reason} at byte {exc.start}") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise FileFormatError(f"{path}{where}: not valid YAML: {problem}") from None
-
-
 def write_parameter_file(path: Path, base_path: Path, config: SimConfig, header: str) -> None:
     """The base file with the simulator's section replaced by every value of ``config``.
 
@@ -116,7 +94,7 @@ def write_parameter_file(path: Path, base_path: Path, config: SimConfig, header:
 
     from rimd_sim.settings.config import NODE_NAME
 
-    doc = read_yaml(base_path) or {}
+    doc = read_yaml(base_path, what="parameter file") or {}
     if not isinstance(doc, dict):
         raise FileFormatError(f"{base_path} line 1 column 1: a parameter file must be a mapping of node names, "
                               f"not {type(doc).__name__}")
