@@ -30,29 +30,53 @@ def _read_version() -> str:
 def _config_files() -> list[str]:
     """List the ROS parameter YAML files and the tables (CSV) of config/, relative to this file.
 
-    ``rimd_sim/config`` is a relative symlink to the repository's ``config/`` directory, so the files are
-    installed to ``share/rimd_sim/config`` while they live at the repository root.
+    The files live in the package (``rimd_sim/config``; the repository's ``config/`` is a link to it), so a copy
+    of the package into another workspace builds; they are installed to ``share/rimd_sim/config``.
     """
     return sorted(str(path.relative_to(HERE)) for pattern in ("*.yaml", "*.csv")
                   for path in (HERE / "config").glob(pattern))
 
 
-def _node_executables() -> list[str]:
-    """``"executable = module:function"`` of every node of the registry (loaded by path, without the package)."""
-    path = HERE / PACKAGE_NAME / "ros" / "nodes" / "registry.py"
-    spec = importlib.util.spec_from_file_location("_rimd_node_registry", path)
+def _load_by_path(name: str, *parts: str):
+    """Load a pure-data module of the package by its path (the package itself may not be importable yet)."""
+    path = HERE.joinpath(PACKAGE_NAME, *parts)
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module   # NamedTuple and annotations look their module up while the class is made
     spec.loader.exec_module(module)
-    return module.console_scripts()
+    return module
+
+
+def _node_executables() -> list[str]:
+    """``"executable = module:function"`` of every node of the registry (loaded by path, without the package)."""
+    return _load_by_path("_rimd_node_registry", "ros", "nodes", "registry.py").console_scripts()
+
+
+#: The commands of a PEP 517 build (pip install, python -m build): only these declare the dependencies.
+PIP_BUILD_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
+
+
+def _requirements(version: str) -> tuple[list[str], dict[str, list[str]]]:
+    """Return ``install_requires`` and ``extras_require`` (rimd_sim/dependencies.py) for a pip build.
+
+    A colcon build (``setup.py develop`` / ``install``) declares none: its dependencies are package.xml's, and
+    console scripts of a develop install check the declared requirements against pip's distributions, which an
+    apt ROS 2 install does not have (``ros-jazzy-rclpy`` would be "not found" while rclpy imports fine).
+    """
+    if not PIP_BUILD_COMMANDS.intersection(sys.argv[1:]):
+        return ["setuptools"], {}
+    dependencies = _load_by_path("_rimd_dependencies", "dependencies.py")
+    return dependencies.install_requires(version), dependencies.extras_require()
 
 
 # ros2-run compatible node executables, "name = module:function"; installed to lib/rimd_sim/.
 NODE_EXECUTABLES: list[str] = _node_executables()
+VERSION = _read_version()
+INSTALL_REQUIRES, EXTRAS_REQUIRE = _requirements(VERSION)
 
 setup(
     name=PACKAGE_NAME,
-    version=_read_version(),
+    version=VERSION,
     packages=find_packages(exclude=["test", "tests"]),
     package_data={"rimd_sim.ros.nodes": ["fastdds_profiles.xml"]},
     data_files=[
@@ -60,7 +84,9 @@ setup(
         ("share/" + PACKAGE_NAME, ["package.xml"]),
         ("share/" + PACKAGE_NAME + "/config", _config_files()),
     ],
-    install_requires=["setuptools"],
+    install_requires=INSTALL_REQUIRES,
+    extras_require=EXTRAS_REQUIRE,
+    python_requires=">=3.11,<3.13",
     zip_safe=False,
     maintainer="RIMD twin maintainers",
     maintainer_email="maintainers@users.noreply.github.com",

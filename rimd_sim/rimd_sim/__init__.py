@@ -1,7 +1,8 @@
 """rimd_sim: digital twin of the RIMD vibro-impact test rig.
 
-Sub-packages: ``core`` (physics, without ROS), ``verbs`` (subcommands of the ``rimd`` command), and later
-``nodes`` (thin ROS 2 adapters over the core).
+The package's folders are its layers, bottom to top (docs/architecture.md): ``settings``, ``model``,
+``instruments`` and ``io``, ``runtime``, ``analysis`` and ``viz``, ``ros`` (the only one that imports ROS), ``cli``.
+Importing ``rimd_sim`` itself imports nothing else.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.4.0"
