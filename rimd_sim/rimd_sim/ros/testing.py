@@ -418,10 +418,12 @@ class RigHandle:
         """What the rig still lacks to be ready, in words ('' when ready)."""
         graph = {ns.rstrip("/") + "/" + name for name, ns in client.node.get_node_names_and_namespaces()}
         parts = [f"{n.name} (not in the ROS graph yet)" for n in self.rig.plan.nodes if n.fqn not in graph]
-        services = [s for s in RIG_SERVICES if not client.service_ready(s)]
-        if services:
-            parts.append("simulator: services " + ", ".join(f"{client.namespace}/{s}" for s in services))
-        if not armed:
+        services = [f"{client.namespace}/{s}" for s in RIG_SERVICES if not client.service_ready(s)]
+        if services:   # the simulator serves them all at once, then arms its lockstep wait
+            parts.append(f"simulator: services {services[0]}"
+                         + (f" and {len(services) - 1} more" if len(services) > 2 else
+                            "".join(f", {s}" for s in services[1:])))
+        elif not armed:
             parts.append(f"simulator: its lockstep wait for {', '.join(self.consumers)} (not in its /diagnostics "
                          "yet)")
         return "; ".join(parts)
