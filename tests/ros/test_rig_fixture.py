@@ -9,6 +9,8 @@ Hypotheses:
   timeout is answered;
 - a simulator that cannot start (its environment lacks ``rimd_msgs``: it dies at import, as in a venv without
   the message package) fails the fixture within 10 s, naming the node, its exit status and its error;
+- a rig not ready within the ready timeout is stopped and fails the fixture, naming what was missing, the
+  settings of the timeout and the nodes' logs;
 - a held simulator (stopped with SIGSTOP) makes a helper with a 1 s timeout fail after about 1 s, naming the
   service and the domain; once it runs again it answers; killed, the next helper fails at once (not after its
   30 s timeout), naming the node and how it ended, with its last log lines;
@@ -203,3 +205,15 @@ def test_helpers_time_out_on_a_held_rig_and_a_dead_node_is_named_at_once(rimd_ri
     assert message.startswith(f"rimd_rig: node rimd_simulator was killed by SIGKILL while the test waited on it "
                               f"(ROS_DOMAIN_ID {rig.domain_id}"), message
     assert "paused at simulation time" in message, message   # its last log lines
+
+
+@pytest.mark.ros
+def test_a_rig_not_ready_in_time_fails_naming_what_was_missing(rimd_rig):
+    started = time.monotonic()
+    with pytest.raises(UnavailableError) as late:   # no Python process imports rclpy and serves in 0.2 s
+        rimd_rig(consumers=["nobody"], record=False, ready_timeout=0.2)
+    message = str(late.value)
+    assert time.monotonic() - started < 10.0, message   # the rig was stopped, not waited for
+    assert message.startswith("rimd_rig: the rig was not ready within 0.2 s (ROS_DOMAIN_ID "), message
+    assert "; still waiting for " in message and "rimd_simulator" in message, message
+    assert "RIMD_READY_TIMEOUT" in message and "--- rimd_simulator: " in message, message
