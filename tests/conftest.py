@@ -1,7 +1,9 @@
 """Fixtures shared by the whole test suite.
 
 ROS isolation: every test that asks for ``ros_env`` (directly or through ``ros_processes`` or
-``rclpy_context``) gets its own ``ROS_DOMAIN_ID`` (leased machine-wide, see ``harness/domains.py``) and
+``rclpy_context``) gets its own ``ROS_DOMAIN_ID`` (leased machine-wide with the ``rimd_rig`` fixture's leases, in
+the same range: 1..100, or ``RIMD_DOMAIN_RANGE`` / the ini key ``rimd_domain_range``; see ``harness/domains.py``
+and docs/testing.md) and
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, so DDS discovery stays on loopback and parallel runs never
 hear each other. The variables are also set in ``os.environ`` for the duration of the test, so rclpy in
 the test process joins the same domain.
@@ -27,6 +29,7 @@ import pytest
 
 from harness.domains import lease_domain_id
 from harness.processes import ProcessManager
+from rimd_sim.ros.testing import configured_domain_range
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -86,9 +89,9 @@ def repo_root() -> Path:
 
 
 @pytest.fixture
-def ros_domain_id() -> Iterator[int]:
-    """A ROS_DOMAIN_ID in 1..100 held by this test alone, machine-wide."""
-    with lease_domain_id() as lease:
+def ros_domain_id(request: pytest.FixtureRequest) -> Iterator[int]:
+    """A ROS_DOMAIN_ID held by this test alone, machine-wide, in the configured range (1..100 by default)."""
+    with lease_domain_id(domain_range=configured_domain_range(request.config)) as lease:
         yield lease.domain_id
 
 

@@ -11,18 +11,20 @@ import time
 import psutil
 import pytest
 
-from harness.domains import DOMAIN_ID_MAX, DOMAIN_ID_MIN, lease_domain_id
+from harness.domains import lease_domain_id
 from harness.processes import ProcessFailure, ProcessManager
+from rimd_sim.ros.testing import configured_domain_range
 
 pytestmark = pytest.mark.process  # every test here starts a process
 
 
 def test_leases_are_exclusive_and_in_range():
-    leases = [lease_domain_id() for _ in range(5)]
+    first, last = configured_domain_range()   # 1..100 unless RIMD_DOMAIN_RANGE says otherwise
+    leases = [lease_domain_id() for _ in range(min(5, last - first + 1))]
     try:
         ids = [lease.domain_id for lease in leases]
         assert len(set(ids)) == len(ids)
-        assert all(DOMAIN_ID_MIN <= domain_id <= DOMAIN_ID_MAX for domain_id in ids)
+        assert all(first <= domain_id <= last for domain_id in ids)
     finally:
         for lease in leases:
             lease.release()
@@ -32,7 +34,8 @@ def test_leases_are_exclusive_and_in_range():
 def test_all_domains_taken_is_an_error(tmp_path):
     leases = []
     try:
-        for _ in range(DOMAIN_ID_MAX - DOMAIN_ID_MIN + 1):
+        first, last = configured_domain_range()
+        for _ in range(last - first + 1):
             leases.append(lease_domain_id(lock_dir=tmp_path))
         with pytest.raises(RuntimeError, match="all ROS domain ids"):
             lease_domain_id(lock_dir=tmp_path)

@@ -373,10 +373,12 @@ class Rig:
 
     def failed(self) -> tuple[str, int] | None:
         """A process that has exited, as (name, status), or None."""
-        for name, proc in self.processes.items():
-            if proc.poll() is not None:
-                return name, proc.returncode
-        return None
+        gone = self.exited()
+        return gone[0] if gone else None
+
+    def exited(self) -> list[tuple[str, int]]:
+        """Every process that has exited, as (name, status), in start order (a status < 0: killed by that signal)."""
+        return [(name, proc.returncode) for name, proc in self.processes.items() if proc.poll() is not None]
 
     def watch(self, stop: StopSignals, duration: float = 0.0, ends_itself: str | None = None) -> tuple[str, int] | None:
         """Wait until ``stop`` is requested, ``duration`` s have passed (0: no limit) or a process exits.

@@ -11,31 +11,179 @@ however loaded the CI runner is (docs/rig.md, "Pacing: lockstep"; docs/testing.m
         subprocess.run([sys.executable, "my_daq.py", "--until", "3"], env=rig.env, check=True, timeout=120)
         ...
 
+``rimd_rig(...)`` returns once the rig is ready (:meth:`RigHandle.wait_ready`): every node in the ROS graph, the
+simulator's services served, and its lockstep wait armed. The simulator says the last in its ``/diagnostics``
+(status ``rimd_simulator: pacing``, a ``lockstep NAME state`` value per consumer), which it publishes once its
+executor spins, after its pacing thread has started (or, started paused, is ready to). A first run on an empty
+numba cache compiles for half a minute before that. The wait is bounded (``ready_timeout``; the ini key
+``rimd_ready_timeout``, the environment variable ``RIMD_READY_TIMEOUT``; default :data:`DEFAULT_READY_TIMEOUT_S`),
+says what it waits for every few seconds on stderr, and fails naming what was missing and the nodes' last log
+lines. A node that exits, while the rig comes up or later while the test waits on the rig (a service call,
+:meth:`RigHandle.wait_until_simulated`, :meth:`RigHandle.session`), fails the test at once with
+:class:`rimd_sim.errors.UnavailableError`, naming the node, its exit status and its last log lines.
+
 :class:`RigHandle` gives the domain's environment (``env``, for the processes you start), the recording
 directory, the rig's services as one-liners (``motor``, ``perturb``, ``inject``, ``pause``, ``resume``, ``reset``,
-``clear_faults``), waits on simulation time, each node's log, and ``stop``.
+``clear_faults``; each with a ``timeout``, default :data:`SERVICE_TIMEOUT_S`), waits on simulation time, each
+node's log, and ``stop``.
+
+The domains are leased from 1..100, or the range of ``RIMD_DOMAIN_RANGE`` (which wins) or of the ini key
+``rimd_domain_range`` (``101-150``; :func:`configured_domain_range`).
 """
 
 from __future__ import annotations
 
 import fcntl
 import itertools
+import math
 import os
+import re
+import signal
+import sys
 import tempfile
-from collections.abc import Iterator, Mapping, Sequence
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-__all__ = ["DomainLease", "RigHandle", "lease_domain_id", "rimd_rig"]
+from rimd_sim.errors import InputError, UnavailableError
 
+__all__ = ["DomainLease", "RigFactory", "RigHandle", "configured_domain_range", "configured_ready_timeout",
+           "lease_domain_id", "parse_domain_range", "parse_ready_timeout", "rimd_rig"]
+
+#: The domain ids leased when no range is configured (0 is left to people).
 DOMAIN_ID_MIN = 1
 DOMAIN_ID_MAX = 100
+#: The largest ROS domain id: with Fast DDS's default ports (7400 + 250 x id + offsets) a larger one has no UDP port.
+ROS_DOMAIN_ID_LIMIT = 232
+#: The domain range's environment variable (wins) and ini key (``FIRST-LAST``).
+DOMAIN_RANGE_ENV = "RIMD_DOMAIN_RANGE"
+DOMAIN_RANGE_INI = "rimd_domain_range"
+#: The ready timeout's environment variable (wins) and ini key (seconds).
+READY_TIMEOUT_ENV = "RIMD_READY_TIMEOUT"
+READY_TIMEOUT_INI = "rimd_ready_timeout"
+#: Default of the ready timeout (s): a first run on an empty numba cache on a slow 2-core runner, with margin
+#: (the simulator was ready 29 s after its start there; docs/testing.md).
+DEFAULT_READY_TIMEOUT_S = 120.0
+#: How often the ready wait says what it still waits for (s).
+READY_REPORT_S = 5.0
+#: Default timeout of each service helper (s): the service found and its answer received.
+SERVICE_TIMEOUT_S = 30.0
+#: Lines of a node's log that an error message shows.
+LOG_TAIL_LINES = 20
+#: The simulator's services the helpers call (in the rig's namespace): served means the rig takes commands.
+RIG_SERVICES = ("set_motor_frequency", "perturb", "inject_fault", "pause", "resume", "reset", "clear_faults")
+#: The simulator's diagnostic status that names its lockstep consumers (runtime/simulator.py, ``diagnostics``).
+PACING_STATUS = "rimd_simulator: pacing"
 LOCK_DIR = Path(tempfile.gettempdir()) / "rimd-ros-domain-locks"
 _lease_counter = itertools.count()
 
+
+# ---- configuration: the domain range and the ready timeout ---------------------------------------------------------
+
+_RANGE = re.compile(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?")
+
+
+def parse_domain_range(text: str, source: str = DOMAIN_RANGE_ENV) -> tuple[int, int]:
+    """A domain range as written (``101-150``; ``7``: that id alone): (first, last), both leased.
+
+    Args:
+        text: The range.
+        source: Where it was given, for the message (``RIMD_DOMAIN_RANGE``, ``rimd_domain_range in pytest.ini``).
+
+    Raises:
+        InputError: Not ``FIRST-LAST`` with ``0 <= FIRST <= LAST <= 232``; the message names the source and the rule.
+    """
+    rule = (f"must be FIRST-LAST (for example 101-150), ROS domain ids with 0 <= FIRST <= LAST <= "
+            f"{ROS_DOMAIN_ID_LIMIT}")
+    match = _RANGE.fullmatch(text)
+    if match is None:
+        raise InputError(f"{source} = {text!r} refused: {rule}")
+    first = int(match.group(1))
+    last = int(match.group(2)) if match.group(2) is not None else first
+    if first > last:
+        raise InputError(f"{source} = {text!r} refused: reversed ({first} > {last}); {rule}")
+    if last > ROS_DOMAIN_ID_LIMIT:
+        raise InputError(f"{source} = {text!r} refused: {last} is beyond the largest ROS domain id, "
+                         f"{ROS_DOMAIN_ID_LIMIT} (Fast DDS's default ports); {rule}")
+    return first, last
+
+
+def parse_ready_timeout(text: str, source: str = READY_TIMEOUT_ENV) -> float:
+    """A ready timeout as written (seconds, > 0).
+
+    Raises:
+        InputError: Not a finite number > 0; the message names the source.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{source} = {text!r} refused: must be a number of seconds > 0 "
+                         f"(default {DEFAULT_READY_TIMEOUT_S:g})")
+    return value
+
+
+def _ini(config: pytest.Config | None, name: str) -> tuple[str, str]:
+    """The ini key ``name``'s value ('' when unset, or when this plugin's keys are not registered) and its source."""
+    if config is None:
+        return "", name
+    try:
+        value = config.getini(name)
+    except ValueError:   # the keys are not registered: this module was not loaded as a plugin (-p no:rimd_sim)
+        return "", name
+    where = config.inipath.name if config.inipath is not None else "the ini file"
+    return str(value or "").strip(), f"{name} in {where}"
+
+
+def _configured(config: pytest.Config | None, environ: Mapping[str, str] | None, env_name: str, ini_name: str,
+                parse: Callable[[str, str], Any], default: Any) -> Any:
+    environ = os.environ if environ is None else environ
+    text = environ.get(env_name, "").strip()
+    if text:
+        return parse(text, env_name)
+    text, source = _ini(config, ini_name)
+    return parse(text, source) if text else default
+
+
+def configured_domain_range(config: pytest.Config | None = None,
+                            environ: Mapping[str, str] | None = None) -> tuple[int, int]:
+    """The domain ids to lease: ``RIMD_DOMAIN_RANGE`` (wins), else the ini key ``rimd_domain_range``, else 1..100.
+
+    Args:
+        config: The pytest configuration (its ini file); None: the environment only.
+        environ: The environment (default ``os.environ``).
+
+    Raises:
+        InputError: The range given is refused (:func:`parse_domain_range`).
+    """
+    return _configured(config, environ, DOMAIN_RANGE_ENV, DOMAIN_RANGE_INI, parse_domain_range,
+                       (DOMAIN_ID_MIN, DOMAIN_ID_MAX))
+
+
+def configured_ready_timeout(config: pytest.Config | None = None, environ: Mapping[str, str] | None = None) -> float:
+    """The default ready timeout (s): ``RIMD_READY_TIMEOUT`` (wins), else the ini key ``rimd_ready_timeout``, else 120.
+
+    Raises:
+        InputError: The value given is refused (:func:`parse_ready_timeout`).
+    """
+    return _configured(config, environ, READY_TIMEOUT_ENV, READY_TIMEOUT_INI, parse_ready_timeout,
+                       DEFAULT_READY_TIMEOUT_S)
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    """The plugin's ini keys (``--strict-config`` refuses an unregistered one)."""
+    parser.addini(DOMAIN_RANGE_INI, f"ROS domain ids the rimd_rig fixture leases, FIRST-LAST (default "
+                                    f"{DOMAIN_ID_MIN}-{DOMAIN_ID_MAX}; {DOMAIN_RANGE_ENV} wins)", default="")
+    parser.addini(READY_TIMEOUT_INI, f"seconds rimd_rig waits for a rig to be ready (default "
+                                     f"{DEFAULT_READY_TIMEOUT_S:g}; {READY_TIMEOUT_ENV} wins)", default="")
+
+
+# ---- domain leases -------------------------------------------------------------------------------------------------
 
 class DomainLease:
     """An exclusively held ROS_DOMAIN_ID; a context manager, ``release()`` is safe to call twice.
@@ -63,17 +211,27 @@ class DomainLease:
         self.release()
 
 
-def lease_domain_id(*, lock_dir: Path = LOCK_DIR) -> DomainLease:
-    """Take the first free domain id of 1..100 (0 is left to people), from a start that differs per process.
+def lease_domain_id(*, lock_dir: Path = LOCK_DIR, domain_range: tuple[int, int] | None = None) -> DomainLease:
+    """Take the first free domain id of the range, from a start that differs per process.
+
+    Args:
+        lock_dir: Where the lock files are (one per id, shared by every range).
+        domain_range: (first, last), both included; default :func:`configured_domain_range` without an ini file
+            (``RIMD_DOMAIN_RANGE``, else 1..100).
 
     Raises:
-        RuntimeError: Every id is held by someone else.
+        RuntimeError: Every id of the range is held by someone else.
+        InputError: ``RIMD_DOMAIN_RANGE`` is refused (no range given).
     """
+    first, last = configured_domain_range() if domain_range is None else domain_range
+    if not 0 <= first <= last <= ROS_DOMAIN_ID_LIMIT:
+        raise ValueError(f"domain_range {domain_range!r}: must be (first, last) with 0 <= first <= last <= "
+                         f"{ROS_DOMAIN_ID_LIMIT}")
     lock_dir.mkdir(mode=0o777, parents=True, exist_ok=True)
-    span = DOMAIN_ID_MAX - DOMAIN_ID_MIN + 1
+    span = last - first + 1
     start = (os.getpid() * 7 + next(_lease_counter)) % span
     for offset in range(span):
-        domain_id = DOMAIN_ID_MIN + (start + offset) % span
+        domain_id = first + (start + offset) % span
         descriptor = os.open(lock_dir / f"{domain_id}.lock", os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -81,8 +239,11 @@ def lease_domain_id(*, lock_dir: Path = LOCK_DIR) -> DomainLease:
             os.close(descriptor)
             continue
         return DomainLease(domain_id, descriptor)
-    raise RuntimeError(f"all ROS domain ids {DOMAIN_ID_MIN}..{DOMAIN_ID_MAX} are leased (lock files in {lock_dir})")
+    raise RuntimeError(f"all ROS domain ids {first}..{last} are leased (lock files in {lock_dir}); a wider range: "
+                       f"{DOMAIN_RANGE_ENV} or the ini key {DOMAIN_RANGE_INI} (docs/testing.md)")
 
+
+# ---- the rig -----------------------------------------------------------------------------------------------------
 
 def ros_environment(domain_id: int, log_dir: Path) -> dict[str, str]:
     """This process's environment on ``domain_id``, discovery kept on this machine, ROS logs in ``log_dir``."""
@@ -99,6 +260,21 @@ def fault_entries(faults: Sequence[Mapping[str, Any] | str]) -> list[str]:
     return [f if isinstance(f, str) else " ".join(f"{k}={v}" for k, v in f.items()) for f in faults]
 
 
+def _say(line: str) -> None:
+    """A progress line of the ready wait, on stderr (pytest shows it with ``-s``, and in a failed test's report)."""
+    print(line, file=sys.stderr, flush=True)
+
+
+def _how(status: int) -> str:
+    """An exit status in words (a negative one: killed by that signal)."""
+    if status < 0:
+        try:
+            return f"was killed by {signal.Signals(-status).name}"
+        except ValueError:
+            pass
+    return f"exited with status {status}"
+
+
 @dataclass
 class RigHandle:
     """A running rig of the ``rimd_rig`` fixture. See the module docstring."""
@@ -112,6 +288,9 @@ class RigHandle:
     _lease: DomainLease
     _client: Any = None
     _clock_ns: int = -1
+    #: Seconds from the start of the wait (right after the processes started) until the rig was ready.
+    ready_after: float = math.nan
+    _stopped: bool = False
 
     @property
     def config(self) -> Any:
@@ -132,16 +311,44 @@ class RigHandle:
         path = self.run_dir / "logs" / f"{node}.log"
         return path.read_text(errors="replace") if path.exists() else ""
 
+    def log_tail(self, node: str, lines: int = LOG_TAIL_LINES) -> str:
+        """The last ``lines`` lines of a node's log, headed by its name and path (for an error message)."""
+        path = self.run_dir / "logs" / f"{node}.log"
+        tail = self.log(node).rstrip().splitlines()[-lines:]
+        if not tail:
+            return f"--- {node}: its log is empty ({path})"
+        return f"--- {node}: last {len(tail)} lines of its log ({path}):\n" + "\n".join(f"    {t}" for t in tail)
+
+    # -- the rig's processes -----------------------------------------------------------------------------------
+    def check_alive(self, when: str = "while the test waited on it") -> None:
+        """Fail at once when a process of the rig has exited (nothing to check once the rig is stopped).
+
+        Raises:
+            UnavailableError: Naming each node that exited, its exit status and its last log lines.
+        """
+        if self._stopped:
+            return
+        gone = self.rig.exited()
+        if gone:
+            what = "; ".join(f"node {name} {_how(status)}" for name, status in gone)
+            tails = "\n".join(self.log_tail(name) for name, _ in gone)
+            raise UnavailableError(f"rimd_rig: {what} {when} (ROS_DOMAIN_ID {self.domain_id}, run directory "
+                                   f"{self.run_dir})\n{tails}")
+
     # -- rclpy in this process, on the rig's domain ------------------------------------------------------------
     def client(self) -> Any:
-        """The rig's services and a node on its domain (:class:`rimd_sim.ros.clients.rig.RigClient`, made once)."""
+        """The rig's services and a node on its domain (:class:`rimd_sim.ros.clients.rig.RigClient`, made once).
+
+        Its waits check that the rig's processes are alive (:meth:`check_alive`).
+        """
         if self._client is None:
             from rclpy.qos import QoSProfile, ReliabilityPolicy
             from rosgraph_msgs.msg import Clock
 
             from rimd_sim.ros.clients.rig import RigClient
 
-            self._client = RigClient(domain_id=self.domain_id, timeout=30.0, name="rimd_test_rig")
+            self._client = RigClient(domain_id=self.domain_id, timeout=SERVICE_TIMEOUT_S, name="rimd_test_rig",
+                                     check=self.check_alive)
 
             def on_clock(msg: Clock) -> None:
                 self._clock_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
@@ -157,34 +364,106 @@ class RigHandle:
     def _spin_until(self, condition: Any, timeout: float) -> bool:
         return self.client().spin_until(condition, timeout)
 
-    def motor(self, frequency_hz: float, ramp_rate: float = 0.0, at: float | None = None) -> Any:
-        """Set the motor frequency (at simulation time ``at`` s, else the next block); the response."""
-        return self.client().motor(frequency_hz, ramp_rate, at)
+    def wait_ready(self, timeout: float, say: Callable[[str], None] = _say) -> float:
+        """Wait until the rig is ready (see the module docstring); the seconds it took.
 
-    def perturb(self, velocity: float, at: float | None = None) -> Any:
+        Ready: every node of the rig in the ROS graph, the simulator's services (:data:`RIG_SERVICES`) served,
+        and its ``/diagnostics`` naming the state of each lockstep consumer (its lockstep wait armed).
+
+        Args:
+            timeout: Seconds.
+            say: Told what the wait still waits for, every :data:`READY_REPORT_S` s.
+
+        Raises:
+            UnavailableError: A node exited (named, with its status and last log lines), or the rig was not ready
+                within ``timeout`` s (what was missing, and each node's last log lines).
+        """
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        started = time.monotonic()
+        client = self.client()
+        node = client.node
+        armed: list[str] = []   # the simulator's pacing message, once it names every consumer's lockstep state
+        keys = {f"lockstep {name} state" for name in self.consumers}
+
+        def on_diagnostics(msg: DiagnosticArray) -> None:
+            for status in msg.status:
+                if status.name.endswith(PACING_STATUS) and keys <= {kv.key for kv in status.values}:
+                    armed.append(status.message)
+
+        sub = node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+        try:
+            next_report = started + READY_REPORT_S
+            while True:
+                self.check_alive("while the rig came up")
+                missing = self._not_ready(client, bool(armed))
+                now = time.monotonic()
+                if not missing:
+                    return now - started
+                if now - started >= timeout:
+                    tails = "\n".join(self.log_tail(name) for name in self.node_names)
+                    raise UnavailableError(
+                        f"rimd_rig: the rig was not ready within {timeout:g} s (ROS_DOMAIN_ID {self.domain_id}, run "
+                        f"directory {self.run_dir}); still waiting for {missing}. A first run on an empty numba "
+                        f"cache compiles for a while: a longer wait is rimd_rig(ready_timeout=...), the ini key "
+                        f"{READY_TIMEOUT_INI} or {READY_TIMEOUT_ENV} (docs/testing.md)\n{tails}")
+                if now >= next_report:
+                    say(f"rimd_rig: waiting for {missing} ({now - started:.0f} s of {timeout:g} s)")
+                    next_report += READY_REPORT_S
+                client.executor.spin_once(timeout_sec=0.05)
+        finally:
+            node.destroy_subscription(sub)
+
+    def _not_ready(self, client: Any, armed: bool) -> str:
+        """What the rig still lacks to be ready, in words ('' when ready)."""
+        graph = {ns.rstrip("/") + "/" + name for name, ns in client.node.get_node_names_and_namespaces()}
+        parts = [f"{n.name} (not in the ROS graph yet)" for n in self.rig.plan.nodes if n.fqn not in graph]
+        services = [f"{client.namespace}/{s}" for s in RIG_SERVICES if not client.service_ready(s)]
+        if services:   # the simulator serves them all at once, then arms its lockstep wait
+            parts.append(f"simulator: services {services[0]}"
+                         + (f" and {len(services) - 1} more" if len(services) > 2 else
+                            "".join(f", {s}" for s in services[1:])))
+        elif not armed:
+            parts.append(f"simulator: its lockstep wait for {', '.join(self.consumers)} (not in its /diagnostics "
+                         "yet)")
+        return "; ".join(parts)
+
+    # -- the rig's services --------------------------------------------------------------------------------------
+    def motor(self, frequency_hz: float, ramp_rate: float = 0.0, at: float | None = None, *,
+              timeout: float = SERVICE_TIMEOUT_S) -> Any:
+        """Set the motor frequency (at simulation time ``at`` s, else the next block); the response.
+
+        Each helper raises :class:`rimd_sim.errors.CommandError` naming the service and the domain when it gets
+        no answer within ``timeout`` s, and :class:`rimd_sim.errors.UnavailableError` at once when a node of the
+        rig has exited.
+        """
+        return self.client().motor(frequency_hz, ramp_rate, at, timeout=timeout)
+
+    def perturb(self, velocity: float, at: float | None = None, *, timeout: float = SERVICE_TIMEOUT_S) -> Any:
         """Add ``velocity`` (m/s) to the hammer (at simulation time ``at`` s); the response."""
-        return self.client().perturb(velocity, at)
+        return self.client().perturb(velocity, at, timeout=timeout)
 
     def inject(self, channel: str, kind: str, *, start: float = 0.0, after: float = 0.0, duration: float = 0.0,
-               magnitude: float = 0.0) -> Any:
+               magnitude: float = 0.0, timeout: float = SERVICE_TIMEOUT_S) -> Any:
         """Inject a fault (docs/faults.md); the response."""
-        return self.client().inject(channel, kind, start=start, after=after, duration=duration, magnitude=magnitude)
+        return self.client().inject(channel, kind, start=start, after=after, duration=duration, magnitude=magnitude,
+                                    timeout=timeout)
 
-    def pause(self) -> Any:
+    def pause(self, *, timeout: float = SERVICE_TIMEOUT_S) -> Any:
         """``/rig/pause``."""
-        return self.client().trigger("pause")
+        return self.client().trigger("pause", timeout=timeout)
 
-    def resume(self) -> Any:
+    def resume(self, *, timeout: float = SERVICE_TIMEOUT_S) -> Any:
         """``/rig/resume``."""
-        return self.client().trigger("resume")
+        return self.client().trigger("resume", timeout=timeout)
 
-    def reset(self) -> Any:
+    def reset(self, *, timeout: float = SERVICE_TIMEOUT_S) -> Any:
         """``/rig/reset``."""
-        return self.client().trigger("reset")
+        return self.client().trigger("reset", timeout=timeout)
 
-    def clear_faults(self) -> Any:
+    def clear_faults(self, *, timeout: float = SERVICE_TIMEOUT_S) -> Any:
         """``/rig/clear_faults``."""
-        return self.client().trigger("clear_faults")
+        return self.client().trigger("clear_faults", timeout=timeout)
 
     def session(self, timeout: float = 30.0) -> Any:
         """The rig's current run (``rimd_msgs/msg/RigSession`` from /rig/session: run id, seed, configuration hash)."""
@@ -213,6 +492,7 @@ class RigHandle:
         Raises:
             AssertionError: Not in ``timeout`` s of wall time; the message says where the rig stands and what
                 it waits for (its log's last lockstep line).
+            UnavailableError: A node of the rig exited meanwhile (at once).
         """
         target = round(seconds * 1e9)
         if not self._spin_until(lambda: self._clock_ns >= target, timeout):
@@ -222,6 +502,7 @@ class RigHandle:
 
     def stop(self) -> int:
         """Stop the rig (the recorder finishes its file) and give the domain back; the rig's exit status."""
+        self._stopped = True
         status = self.rig.stop()
         if self._client is not None:
             self._client.close()
@@ -231,18 +512,25 @@ class RigHandle:
 
 
 class RigFactory:
-    """What the ``rimd_rig`` fixture gives: call it to bring up a rig (as many as you like in one test)."""
+    """What the ``rimd_rig`` fixture gives: call it to bring up a rig (as many as you like in one test).
 
-    def __init__(self, base_dir: Path) -> None:
+    Args:
+        base_dir: Where each rig's run directory goes.
+        config: The pytest configuration, for the ini keys (None: the environment variables and defaults only).
+    """
+
+    def __init__(self, base_dir: Path, config: pytest.Config | None = None) -> None:
         self._base = base_dir
+        self._config = config
         self._rigs: list[RigHandle] = []
 
     def __call__(self, *, consumers: Sequence[str] = (), seed: int = 0,
                  parameters: Mapping[str, Any] | None = None, faults: Sequence[Mapping[str, Any] | str] = (),
                  config: str | Path | None = None, record: bool = True, rerun: bool = False,
                  real_time_factor: float = 0.0, window: float | None = None, timeout: float | None = None,
-                 on_timeout: str | None = None) -> RigHandle:
-        """Bring up a rig in lockstep in a domain of its own.
+                 on_timeout: str | None = None, env: Mapping[str, str] | None = None,
+                 ready_timeout: float | None = None) -> RigHandle:
+        """Bring up a rig in lockstep in a domain of its own; return it once it is ready.
 
         Args:
             consumers: The names your consumers report progress under (``ProgressReporter``); the rig also waits
@@ -258,10 +546,23 @@ class RigFactory:
             window: ``lockstep.window`` (s of simulation time a consumer may lag).
             timeout: ``lockstep.timeout`` (s without progress before ``on_timeout`` applies).
             on_timeout: ``lockstep.on_timeout``: ``wait`` or ``drop``.
+            env: More environment variables of the rig's processes (``{"NUMBA_CACHE_DIR": ...}``); not in
+                ``RigHandle.env``, the environment of your processes.
+            ready_timeout: Seconds to wait for the rig to be ready (default: ``RIMD_READY_TIMEOUT``, the ini key
+                ``rimd_ready_timeout``, else :data:`DEFAULT_READY_TIMEOUT_S`).
+
+        Raises:
+            UnavailableError: A node exited while the rig came up, or the rig was not ready in time (the rig is
+                stopped; the message names the node or what was missing, with the nodes' last log lines).
+            InputError: The configuration, a parameter, the domain range or the ready timeout is refused
+                (nothing started).
         """
         from rimd_sim.ros.bringup import Rig, plan_rig
 
-        lease = lease_domain_id()
+        wait = configured_ready_timeout(self._config) if ready_timeout is None else float(ready_timeout)
+        if not (math.isfinite(wait) and wait > 0):
+            raise ValueError(f"ready_timeout = {ready_timeout!r}: must be a number of seconds > 0")
+        lease = lease_domain_id(domain_range=configured_domain_range(self._config))
         run_dir = Path(tempfile.mkdtemp(prefix=f"rig{lease.domain_id}_", dir=self._base))
         sim = {"seed": seed, **(parameters or {})}
         if faults:
@@ -270,18 +571,28 @@ class RigFactory:
             if value is not None:
                 sim[f"lockstep.{key}"] = value
         bridge = {"sink": "save", "save_path": str(run_dir / "rig.rrd")}
+        rig = None
         try:
             plan = plan_rig(config, output_dir=run_dir / "recording" if record else None, record=record,
                             rerun=rerun, lockstep=True, consumers=consumers, real_time_factor=real_time_factor,
                             parameters={"rimd_simulator": sim, "rimd_rerun": bridge}, run_dir=run_dir)
-            env = ros_environment(lease.domain_id, run_dir / "ros_log")
-            rig = Rig(plan, env=env, log_dir=run_dir / "logs")
+            handle_env = ros_environment(lease.domain_id, run_dir / "ros_log")
+            rig = Rig(plan, env={**handle_env, **(env or {})}, log_dir=run_dir / "logs")
             rig.start()
         except BaseException:
+            if rig is not None:
+                rig.stop()
             lease.release()
             raise
-        handle = RigHandle(lease.domain_id, env, run_dir, plan.recording_dir, plan.lockstep_consumers, rig, lease)
+        handle = RigHandle(lease.domain_id, handle_env, run_dir, plan.recording_dir, plan.lockstep_consumers, rig,
+                           lease)
         self._rigs.append(handle)
+        try:
+            handle.ready_after = handle.wait_ready(wait)
+        except BaseException:
+            self._rigs.remove(handle)
+            handle.stop()
+            raise
         return handle
 
     def stop_all(self) -> None:
@@ -291,9 +602,9 @@ class RigFactory:
 
 
 @pytest.fixture
-def rimd_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RigFactory]:
-    """Bring up rigs in lockstep, each in a ROS domain of its own; every one is stopped after the test."""
-    factory = RigFactory(tmp_path_factory.mktemp("rimd_rig"))
+def rimd_rig(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Iterator[RigFactory]:
+    """Bring up rigs in lockstep, each in a ROS domain of its own, ready when returned; all stopped after the test."""
+    factory = RigFactory(tmp_path_factory.mktemp("rimd_rig"), config=request.config)
     try:
         yield factory
     finally:
