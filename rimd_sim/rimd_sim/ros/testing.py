@@ -28,7 +28,7 @@ directory, the rig's services as one-liners (``motor``, ``perturb``, ``inject``,
 node's log, and ``stop``.
 
 The domains are leased from 1..100, or the range of ``RIMD_DOMAIN_RANGE`` (which wins) or of the ini key
-``rimd_domain_range`` (``101-150``; :func:`configured_domain_range`).
+``rimd_domain_range`` (``51-80``; :func:`configured_domain_range`).
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ _RANGE = re.compile(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?")
 
 
 def parse_domain_range(text: str, source: str = DOMAIN_RANGE_ENV) -> tuple[int, int]:
-    """A domain range as written (``101-150``; ``7``: that id alone): (first, last), both leased.
+    """A domain range as written (``51-80``; ``7``: that id alone): (first, last), both leased.
 
     Args:
         text: The range.
@@ -97,7 +97,7 @@ def parse_domain_range(text: str, source: str = DOMAIN_RANGE_ENV) -> tuple[int, 
     Raises:
         InputError: Not ``FIRST-LAST`` with ``0 <= FIRST <= LAST <= 232``; the message names the source and the rule.
     """
-    rule = (f"must be FIRST-LAST (for example 101-150), ROS domain ids with 0 <= FIRST <= LAST <= "
+    rule = (f"must be FIRST-LAST (for example 51-80), ROS domain ids with 0 <= FIRST <= LAST <= "
             f"{ROS_DOMAIN_ID_LIMIT}")
     match = _RANGE.fullmatch(text)
     if match is None:
