@@ -381,7 +381,7 @@ def info_problem(venv: Path, version: str):
     return check
 
 
-def test_python(report: Report, wheels: dict[str, Path], version: str, keep: bool) -> None:
+def run_steps(report: Report, wheels: dict[str, Path], version: str, keep: bool) -> None:
     """Run every step for one Python in a fresh venv in a temporary directory, timing them into ``report``."""
     python = report.python
     logs = LOG_ROOT / f"python{python}"
@@ -448,7 +448,7 @@ def main(argv: list[str] | None = None) -> int:
             f"({', '.join(p.name for p in wheels.values())})")
         for python in pythons:
             reports.append(Report(python))
-            test_python(reports[-1], wheels, version, args.keep)
+            run_steps(reports[-1], wheels, version, args.keep)
     except (StepFailed, build_dist.BuildError) as error:
         print(f"make test-dist: FAILED: {error}", file=sys.stderr)
         _print_times(reports)
