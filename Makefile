@@ -10,7 +10,10 @@ export VENV
 
 PYTEST_ARGS ?=
 
-.PHONY: help setup run test test-fast lint clean
+# The Pythons `make dist` builds the rimd_msgs wheel for, and `make test-dist` tests the wheels with.
+DIST_PYTHONS ?= 3.11 3.12
+
+.PHONY: help setup run test test-fast lint clean dist test-dist clean-dist
 
 help:
 	@echo "make run        set up, build and run the rig (rimd rig)"
@@ -19,6 +22,9 @@ help:
 	@echo "make setup      only create/refresh the venv ($(VENV)) and build ros_ws"
 	@echo "make lint       ruff check, lint-imports (the layer contracts) and mypy (the package's types)"
 	@echo "make clean      remove ros_ws build/install/log and the set-up stamps (keeps the venv)"
+	@echo "make dist       the wheels a lab installs with pip, in dist/: rimd_msgs for $(DIST_PYTHONS), rimd_sim"
+	@echo "make test-dist  make dist, then install the wheels into fresh venvs outside the repository and run them"
+	@echo "make clean-dist remove dist/ and .dist-build/ (the build venvs and CMake trees of make dist)"
 
 setup:
 	@bash scripts/setup.sh
@@ -47,3 +53,18 @@ lint: setup
 
 clean:
 	rm -rf ros_ws/build ros_ws/install ros_ws/log .stamps
+
+# The wheels a lab installs with pip (docs/testing.md, "From your repository's CI"): the rimd_msgs wheel of each
+# Python of DIST_PYTHONS and the rimd_sim wheel, in dist/. Build venvs and CMake trees are kept in .dist-build/ and
+# reused while requirements.txt is unchanged; an unchanged wheel is not rebuilt (scripts/build_dist.py).
+dist:
+	@python3 scripts/build_dist.py $(foreach python,$(DIST_PYTHONS),--python $(python))
+
+# The wheels from outside: for each Python, a fresh venv in a temporary directory, pip install of the wheels, then
+# rimd info, a rig and its recording, a lab's tests and the CI recipe, with a clean environment; prints the times
+# (scripts/test_dist.py).
+test-dist: dist
+	@python3 scripts/test_dist.py $(foreach python,$(DIST_PYTHONS),--python $(python))
+
+clean-dist:
+	rm -rf dist .dist-build

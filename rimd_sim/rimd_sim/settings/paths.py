@@ -1,7 +1,14 @@
-"""Where the project's files are: the repository's config/ first, then the installed share directory."""
+"""Where the project's files are: the repository's config/ first, then the installed share directory.
+
+The installed ``share/rimd_sim`` is found through the ament index (``AMENT_PREFIX_PATH``: a colcon workspace or
+a ROS 2 install), else under the interpreter's prefix or the prefix this package is installed in: a plain ``pip
+install`` of the wheel into a venv puts it in ``<venv>/share/rimd_sim`` and sets no environment variable (the ROS
+wheels' bootstrapper sets only ``LD_LIBRARY_PATH``).
+"""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 PACKAGE_NAME = "rimd_sim"
@@ -20,16 +27,48 @@ def source_root() -> Path | None:
     return None
 
 
-def installed_share_dir() -> Path | None:
-    """Return ``share/rimd_sim`` of the install prefix found on AMENT_PREFIX_PATH, or None."""
+def _ament_share_dir() -> Path | None:
+    """Return ``share/rimd_sim`` of the prefix on AMENT_PREFIX_PATH that has the package, or None."""
     try:
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
     except ImportError:
         return None
     try:
         return Path(get_package_share_directory(PACKAGE_NAME))
-    except PackageNotFoundError:
+    except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset or empty (a plain pip venv)
         return None
+
+
+def install_prefixes() -> list[Path]:
+    """Return the prefixes a pip install may have put ``share/rimd_sim`` in.
+
+    The interpreter's (a venv), then the one above the site-packages this package is in
+    (``<prefix>/lib/python3.X/site-packages``: ``pip install --prefix`` or ``--user``, Debian's ``dist-packages``).
+    """
+    prefixes = [Path(sys.prefix)]
+    site = Path(__file__).resolve().parent.parent.parent  # <site>/rimd_sim/settings/paths.py
+    if site.name in ("site-packages", "dist-packages"):
+        prefixes.append(site.parent.parent.parent)
+    unique: list[Path] = []
+    for prefix in prefixes:
+        if prefix not in unique:
+            unique.append(prefix)
+    return unique
+
+
+def installed_share_dir() -> Path | None:
+    """Return the installed ``share/rimd_sim``: the ament index's, else a pip install's (install_prefixes), or None.
+
+    A pip install's is recognised by the package.xml the wheel installs there.
+    """
+    share = _ament_share_dir()
+    if share is not None:
+        return share
+    for prefix in install_prefixes():
+        candidate = prefix / "share" / PACKAGE_NAME
+        if (candidate / "package.xml").is_file():
+            return candidate
+    return None
 
 
 def config_dir() -> Path:

@@ -50,15 +50,18 @@ def collect_facts() -> dict[str, object]:
     except FileNotFoundError as error:
         config = f"(not found: {error})"
     root = paths.source_root()
+    share = paths.installed_share_dir()
     return {
         "rimd_sim_version": __version__,
         "rimd_sim_location": _module_location("rimd_sim"),
         "source_root": str(root) if root is not None else None,
         "config_dir": config,
+        "share_dir": str(share) if share is not None else None,
         "python": f"{platform.python_version()} ({sys.executable})",
         "prefix": sys.prefix,
         "ros_jazzy_rclpy": _distribution_version("ros-jazzy-rclpy"),
         "rimd_msgs_location": _module_location("rimd_msgs"),
+        "ros_jazzy_rimd_msgs": _distribution_version("ros-jazzy-rimd-msgs"),
         "environment": {name: os.environ.get(name) for name in ROS_ENVIRONMENT_VARIABLES},
     }
 
