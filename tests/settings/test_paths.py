@@ -53,3 +53,26 @@ def test_the_prefix_of_the_site_packages_the_package_is_in_is_a_candidate(monkey
     monkeypatch.setattr(paths, "__file__", str(site / "rimd_sim" / "settings" / "paths.py"))
     monkeypatch.setattr(sys, "prefix", str(tmp_path / "venv"))
     assert paths.install_prefixes() == [tmp_path / "venv", tmp_path / "prefix"]
+
+
+def test_a_config_directory_above_an_installed_package_is_not_the_twins(monkeypatch, tmp_path):
+    """A lab's repository holding its venv has a config/ of its own: the twin's configurations come only from
+    RIMD_CONFIG_DIR, a source checkout and the installed share, so a lab's rimd.yaml never shadows the shipped one."""
+    from rimd_sim.settings.config import find_config_file
+    from rimd_sim.settings.yaml_file import config_dirs
+
+    lab = tmp_path / "lab"
+    (lab / "config").mkdir(parents=True)
+    (lab / "config" / "rimd.yaml").write_text("not the twin's\n")
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    monkeypatch.delenv("RIMD_CONFIG_DIR", raising=False)
+    venv = lab / ".venv"
+    monkeypatch.setattr(sys, "prefix", str(venv))
+    share = _share(venv)
+    (share / "config" / "rimd.yaml").write_text("the twin's\n")
+    monkeypatch.setattr(paths, "source_root", lambda: None)   # installed, in lab/.venv
+    monkeypatch.chdir(lab)
+    assert config_dirs() == [share / "config"]
+    assert find_config_file("rimd.yaml") == (share / "config" / "rimd.yaml").resolve()
+    monkeypatch.setenv("RIMD_CONFIG_DIR", str(lab / "config"))   # unless the lab asks for it
+    assert find_config_file("rimd.yaml") == (lab / "config" / "rimd.yaml").resolve()

@@ -445,16 +445,12 @@ def find_config_file(name: str = "rimd.yaml") -> Path:
     Raises:
         ConfigError: When no such file exists.
     """
-    import os
-    import sys
+    from rimd_sim.settings.paths import config_dirs
 
-    candidates = []
-    if os.environ.get("RIMD_CONFIG_DIR"):
-        candidates.append(Path(os.environ["RIMD_CONFIG_DIR"]) / name)
-    here = Path(__file__).resolve()
-    candidates += [parent / "config" / name for parent in here.parents]
-    candidates.append(Path(sys.prefix) / "share" / "rimd_sim" / "config" / name)
+    directories = config_dirs()
+    candidates = [directory / name for directory in directories]
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    raise ConfigError("config file", name, "not found in " + ", ".join(str(c.parent) for c in candidates[:3]))
+    raise ConfigError("config file", name, "not found in " + (", ".join(str(d) for d in directories)
+                                                             or "no source checkout and no installed rimd_sim"))

@@ -8,6 +8,7 @@ wheels' bootstrapper sets only ``LD_LIBRARY_PATH``).
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -69,6 +70,25 @@ def installed_share_dir() -> Path | None:
         if (candidate / "package.xml").is_file():
             return candidate
     return None
+
+
+def config_dirs() -> list[Path]:
+    """Where shipped configurations are looked for, in order.
+
+    ``$RIMD_CONFIG_DIR`` when set, the source checkout's ``config/`` when this package runs from one, the installed
+    ``share/rimd_sim/config``. Only these: a ``config/`` directory that happens to be above the package (a lab's
+    own repository holding the venv) is not the twin's.
+    """
+    dirs = []
+    if os.environ.get("RIMD_CONFIG_DIR"):
+        dirs.append(Path(os.environ["RIMD_CONFIG_DIR"]))
+    root = source_root()
+    if root is not None:
+        dirs.append(root / "config")
+    share = installed_share_dir()
+    if share is not None:
+        dirs.append(share / "config")
+    return dirs
 
 
 def config_dir() -> Path:

@@ -9,8 +9,6 @@ and otherwise says where it looked.
 
 from __future__ import annotations
 
-import os
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -46,14 +44,10 @@ def read_yaml(path: str | Path, *, what: str = "file") -> Any:
 
 
 def config_dirs() -> list[Path]:
-    """Where shipped configurations live: ``$RIMD_CONFIG_DIR``, the repository's ``config/``, the installed share."""
-    dirs = []
-    if os.environ.get("RIMD_CONFIG_DIR"):
-        dirs.append(Path(os.environ["RIMD_CONFIG_DIR"]))
-    here = Path(__file__).resolve()
-    dirs += [parent / "config" for parent in here.parents if (parent / "config").is_dir()][:1]
-    dirs.append(Path(sys.prefix) / "share" / "rimd_sim" / "config")
-    return dirs
+    """Where shipped configurations live: :func:`rimd_sim.settings.paths.config_dirs`."""
+    from rimd_sim.settings import paths
+
+    return paths.config_dirs()
 
 
 def resolve_config(path: str | Path, *, what: str = "--config") -> Path:
