@@ -10,6 +10,10 @@ resolves requirements.txt in a scratch venv of that Python (``pip install --dry-
 and the check fails, naming the distributions, when the resolution is not exactly the lock: a pin without a
 wheel or sdist for that Python, or a distribution the lock lacks there (one lock serves both Pythons).
 
+One lock serves Python 3.11 and 3.12. A distribution whose pin cannot be the same on both is written as two lines
+with environment markers (:data:`PER_PYTHON`): ``setuptools`` stays at 3.11's own 65.5.0, which on 3.12 fails to
+import (``pkgutil.ImpImporter`` is gone), and is 68.1.2 on 3.12, the version Ubuntu 24.04's colcon builds with.
+
 Distributions that are not installed by pip are left out: the ROS wheels ship ``*.egg-info`` directories
 (``rclpy-7.1.5-py3.11.egg-info``, ``std_msgs-5.3.6-py3.11.egg-info``...) that ``pip freeze`` lists as if
 they were distributions of their own, but no index has them.
@@ -32,6 +36,10 @@ HEADER = """\
 # edit requirements.in and regenerate; do not edit by hand. ROS 2 Jazzy only: the unprefixed `ros-*` names
 # below are dependencies of the `ros-jazzy-*` wheels, pinned to their Jazzy versions.
 """
+
+#: Pins that differ from the resolution on the running Python (3.11) for a newer Python: name -> (from, version).
+#: The running Python's version is written for the older ones, ``version`` from ``python_version >= from`` on.
+PER_PYTHON = {"setuptools": ("3.12", "68.1.2")}
 
 LIST_PIP_INSTALLED = """
 import importlib.metadata as md
@@ -59,12 +67,32 @@ def _canonical(name: str) -> str:
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
-def pins(path: Path) -> dict[str, str]:
-    """The ``name==version`` lines of a lock, by canonical name (environment markers are not expected)."""
+def with_markers(pins: list[str]) -> list[str]:
+    """The lock's lines: each pin, or two lines with markers for a distribution of :data:`PER_PYTHON`."""
+    lines = []
+    for pin in pins:
+        name = pin.split("==", 1)[0]
+        if name.lower() in PER_PYTHON:
+            since, version = PER_PYTHON[name.lower()]
+            lines += [f'{pin}; python_version < "{since}"', f'{name}=={version}; python_version >= "{since}"']
+        else:
+            lines.append(pin)
+    return lines
+
+
+def pins(path: Path, environment: dict[str, str] | None = None) -> dict[str, str]:
+    """The ``name==version`` lines of a lock that apply in ``environment`` (markers; default: this Python)."""
+    try:
+        from packaging.markers import Marker
+    except ImportError:   # the project venv has packaging; a bare Python has pip's copy
+        from pip._vendor.packaging.markers import Marker
     found = {}
     for line in direct_requirements(path):
-        name, _, version = line.partition("==")
-        found[_canonical(name)] = version.strip()
+        requirement, _, marker = line.partition(";")
+        if marker.strip() and not Marker(marker.strip()).evaluate(environment):
+            continue
+        name, _, version = requirement.partition("==")
+        found[_canonical(name.strip())] = version.strip()
     return found
 
 
@@ -98,7 +126,8 @@ def check(python: str) -> list[str]:
         if resolved.returncode:
             lines = [line for line in resolved.stderr.splitlines() if line.startswith("ERROR")]
             return [f"pip cannot resolve requirements.txt: {line}" for line in lines or [resolved.stderr.strip()]]
-        return report_problems(pins(ROOT / "requirements.txt"), json.loads(report.read_text()))
+        resolution = json.loads(report.read_text())
+        return report_problems(pins(ROOT / "requirements.txt", resolution.get("environment")), resolution)
 
 
 def main() -> int:
@@ -133,7 +162,7 @@ def main() -> int:
     kilted = [pin for pin in pins if pin.lower().startswith("ros-kilted-")]
     if kilted:
         raise SystemExit(f"the lock would contain Kilted wheels: {', '.join(kilted)}")
-    (ROOT / "requirements.txt").write_text(HEADER + "\n".join(pins) + "\n", encoding="utf-8")
+    (ROOT / "requirements.txt").write_text(HEADER + "\n".join(with_markers(pins)) + "\n", encoding="utf-8")
     print(f"wrote {ROOT / 'requirements.txt'} ({len(pins)} pins)")
     return 0
 

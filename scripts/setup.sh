@@ -154,12 +154,13 @@ step_requirements() {
     fi
     echo "set-up: installing the pinned wheels of requirements.txt into $VENV" >&2
     local pip=("$VENV/bin/python" -m pip --disable-pip-version-check)
-    # pip and setuptools first: the venv's own may be older than the pins.
+    # pip and setuptools first: the venv's own may be older than the pins. A line may carry an environment marker
+    # (setuptools differs between Python 3.11 and 3.12): pip skips the line whose marker does not hold.
     local pin
-    for pin in $(grep -iE '^(pip|setuptools)==' "$ROOT/requirements.txt"); do
-        "${pip[@]}" install --quiet "$pin" 2>&1 | grep -v "^WARNING: Location" >&2
+    while IFS= read -r pin; do
+        "${pip[@]}" install --quiet "$pin" 2>&1 | grep -v -e "^WARNING: Location" -e "^Ignoring " >&2
         [ "${PIPESTATUS[0]}" -eq 0 ] || fail "pip install $pin exited with an error (see above)"
-    done
+    done < <(grep -iE '^(pip|setuptools)==' "$ROOT/requirements.txt")
     "${pip[@]}" install --quiet -r "$ROOT/requirements.txt" 2>&1 | grep -v "^WARNING: Location" >&2
     [ "${PIPESTATUS[0]}" -eq 0 ] \
         || fail "pip install -r requirements.txt exited with an error (see above); is the package registry reachable?"
