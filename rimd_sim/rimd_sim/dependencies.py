@@ -58,13 +58,15 @@ DEPENDENCIES: tuple[Dependency, ...] = (
     Dependency("rosgraph_msgs", "ros-jazzy-rosgraph-msgs>=2.0,<3", None, "rosgraph_msgs", "/clock"),
     Dependency("rimd_msgs", "ros-jazzy-rimd-msgs", None, "rimd_msgs", "the rig's messages and services"),
     # --- the physics, data and plots (base install) ---
-    Dependency("numpy", "numpy>=1.26", None, "python3-numpy", "everything numeric"),
-    Dependency("scipy", "scipy>=1.11", None, "python3-scipy", "fits, filters, the reference integrator"),
-    Dependency("yaml", "PyYAML>=6.0", None, "python3-yaml", "configuration and parameter files"),
-    Dependency("matplotlib", "matplotlib>=3.6", None, "python3-matplotlib", "the analyses' plots"),
-    Dependency("tqdm", "tqdm>=4.60", None, "python3-tqdm", "progress of long analyses"),
+    # The lower bounds are versions the package's tests ran with (docs/ros-install.md): Ubuntu 24.04's apt versions
+    # for the rows with a rosdep key, the oldest tried for the pip-only ones (mcap before 1.5 has no Writer.flush).
+    Dependency("numpy", "numpy>=1.26.4", None, "python3-numpy", "everything numeric"),
+    Dependency("scipy", "scipy>=1.11.4", None, "python3-scipy", "fits, filters, the reference integrator"),
+    Dependency("yaml", "PyYAML>=6.0.1", None, "python3-yaml", "configuration and parameter files"),
+    Dependency("matplotlib", "matplotlib>=3.6.3", None, "python3-matplotlib", "the analyses' plots"),
+    Dependency("tqdm", "tqdm>=4.66.2", None, "python3-tqdm", "progress of long analyses"),
     Dependency("numba", "numba>=0.60", None, None, "the compiled physics kernels"),
-    Dependency("mcap", "mcap>=1.2,<2", None, None, "recordings (MCAP files)"),
+    Dependency("mcap", "mcap>=1.5,<2", None, None, "recordings (MCAP files)"),
     Dependency("zstandard", "zstandard>=0.22", None, None, "zstd-compressed recordings"),
     Dependency("lz4", "lz4>=4.0", None, None, "lz4-compressed recordings"),
     # --- extras ---

@@ -451,7 +451,7 @@ def _listener_class() -> type:
     """The SDK's server listener class for a sink (made once, when the SDK is first needed)."""
     base: type = _sdk().websocket.ServerListener
 
-    class Listener(base):  # type: ignore[valid-type, misc]
+    class Listener(base):
         """The SDK's server listener: parameter and playback requests go to the sink (never raised into Rust)."""
 
         def __init__(self, sink: FoxgloveSink) -> None:
