@@ -1,6 +1,7 @@
 # Source this file at the repository root to get the project environment in an interactive shell:
 #     source env.sh          (bash, zsh; `. ./env.sh` in sh/dash, from the repository root)
-# It activates the venv (VENV, default .venv), puts the venv's ROS 2 Jazzy wheels on AMENT_PREFIX_PATH and
+# It activates the venv (VENV; unset: the venv ros_ws was built with, as `make setup` recorded it in
+# ros_ws/install/.rimd-venv, else .venv), puts the venv's ROS 2 Jazzy wheels on AMENT_PREFIX_PATH and
 # CMAKE_PREFIX_PATH, sources the colcon workspace ros_ws/install/setup.sh and puts `rimd` on PATH.
 # Run `make setup` (or `make test`) first: it creates the venv and builds ros_ws.
 # Sourcing it twice is harmless, and so is sourcing it from a script that runs with `set -euo pipefail`.
@@ -23,7 +24,12 @@ _rimd_env_main() {
         echo "env.sh: cannot find the repository root (got '$RIMD_ROOT'); source env.sh from the root" >&2
         return 1
     fi
-    _rimd_venv="${VENV:-$RIMD_ROOT/.venv}"
+    # VENV set wins (with a warning below when ros_ws was built with another); unset: the build's venv.
+    _rimd_venv="${VENV:-}"
+    if [ -z "$_rimd_venv" ]; then
+        _rimd_venv="$(cat "$RIMD_ROOT/ros_ws/install/.rimd-venv" 2>/dev/null)"
+        [ -n "$_rimd_venv" ] || _rimd_venv="$RIMD_ROOT/.venv"
+    fi
     if [ ! -f "$_rimd_venv/bin/activate" ]; then
         echo "env.sh: no venv at $_rimd_venv; run 'make setup' first" >&2
         return 1
@@ -33,7 +39,7 @@ _rimd_env_main() {
         return 1
     fi
     if [ "$(cat "$RIMD_ROOT/ros_ws/install/.rimd-venv" 2>/dev/null)" != "$_rimd_venv" ]; then
-        echo "env.sh: warning: ros_ws was built with another venv; run 'make setup' to rebuild it" >&2
+        echo "env.sh: warning: ros_ws was built with another venv ($(cat "$RIMD_ROOT/ros_ws/install/.rimd-venv" 2>/dev/null || echo unknown)), not $_rimd_venv; run 'VENV=$_rimd_venv make setup' to rebuild it" >&2
     fi
 
     # shellcheck disable=SC1091

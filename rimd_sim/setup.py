@@ -5,6 +5,11 @@ install can ``ros2 run rimd_sim <name>`` them; ``env.sh`` also puts that directo
 ``rimd`` command. The node executables come from the registry of nodes, ``rimd_sim/ros/nodes/registry.py``,
 read here by its path (pure data: nothing of ROS is imported at build time); a node added there is installed by
 the next ``make setup``.
+
+Installed with them (``share/rimd_sim``): package.xml, the configuration (``config/``) and the launch file
+(``launch/rig.launch.xml``). A colcon build also installs ``bin/rimd``, a launcher of ``lib/rimd_sim/rimd``: colcon
+puts ``install/rimd_sim/bin`` on PATH, so ``rimd`` works after ``source install/setup.bash``. A pip build
+(:data:`PIP_BUILD_COMMANDS`) leaves it out (pip makes ``rimd`` itself) and declares the requirements instead.
 """
 
 from __future__ import annotations
@@ -37,6 +42,11 @@ def _config_files() -> list[str]:
                   for path in (HERE / "config").glob(pattern))
 
 
+def _launch_files() -> list[str]:
+    """The launch files (``launch/*.launch.xml``), relative to this file; installed to ``share/rimd_sim/launch``."""
+    return sorted(str(path.relative_to(HERE)) for path in (HERE / "launch").glob("*.launch.xml"))
+
+
 def _load_by_path(name: str, *parts: str):
     """Load a pure-data module of the package by its path (the package itself may not be importable yet)."""
     path = HERE.joinpath(PACKAGE_NAME, *parts)
@@ -56,6 +66,20 @@ def _node_executables() -> list[str]:
 PIP_BUILD_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
 
 
+def _pip_build() -> bool:
+    """Whether this run of setup.py is a pip (PEP 517) build: one of :data:`PIP_BUILD_COMMANDS` is asked."""
+    return bool(PIP_BUILD_COMMANDS.intersection(sys.argv[1:]))
+
+
+def _colcon_launchers() -> list[tuple[str, list[str]]]:
+    """The data files of ``bin/``: the ``rimd`` launcher for a colcon build, none for a pip build.
+
+    A colcon build runs ``setup.py develop`` or ``install`` (and reads the data files with ``--dry-run``); a pip
+    build's installer writes ``rimd`` into its own ``bin``.
+    """
+    return [] if _pip_build() else [("bin", ["bin/rimd"])]
+
+
 def _requirements(version: str) -> tuple[list[str], dict[str, list[str]]]:
     """Return ``install_requires`` and ``extras_require`` (rimd_sim/dependencies.py) for a pip build.
 
@@ -63,7 +87,7 @@ def _requirements(version: str) -> tuple[list[str], dict[str, list[str]]]:
     console scripts of a develop install check the declared requirements against pip's distributions, which an
     apt ROS 2 install does not have (``ros-jazzy-rclpy`` would be "not found" while rclpy imports fine).
     """
-    if not PIP_BUILD_COMMANDS.intersection(sys.argv[1:]):
+    if not _pip_build():
         return ["setuptools"], {}
     dependencies = _load_by_path("_rimd_dependencies", "dependencies.py")
     return dependencies.install_requires(version), dependencies.extras_require()
@@ -83,6 +107,8 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),
         ("share/" + PACKAGE_NAME + "/config", _config_files()),
+        ("share/" + PACKAGE_NAME + "/launch", _launch_files()),
+        *_colcon_launchers(),
     ],
     install_requires=INSTALL_REQUIRES,
     extras_require=EXTRAS_REQUIRE,

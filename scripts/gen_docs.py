@@ -9,7 +9,8 @@ Every parameter table (name, default, type, rule, description) and every ``rimd`
 - the recorder's: ``rimd_sim.settings.recording.PARAMETERS`` (and the rules that module checks);
 - the replay's: ``rimd_sim.runtime.replay.ReplaySettings``;
 - the Rerun bridge's: ``rimd_sim.viz.bridge_settings.PARAMETERS``;
-- the verbs: ``rimd_sim.cli.VERBS`` and each verb's argparse parser (``add_arguments``).
+- the verbs: ``rimd_sim.cli.VERBS`` and each verb's argparse parser (``add_arguments``);
+- the packages a ROS 2 install takes from pip: ``rimd_sim.dependencies`` (the rows without a rosdep key).
 
 A generated section sits between two markers in a page::
 
@@ -205,6 +206,20 @@ def render_rerun_parameters() -> str:
     return parameter_table(PARAMETERS)
 
 
+def render_pip_only() -> str:
+    """The pip-only packages of a ROS 2 install (rimd_sim.dependencies), and the pip command of the base ones."""
+    from rimd_sim import dependencies
+
+    rows = dependencies.pip_only()
+    lines = ["| pip requirement | module | installed for | what needs it |", "|---|---|---|---|"]
+    for row in rows:
+        what = f"the extra `{row.extra}`" if row.extra else "every command"
+        lines.append(f"| `{row.requirement}` | `{row.module}` | {what} | {row.why} |")
+    base = " ".join(f"'{row.requirement}'" for row in rows if row.extra is None)
+    lines += ["", "```bash", f"python -m pip install -c constraints.txt {base}", "```"]
+    return "\n".join(lines)
+
+
 # ------------------------------------------------------------------------------------------------------------
 # Verb tables
 # ------------------------------------------------------------------------------------------------------------
@@ -312,6 +327,7 @@ def sections() -> list[Section]:
         Section("replay-parameters", "docs/recording.md", render_replay_parameters, "Replay parameters"),
         Section("rerun-parameters", "docs/rerun.md", render_rerun_parameters, "Rerun bridge parameters"),
         Section("node-parameters", "docs/configuration.md", render_node_parameters, "Simulator node parameters"),
+        Section("pip-only", "docs/ros-install.md", render_pip_only, "The pip-only packages"),
     ]
     for verb in cli.VERBS:
         if verb.module is None:

@@ -1,9 +1,18 @@
 #!/usr/bin/env python3
-"""Regenerate requirements.txt (every wheel pinned) from requirements.in.
+"""Regenerate requirements.txt (every wheel pinned) from requirements.in, or check that it resolves.
 
 Usage: ``scripts/lock_requirements.py [--constraints FILE]``. Creates a scratch venv with the running
 Python (3.11), installs requirements.in into it (optionally held to the versions in FILE, for example the
 output of ``pip freeze`` of a venv in use), and writes the versions of every distribution pip installed.
+
+``scripts/lock_requirements.py --check python3.11 --check python3.12`` changes nothing: for each Python, pip
+resolves requirements.txt in a scratch venv of that Python (``pip install --dry-run --report``, nothing installed)
+and the check fails, naming the distributions, when the resolution is not exactly the lock: a pin without a
+wheel or sdist for that Python, or a distribution the lock lacks there (one lock serves both Pythons).
+
+One lock serves Python 3.11 and 3.12. A distribution whose pin cannot be the same on both is written as two lines
+with environment markers (:data:`PER_PYTHON`): ``setuptools`` stays at 3.11's own 65.5.0, which on 3.12 fails to
+import (``pkgutil.ImpImporter`` is gone), and is 68.1.2 on 3.12, the version Ubuntu 24.04's colcon builds with.
 
 Distributions that are not installed by pip are left out: the ROS wheels ship ``*.egg-info`` directories
 (``rclpy-7.1.5-py3.11.egg-info``, ``std_msgs-5.3.6-py3.11.egg-info``...) that ``pip freeze`` lists as if
@@ -13,7 +22,9 @@ they were distributions of their own, but no index has them.
 from __future__ import annotations
 
 import argparse
+import json
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -25,6 +36,10 @@ HEADER = """\
 # edit requirements.in and regenerate; do not edit by hand. ROS 2 Jazzy only: the unprefixed `ros-*` names
 # below are dependencies of the `ros-jazzy-*` wheels, pinned to their Jazzy versions.
 """
+
+#: Pins that differ from the resolution on the running Python (3.11) for a newer Python: name -> (from, version).
+#: The running Python's version is written for the older ones, ``version`` from ``python_version >= from`` on.
+PER_PYTHON = {"setuptools": ("3.12", "68.1.2")}
 
 LIST_PIP_INSTALLED = """
 import importlib.metadata as md
@@ -48,11 +63,88 @@ def direct_requirements(path: Path) -> list[str]:
     return [line for line in lines if line]
 
 
+def _canonical(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def with_markers(pins: list[str]) -> list[str]:
+    """The lock's lines: each pin, or two lines with markers for a distribution of :data:`PER_PYTHON`."""
+    lines = []
+    for pin in pins:
+        name = pin.split("==", 1)[0]
+        if name.lower() in PER_PYTHON:
+            since, version = PER_PYTHON[name.lower()]
+            lines += [f'{pin}; python_version < "{since}"', f'{name}=={version}; python_version >= "{since}"']
+        else:
+            lines.append(pin)
+    return lines
+
+
+def pins(path: Path, environment: dict[str, str] | None = None) -> dict[str, str]:
+    """The ``name==version`` lines of a lock that apply in ``environment`` (markers; default: this Python)."""
+    try:
+        from packaging.markers import Marker
+    except ImportError:   # the project venv has packaging; a bare Python has pip's copy
+        from pip._vendor.packaging.markers import Marker
+    found = {}
+    for line in direct_requirements(path):
+        requirement, _, marker = line.partition(";")
+        if marker.strip() and not Marker(marker.strip()).evaluate(environment):
+            continue
+        name, _, version = requirement.partition("==")
+        found[_canonical(name.strip())] = version.strip()
+    return found
+
+
+def report_problems(locked: dict[str, str], report: dict) -> list[str]:
+    """What differs between the lock and pip's resolution report (``pip install --dry-run --report``)."""
+    resolved = {_canonical(item["metadata"]["name"]): item["metadata"]["version"]
+                for item in report.get("install", [])}
+    problems = [f"{name}=={resolved[name]} would be installed, the lock does not pin it"
+                for name in sorted(set(resolved) - set(locked))]
+    problems += [f"{name}: resolved {resolved[name]}, locked {locked[name]}"
+                 for name in sorted(set(resolved) & set(locked)) if resolved[name] != locked[name]]
+    problems += [f"{name}=={locked[name]} is not part of the resolution"
+                 for name in sorted(set(locked) - set(resolved))]
+    return problems
+
+
+def check(python: str) -> list[str]:
+    """Resolve requirements.txt with ``python`` in a scratch venv (nothing installed); the problems found."""
+    if shutil.which(python) is None and not Path(python).is_file():
+        return [f"{python}: not found (PYENV_VERSION=3.11.7:3.12.1 makes pyenv's Pythons callable)"]
+    with tempfile.TemporaryDirectory(prefix="rimd-lock-check-") as scratch:
+        venv = Path(scratch) / "venv"
+        created = subprocess.run([python, "-m", "venv", str(venv)], capture_output=True, text=True)
+        if created.returncode:
+            return [f"{python} -m venv failed: {created.stderr.strip()}"]
+        report = Path(scratch) / "report.json"
+        resolved = subprocess.run(
+            [str(venv / "bin" / "python"), "-m", "pip", "install", "--disable-pip-version-check", "--quiet",
+             "--dry-run", "--ignore-installed", "--report", str(report), "-r", str(ROOT / "requirements.txt")],
+            capture_output=True, text=True)
+        if resolved.returncode:
+            lines = [line for line in resolved.stderr.splitlines() if line.startswith("ERROR")]
+            return [f"pip cannot resolve requirements.txt: {line}" for line in lines or [resolved.stderr.strip()]]
+        resolution = json.loads(report.read_text())
+        return report_problems(pins(ROOT / "requirements.txt", resolution.get("environment")), resolution)
+
+
 def main() -> int:
-    """Lock requirements.in into requirements.txt."""
+    """Lock requirements.in into requirements.txt (or, with --check, check the lock on the Pythons named)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--constraints", type=Path, help="pip constraints file to prefer known versions")
+    parser.add_argument("--check", action="append", default=[], metavar="PYTHON",
+                        help="change nothing: check that requirements.txt resolves exactly on PYTHON (repeatable)")
     args = parser.parse_args()
+    if args.check:
+        failed = False
+        for python in args.check:
+            problems = check(python)
+            failed = failed or bool(problems)
+            print(f"{python}: " + ("the lock resolves exactly" if not problems else "\n  ".join(
+                ["the lock does not resolve as pinned:", *problems])))
+        return 1 if failed else 0
     requirements = direct_requirements(ROOT / "requirements.in")
     check_jazzy_only([re.split(r"[\[<>=~!; ]", line, maxsplit=1)[0] for line in requirements])
     with tempfile.TemporaryDirectory(prefix="rimd-lock-") as scratch:
@@ -70,7 +162,7 @@ def main() -> int:
     kilted = [pin for pin in pins if pin.lower().startswith("ros-kilted-")]
     if kilted:
         raise SystemExit(f"the lock would contain Kilted wheels: {', '.join(kilted)}")
-    (ROOT / "requirements.txt").write_text(HEADER + "\n".join(pins) + "\n", encoding="utf-8")
+    (ROOT / "requirements.txt").write_text(HEADER + "\n".join(with_markers(pins)) + "\n", encoding="utf-8")
     print(f"wrote {ROOT / 'requirements.txt'} ({len(pins)} pins)")
     return 0
 

@@ -4,16 +4,18 @@
 # Usage: scripts/setup.sh [--only STEP]...      (STEP: preflight, venv, requirements, build, warmup)
 # Environment:
 #   VENV    the project venv (default: <repo>/.venv); created if missing, never deleted
-#   PYTHON  the interpreter to create it with (default: python3.11)
+#   PYTHON  the interpreter to create it with: Python 3.11 or 3.12 (default: python3.11, or the Python of an
+#           existing VENV); given, an existing VENV must be of that version. A pythonX.Y that is not on PATH
+#           (or a pyenv shim of a version pyenv does not activate) is taken from pyenv's versions when it has one.
 #
 # Steps, in order; each is skipped quickly when its stamp says nothing changed:
-#   preflight     python3.11 with venv/ensurepip, cmake (>= 3.19), gcc, g++, make on PATH
+#   preflight     Python 3.11 or 3.12 with venv/ensurepip, cmake (>= 3.19), gcc, g++, make on PATH
 #   venv          create VENV when it does not exist
 #   requirements  pip install -r requirements.txt (every wheel pinned) when the lock or the venv changed;
 #                 stamp: VENV/.rimd-requirements.sha256
 #   build         colcon build --symlink-install of ros_ws when a build input changed (package manifests,
-#                 setup.py/.cfg, the registry of nodes (its console scripts), .msg/.srv, cmake/, the venv,
-#                 this script); stamp: .stamps/build-*.sha256
+#                 setup.py/.cfg, the registry of nodes (its console scripts), launch files, .msg/.srv, cmake/,
+#                 the venv, this script); stamp: .stamps/build-*.sha256
 #                 Python sources are symlinked, so editing a .py never needs a rebuild.
 #   warmup        `rimd warmup`: numba compiles the physics (the models' drivers, the sensors, the ensembles)
 #                 into its on-disk cache once, here, instead of in the first rig or test that runs (about 40 s
@@ -23,7 +25,10 @@ set -uo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)"
 VENV="${VENV:-$ROOT/.venv}"
+PYTHON_GIVEN="${PYTHON:+yes}"
 PYTHON="${PYTHON:-python3.11}"
+PYTHON_ASKED="$PYTHON"   # as given (PYTHON may become pyenv's path to it)
+SUPPORTED_PYTHONS="3.11 3.12"   # the ROS 2 Jazzy wheels exist as cp311 and cp312; Ubuntu 24.04's ROS runs 3.12
 WS="$ROOT/ros_ws"
 STAMPS="$ROOT/.stamps"
 CMAKE_MINIMUM="3.19"   # cmake_language(DEFER) in cmake/drop_missing_includes.cmake
@@ -50,16 +55,59 @@ hash_inputs() {
 }
 
 # ---------------------------------------------------------------------------------------------------
+python_version() {   # "X.Y" of the interpreter $1, or nothing when it does not run
+    "$1" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null
+}
+
+# pythonX.Y from pyenv's installed versions (the newest X.Y.*), for a PYTHON that is not callable as it is.
+pyenv_python() {
+    local name="$1" minor pyenv_root version
+    minor="$(printf '%s' "$name" | sed -n 's/^python\([0-9]*\.[0-9]*\)$/\1/p')"
+    [ -n "$minor" ] || return 1
+    pyenv_root="${PYENV_ROOT:-}"
+    if [ -z "$pyenv_root" ] && command -v pyenv >/dev/null 2>&1; then pyenv_root="$(pyenv root 2>/dev/null)"; fi
+    [ -n "$pyenv_root" ] || pyenv_root="$HOME/.pyenv"
+    [ -d "$pyenv_root/versions" ] || return 1
+    version="$(cd "$pyenv_root/versions" && ls -1d "$minor".* 2>/dev/null | grep -E "^$minor\.[0-9]+$" | sort -V | tail -n1)"
+    [ -n "$version" ] && [ -x "$pyenv_root/versions/$version/bin/$name" ] || return 1
+    printf '%s\n' "$pyenv_root/versions/$version/bin/$name"
+}
+
+# The Python to check and to create the venv with: PYTHON as given, else an existing venv's own, else python3.11.
+# Sets PYTHON (resolved through pyenv when needed) and PYTHON_VERSION.
+resolve_python() {
+    if [ -z "$PYTHON_GIVEN" ] && [ -x "$VENV/bin/python" ]; then
+        PYTHON_VERSION="$(python_version "$VENV/bin/python")"
+        if [ -n "$PYTHON_VERSION" ]; then
+            PYTHON="python$PYTHON_VERSION"   # the venv's; no interpreter needed to use it
+            return 0
+        fi
+    fi
+    PYTHON_VERSION="$(python_version "$PYTHON")"
+    if [ -z "$PYTHON_VERSION" ]; then
+        local found
+        if found="$(pyenv_python "$PYTHON")"; then
+            echo "set-up: $PYTHON is not callable here; using pyenv's $found" >&2
+            PYTHON="$found"
+            PYTHON_VERSION="$(python_version "$PYTHON")"
+        fi
+    fi
+    if [ -z "$PYTHON_VERSION" ]; then
+        command -v "$PYTHON" >/dev/null 2>&1 && fail "$PYTHON does not run (a pyenv shim of a version pyenv does not activate? PYENV_VERSION=3.11.7:3.12.1 makes both callable)"
+        fail "$PYTHON not found on PATH nor in pyenv's versions; install Python 3.11 or 3.12 (apt-get install python3.12 python3.12-venv, or pyenv install 3.12) or set PYTHON=/path/to/python3.12"
+    fi
+}
+
 step_preflight() {
-    command -v "$PYTHON" >/dev/null 2>&1 \
-        || fail "$PYTHON not found on PATH; install Python 3.11 (apt-get install python3.11 python3.11-venv) or set PYTHON=/path/to/python3.11"
-    local version
-    version="$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)" \
-        || fail "$PYTHON does not run"
-    [ "$version" = "3.11" ] \
-        || fail "$PYTHON is Python $version; the ROS 2 Jazzy wheels are cp311: use Python 3.11 (set PYTHON=...)"
-    "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1 \
-        || fail "$PYTHON cannot create venvs (no venv/ensurepip module); install it with apt-get install python3.11-venv"
+    resolve_python
+    case " $SUPPORTED_PYTHONS " in
+        *" $PYTHON_VERSION "*) ;;
+        *) fail "$PYTHON is Python $PYTHON_VERSION; the project supports Python ${SUPPORTED_PYTHONS// / and } (the ROS 2 Jazzy wheels are cp311 and cp312): set PYTHON=python3.11 or PYTHON=python3.12" ;;
+    esac
+    if [ ! -x "$VENV/bin/python" ]; then   # only to create the venv
+        "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1 \
+            || fail "$PYTHON cannot create venvs (no venv/ensurepip module); install it with apt-get install python$PYTHON_VERSION-venv"
+    fi
     command -v cmake >/dev/null 2>&1 \
         || fail "cmake not found on PATH; install it with apt-get install cmake"
     local cmake_version
@@ -75,19 +123,26 @@ step_preflight() {
 }
 
 step_venv() {
+    [ -n "${PYTHON_VERSION:-}" ] || resolve_python
     if [ -e "$VENV" ]; then
         [ -x "$VENV/bin/python" ] \
             || fail "$VENV exists but has no bin/python; remove it (rm -rf $VENV) or set VENV to another path"
         local version
-        version="$("$VENV/bin/python" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)" \
+        version="$(python_version "$VENV/bin/python")" \
             || fail "$VENV/bin/python does not run; remove the venv (rm -rf $VENV) and run the set-up again"
-        [ "$version" = "3.11" ] \
-            || fail "$VENV is a Python $version venv, 3.11 is needed; remove it (rm -rf $VENV) or set VENV"
-        VENV_STATUS="present"
+        [ -n "$version" ] || fail "$VENV/bin/python does not run; remove the venv (rm -rf $VENV) and run the set-up again"
+        if [ "$version" != "$PYTHON_VERSION" ]; then
+            fail "$VENV is a Python $version venv but PYTHON=$PYTHON_ASKED is Python $PYTHON_VERSION; remove the venv (rm -rf $VENV), set VENV to another path, or set PYTHON=python$version"
+        fi
+        case " $SUPPORTED_PYTHONS " in
+            *" $version "*) ;;
+            *) fail "$VENV is a Python $version venv; the project supports Python ${SUPPORTED_PYTHONS// / and }: remove it (rm -rf $VENV) or set VENV" ;;
+        esac
+        VENV_STATUS="present (Python $version)"
         return 0
     fi
     "$PYTHON" -m venv "$VENV" || fail "$PYTHON -m venv $VENV exited with an error"
-    VENV_STATUS="created"
+    VENV_STATUS="created (Python $PYTHON_VERSION)"
 }
 
 step_requirements() {
@@ -99,12 +154,13 @@ step_requirements() {
     fi
     echo "set-up: installing the pinned wheels of requirements.txt into $VENV" >&2
     local pip=("$VENV/bin/python" -m pip --disable-pip-version-check)
-    # pip and setuptools first: the venv's own may be older than the pins.
+    # pip and setuptools first: the venv's own may be older than the pins. A line may carry an environment marker
+    # (setuptools differs between Python 3.11 and 3.12): pip skips the line whose marker does not hold.
     local pin
-    for pin in $(grep -iE '^(pip|setuptools)==' "$ROOT/requirements.txt"); do
-        "${pip[@]}" install --quiet "$pin" 2>&1 | grep -v "^WARNING: Location" >&2
+    while IFS= read -r pin; do
+        "${pip[@]}" install --quiet "$pin" 2>&1 | grep -v -e "^WARNING: Location" -e "^Ignoring " >&2
         [ "${PIPESTATUS[0]}" -eq 0 ] || fail "pip install $pin exited with an error (see above)"
-    done
+    done < <(grep -iE '^(pip|setuptools)==' "$ROOT/requirements.txt")
     "${pip[@]}" install --quiet -r "$ROOT/requirements.txt" 2>&1 | grep -v "^WARNING: Location" >&2
     [ "${PIPESTATUS[0]}" -eq 0 ] \
         || fail "pip install -r requirements.txt exited with an error (see above); is the package registry reachable?"
@@ -140,7 +196,7 @@ step_build() {
         "$ROOT/rimd_msgs/msg/"*.msg "$ROOT/rimd_msgs/srv/"*.srv
         "$ROOT/rimd_sim/package.xml" "$ROOT/rimd_sim/setup.py" "$ROOT/rimd_sim/setup.cfg"
         "$ROOT/rimd_sim/rimd_sim/ros/nodes/registry.py"
-        "$ROOT/rimd_sim/resource/"*
+        "$ROOT/rimd_sim/resource/"* "$ROOT/rimd_sim/launch/"* "$ROOT/rimd_sim/bin/"*
         "$WS/src/"*
     )
     # Names only: config files are installed as symlinks, so their contents need no rebuild.
@@ -211,7 +267,7 @@ while [ $# -gt 0 ]; do
     case "$1" in
         --only) [ $# -ge 2 ] || { echo "setup.sh: --only needs a step name" >&2; exit 2; }
                 STEPS+=("$2"); shift 2 ;;
-        -h|--help) sed -n '2,21p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,23p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "setup.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
@@ -220,8 +276,9 @@ done
 VENV_STATUS="" REQUIREMENTS_STATUS="" BUILD_STATUS="" WARMUP_STATUS=""
 START="$(now)"
 SUMMARY=""
-# One set-up at a time per checkout (two `make test` in the same tree would build ros_ws concurrently).
-if [ "${STEPS[*]}" != "preflight" ]; then
+# One set-up at a time per checkout (two `make test` in the same tree would build ros_ws concurrently); the checks
+# and the venv alone need no lock.
+if [ -n "$(printf '%s\n' "${STEPS[@]}" | grep -vxE 'preflight|venv')" ]; then
     mkdir -p "$STAMPS" && exec 9>"$STAMPS/setup.lock" \
         || { echo "set-up step 'lock' failed: cannot create $STAMPS/setup.lock" >&2; exit 1; }
     if ! flock -n 9; then

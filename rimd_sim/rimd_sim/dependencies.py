@@ -7,14 +7,24 @@ recent enough version: the module is *pip-only* there, installed into a venv mad
 ``--system-site-packages``, docs/ros-install.md). ``package.xml`` declares the rosdep keys; the wheel declares
 the distributions; tests check both against the package's imports.
 
-Nothing here imports anything: ``setup.py`` runs where the package's dependencies are not installed yet.
+The rosdep keys were checked against the public rosdep database (``rosdep/python.yaml`` and
+``rosdep/base.yaml`` of ros/rosdistro, and ``jazzy/distribution.yaml`` for the ROS packages): a key exists and
+resolves on Ubuntu 24.04 (noble), and noble's apt version lies in the row's range (docs/ros-install.md says
+which versions were confirmed and what was run against them). ``zstandard`` and ``lz4`` have no rosdep key;
+``numba`` has one (``python3-numba``) but noble's is older than the range; ``pytest``'s (``python3-pytest``) is
+7.4 on noble, below the plugin's range: those are pip-only.
+
+Nothing here imports anything beyond the standard library: ``setup.py`` loads this file by its path, where the
+package's dependencies are not installed yet (``tests/test_packaging.py`` checks it).
 """
 
 from __future__ import annotations
 
+import importlib.util
 from typing import NamedTuple
 
-__all__ = ["DEPENDENCIES", "EXTRAS", "Dependency", "extras_require", "install_requires"]
+__all__ = ["DEPENDENCIES", "DISTRIBUTION", "EXTRAS", "ROS_EXEC_DEPENDS", "Dependency", "distribution",
+           "extras_require", "install_requires", "installed", "missing_extra", "pip_only"]
 
 
 class Dependency(NamedTuple):
@@ -29,6 +39,9 @@ class Dependency(NamedTuple):
 
 #: The ROS 2 distribution the package targets, and the rimd_msgs distribution it needs (same version).
 ROS_DISTRO = "jazzy"
+
+#: The package's name for pip (``pip install 'rimd-sim[rerun]'``).
+DISTRIBUTION = "rimd-sim"
 
 DEPENDENCIES: tuple[Dependency, ...] = (
     # --- ROS 2 (from the ros-jazzy-* wheels with pip; from apt and rosdep on a ROS system) ---
@@ -45,15 +58,17 @@ DEPENDENCIES: tuple[Dependency, ...] = (
     Dependency("rosgraph_msgs", "ros-jazzy-rosgraph-msgs>=2.0,<3", None, "rosgraph_msgs", "/clock"),
     Dependency("rimd_msgs", "ros-jazzy-rimd-msgs", None, "rimd_msgs", "the rig's messages and services"),
     # --- the physics, data and plots (base install) ---
-    Dependency("numpy", "numpy>=1.26", None, "python3-numpy", "everything numeric"),
-    Dependency("scipy", "scipy>=1.11", None, "python3-scipy", "fits, filters, the reference integrator"),
-    Dependency("yaml", "PyYAML>=6.0", None, "python3-yaml", "configuration and parameter files"),
-    Dependency("matplotlib", "matplotlib>=3.6", None, "python3-matplotlib", "the analyses' plots"),
-    Dependency("tqdm", "tqdm>=4.60", None, "python3-tqdm", "progress of long analyses"),
+    # The lower bounds are versions the package's tests ran with (docs/ros-install.md): Ubuntu 24.04's apt versions
+    # for the rows with a rosdep key, the oldest tried for the pip-only ones (mcap before 1.5 has no Writer.flush).
+    Dependency("numpy", "numpy>=1.26.4", None, "python3-numpy", "everything numeric"),
+    Dependency("scipy", "scipy>=1.11.4", None, "python3-scipy", "fits, filters, the reference integrator"),
+    Dependency("yaml", "PyYAML>=6.0.1", None, "python3-yaml", "configuration and parameter files"),
+    Dependency("matplotlib", "matplotlib>=3.6.3", None, "python3-matplotlib", "the analyses' plots"),
+    Dependency("tqdm", "tqdm>=4.66.2", None, "python3-tqdm", "progress of long analyses"),
     Dependency("numba", "numba>=0.60", None, None, "the compiled physics kernels"),
-    Dependency("mcap", "mcap>=1.2,<2", None, None, "recordings (MCAP files)"),
-    Dependency("zstandard", "zstandard>=0.22", None, "python3-zstandard", "zstd-compressed recordings"),
-    Dependency("lz4", "lz4>=4.0", None, "python3-lz4", "lz4-compressed recordings"),
+    Dependency("mcap", "mcap>=1.5,<2", None, None, "recordings (MCAP files)"),
+    Dependency("zstandard", "zstandard>=0.22", None, None, "zstd-compressed recordings"),
+    Dependency("lz4", "lz4>=4.0", None, None, "lz4-compressed recordings"),
     # --- extras ---
     Dependency("rerun", "rerun-sdk>=0.41,<0.42", "rerun", None, "the Rerun bridge and .rrd files"),
     Dependency("rerun_cli", "rerun-sdk>=0.41,<0.42", "rerun", None, "the Rerun viewer binary"),
@@ -61,8 +76,13 @@ DEPENDENCIES: tuple[Dependency, ...] = (
     Dependency("foxglove", "foxglove-sdk>=0.30,<0.31", "foxglove", None, "the Foxglove WebSocket server"),
     Dependency("distributed", "distributed>=2024.1", "dask", None, "maps and sweeps on a Dask cluster"),
     Dependency("dask", "dask>=2024.1", "dask", None, "maps and sweeps on a Dask cluster"),
-    Dependency("pytest", "pytest>=8.0", "testing", "python3-pytest", "the rimd_rig fixture (pytest plugin)"),
+    Dependency("pytest", "pytest>=8.0", "testing", None, "the rimd_rig fixture (pytest plugin)"),
 )
+
+#: package.xml's exec_depends that no imported module explains: what a ROS install runs the package with.
+ROS_EXEC_DEPENDS: dict[str, str] = {
+    "ros2launch": "ros2 launch rimd_sim rig.launch.xml (launch/rig.launch.xml)",
+}
 
 #: The extras, each with what it adds; ``all`` is every one of them.
 EXTRAS: dict[str, str] = {
@@ -94,3 +114,44 @@ def extras_require() -> dict[str, list[str]]:
             extras[dependency.extra].append(dependency.requirement)
     extras["all"] = sorted({requirement for values in extras.values() for requirement in values})
     return extras
+
+
+def distribution(dependency: Dependency) -> str:
+    """The name of the distribution a row installs (``rerun-sdk`` of ``rerun-sdk>=0.41,<0.42``)."""
+    name = dependency.requirement
+    for stop in "[<>=~!; ":
+        name = name.split(stop, 1)[0]
+    return name
+
+
+def pip_only() -> list[Dependency]:
+    """The rows a ROS system installs with pip (no rosdep key), one per distribution, in table order."""
+    seen: dict[str, Dependency] = {}
+    for dependency in DEPENDENCIES:
+        if dependency.rosdep is None:
+            seen.setdefault(distribution(dependency), dependency)
+    return list(seen.values())
+
+
+def installed(module: str) -> bool:
+    """Whether the top-level ``module`` can be imported here (found, without importing it)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):   # a parent that fails, or a module without a spec
+        return False
+
+
+def missing_extra(module: str, feature: str, alternative: str = "") -> str:
+    """The message of a feature whose extra is not installed: what it needs and the pip command.
+
+    ``missing_extra("rerun", "the Rerun bridge", "or run with --no-rerun")`` is "the Rerun bridge needs
+    rerun-sdk: pip install 'rimd-sim[rerun]' (or run with --no-rerun)".
+
+    Raises:
+        KeyError: ``module`` is no row of an extra.
+    """
+    for dependency in DEPENDENCIES:
+        if dependency.module == module and dependency.extra is not None:
+            text = f"{feature} needs {distribution(dependency)}: pip install '{DISTRIBUTION}[{dependency.extra}]'"
+            return f"{text} ({alternative})" if alternative else text
+    raise KeyError(f"{module} is not the module of an extra")

@@ -163,7 +163,7 @@ def test_bad_addresses_and_a_taken_port_are_refused_in_one_line():
 def test_rig_foxglove_starts_the_bridge_with_foxglove_only_when_asked(repo_root, tmp_path):
     from rimd_sim.ros.bringup import plan_rig
 
-    config = Path(repo_root) / "config" / "rimd.yaml"
+    config = (Path(repo_root) / "config" / "rimd.yaml").resolve()   # config/ links to rimd_sim/config
 
     def plan(**options) -> dict[str, list[str]]:
         nodes = plan_rig(config, output_dir=tmp_path / "rec", **options).nodes

@@ -27,6 +27,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+from rimd_sim.dependencies import installed, missing_extra
 from rimd_sim.errors import UnavailableError
 
 __all__ = ["CONNECT_TIMEOUT_S", "ENV_SCHEDULER", "SchedulerError", "TaskRunner", "open_executor", "run_tasks"]
@@ -113,10 +114,13 @@ def _probe(address: str) -> None:
 
 @contextmanager
 def _dask(address: str) -> Iterator[TaskRunner]:
+    if not installed("distributed"):   # the extra dask: named before the address is probed
+        raise SchedulerError(missing_extra("distributed", f"the Dask scheduler {address}",
+                                           "or run without --scheduler and RIMD_DASK_SCHEDULER"))
     _probe(address)
     try:
         from distributed import Client
-    except ImportError as exc:  # pragma: no cover - dask is in the lock
+    except ImportError as exc:  # installed but broken
         raise SchedulerError(f"cannot use the Dask scheduler at {address}: {exc}") from None
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)

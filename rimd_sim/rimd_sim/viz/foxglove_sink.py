@@ -1,5 +1,9 @@
 """The rig on the Foxglove WebSocket protocol: a server of the Foxglove SDK (``foxglove-sdk``), no ROS import.
 
+The SDK is an extra (``pip install 'rimd-sim[foxglove]'``): it is imported when a server starts, so that this
+module (its settings, :func:`check_address`) imports without it; :func:`require_sdk` refuses up front, naming the
+extra.
+
 What a Foxglove client (the Foxglove app, or any client of the protocol) gets from :class:`FoxgloveSink`:
 
 * **Channels.** Each rig topic is advertised as a channel of message encoding ``cdr`` with its ``ros2msg``
@@ -36,19 +40,17 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cache
 from typing import Any, Protocol
 
-import foxglove
-from foxglove import MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema, StatusLevel
-from foxglove.websocket import Capability, PlaybackCommand, PlaybackState, PlaybackStatus, ServerListener
-
+from rimd_sim.dependencies import installed, missing_extra
 from rimd_sim.errors import UnavailableError
 from rimd_sim.io.msgdefs import MessageDefinitionError, message_definition, service_definitions
 from rimd_sim.runtime.playback_control import PlaybackReport, PlaybackRequest
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "FoxgloveError", "FoxgloveSink", "ForwardedService", "ParameterBackend",
            "ParameterEntry", "PlaybackHandler", "ServiceBackend", "ServiceCallError", "check_address",
-           "websocket_url"]
+           "require_sdk", "websocket_url"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
@@ -69,6 +71,30 @@ class FoxgloveError(UnavailableError):
 
 class ServiceCallError(UnavailableError):
     """A forwarded service call failed; the message (one line) goes back to the Foxglove client."""
+
+
+def require_sdk(alternative: str = "") -> None:
+    """Refuse, before anything starts, to serve Foxglove without the Foxglove SDK (the extra ``foxglove``).
+
+    Raises:
+        FoxgloveError: foxglove-sdk is not installed; the message names the extra (and ``alternative``).
+    """
+    if not installed("foxglove"):
+        raise FoxgloveError(missing_extra("foxglove", "the Foxglove server", alternative))
+
+
+def _sdk() -> Any:
+    """The Foxglove SDK (``foxglove`` with its ``websocket`` module), imported on first use.
+
+    Raises:
+        FoxgloveError: foxglove-sdk is not installed; the message names the extra.
+    """
+    try:
+        import foxglove
+        import foxglove.websocket
+    except ImportError:
+        raise FoxgloveError(missing_extra("foxglove", "the Foxglove server")) from None
+    return foxglove
 
 
 @dataclass(frozen=True)
@@ -122,13 +148,13 @@ class PlaybackHandler(Protocol):
         ...
 
 
-_STATUSES = {"playing": PlaybackStatus.Playing, "paused": PlaybackStatus.Paused, "ended": PlaybackStatus.Ended}
-
-
 def playback_state(report: PlaybackReport, request_id: str | None = None) -> Any:
     """The SDK's PlaybackState of a report."""
-    return PlaybackState(status=_STATUSES[report.status], current_time=int(report.current_ns),
-                         playback_speed=float(report.speed), did_seek=report.did_seek, request_id=request_id)
+    ws = _sdk().websocket
+    status = {"playing": ws.PlaybackStatus.Playing, "paused": ws.PlaybackStatus.Paused,
+              "ended": ws.PlaybackStatus.Ended}[report.status]
+    return ws.PlaybackState(status=status, current_time=int(report.current_ns), playback_speed=float(report.speed),
+                            did_seek=report.did_seek, request_id=request_id)
 
 
 def check_address(host: str, port: int) -> None:
@@ -199,7 +225,9 @@ class FoxgloveSink:
                  services: Sequence[ForwardedService] = (), service_backend: ServiceBackend | None = None,
                  parameter_backend: ParameterBackend | None = None, playback: PlaybackHandler | None = None) -> None:
         check_address(host, port)
-        self._context = foxglove.Context()
+        fg = self._fg = _sdk()   # FoxgloveError naming the extra when the SDK is not installed
+        Capability = fg.websocket.Capability
+        self._context = fg.Context()
         self._channels: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._services = list(services)
@@ -216,7 +244,7 @@ class FoxgloveSink:
         if parameter_backend is not None:
             capabilities.append(Capability.Parameters)
         self._options: dict[str, Any] = {"name": name, "host": host, "capabilities": capabilities,
-                         "server_listener": _Listener(self) if parameter_backend or playback else None,
+                         "server_listener": _listener_class()(self) if parameter_backend or playback else None,
                          "supported_encodings": [MESSAGE_ENCODING],
                          "services": [self._service(s) for s in self._services] or None, "context": self._context}
         self.host = host
@@ -229,7 +257,7 @@ class FoxgloveSink:
         deadline = time.monotonic() + patience
         while True:
             try:
-                return foxglove.start_server(port=port, playback_time_range=self.playback_range, **self._options)
+                return self._fg.start_server(port=port, playback_time_range=self.playback_range, **self._options)
             except Exception as exc:  # the SDK raises its own error types (e.g. address in use)
                 if time.monotonic() < deadline:
                     time.sleep(0.005)
@@ -257,12 +285,11 @@ class FoxgloveSink:
         except MessageDefinitionError as exc:
             self.unadvertised[topic] = str(exc)
             return False
-        schema = Schema(name=definition.type_name, encoding=SCHEMA_ENCODING,
-                                       data=definition.text.encode())
+        schema = self._fg.Schema(name=definition.type_name, encoding=SCHEMA_ENCODING, data=definition.text.encode())
         with self._lock:
             if topic not in self._channels and not self._closed:
-                self._channels[topic] = foxglove.Channel(topic, schema=schema, message_encoding=MESSAGE_ENCODING,
-                                                               context=self._context)
+                self._channels[topic] = self._fg.Channel(topic, schema=schema, message_encoding=MESSAGE_ENCODING,
+                                                         context=self._context)
         return topic in self._channels
 
     def log(self, topic: str, data: bytes, log_time_ns: int) -> None:
@@ -284,7 +311,8 @@ class FoxgloveSink:
     def status(self, message: str, *, error: bool = False, status_id: str | None = None) -> None:
         """Show ``message`` in the clients (Foxglove's problems and notifications)."""
         if not self._closed:
-            self._server.publish_status(message, StatusLevel.Error if error else StatusLevel.Info, status_id)
+            level = self._fg.StatusLevel
+            self._server.publish_status(message, level.Error if error else level.Info, status_id)
 
     # -- playback control --------------------------------------------------------------------------------------
     def set_playback_range(self, start_ns: int, end_ns: int) -> bool:
@@ -314,7 +342,8 @@ class FoxgloveSink:
         """The SDK's PlaybackControlRequest carried out: its errors shown as error statuses; the state answered."""
         assert self._playback is not None   # the listener takes playback requests only then
         report, errors = self._playback.handle(PlaybackRequest(
-            play=request.playback_command == PlaybackCommand.Play, speed=float(request.playback_speed),
+            play=request.playback_command == self._fg.websocket.PlaybackCommand.Play,
+            speed=float(request.playback_speed),
             seek_ns=None if request.seek_time is None else int(request.seek_time),
             request_id=str(request.request_id or "")))
         for line in errors:
@@ -327,11 +356,12 @@ class FoxgloveSink:
             request, response = service_definitions(service.type_name)
         except MessageDefinitionError as exc:
             raise FoxgloveError(f"service {service.name}: {exc}") from None
-        schema = ServiceSchema(
+        fg = self._fg
+        schema = fg.ServiceSchema(
             name=service.type_name,
-            request=MessageSchema(encoding=MESSAGE_ENCODING, schema=Schema(
+            request=fg.MessageSchema(encoding=MESSAGE_ENCODING, schema=fg.Schema(
                 name=request.type_name, encoding=SCHEMA_ENCODING, data=request.text.encode())),
-            response=MessageSchema(encoding=MESSAGE_ENCODING, schema=Schema(
+            response=fg.MessageSchema(encoding=MESSAGE_ENCODING, schema=fg.Schema(
                 name=response.type_name, encoding=SCHEMA_ENCODING, data=response.text.encode())))
         backend = self._service_backend
         assert backend is not None   # checked in __init__: services come with their backend
@@ -343,10 +373,11 @@ class FoxgloveSink:
                                        f"must be {MESSAGE_ENCODING}")
             return bytes(backend.call(service, bytes(request_msg.payload)))
 
-        return Service(name=service.name, schema=schema, handler=handler)
+        return fg.Service(name=service.name, schema=schema, handler=handler)
 
     # -- parameters --------------------------------------------------------------------------------------------
     def _parameter(self, entry: ParameterEntry) -> Any:
+        Parameter, ParameterType = self._fg.Parameter, self._fg.ParameterType
         if entry.kind is None:
             return Parameter(entry.name)
         if entry.kind == "double":
@@ -359,8 +390,8 @@ class FoxgloveSink:
             return Parameter(entry.name, value=list(entry.value))
         return Parameter(entry.name, value=entry.value)
 
-    @staticmethod
-    def _entry(parameter: Any) -> ParameterEntry:
+    def _entry(self, parameter: Any) -> ParameterEntry:
+        ParameterType = self._fg.ParameterType
         value = parameter.get_value()
         hint = parameter.type
         kind = parameter_kind(value, float_hint=hint in (ParameterType.Float64, ParameterType.Float64Array),
@@ -415,28 +446,35 @@ class FoxgloveSink:
         self.close()
 
 
-class _Listener(ServerListener):
-    """The SDK's server listener: parameter and playback requests go to the sink (never raised into Rust)."""
+@cache
+def _listener_class() -> type:
+    """The SDK's server listener class for a sink (made once, when the SDK is first needed)."""
+    base: type = _sdk().websocket.ServerListener
 
-    def __init__(self, sink: FoxgloveSink) -> None:
-        self._sink = sink
+    class Listener(base):
+        """The SDK's server listener: parameter and playback requests go to the sink (never raised into Rust)."""
 
-    def _shown(self, call: Callable[[], Any], failed: str, status_id: str, fallback: Any) -> Any:
-        """``call()``; should it raise, ``failed: <exception>`` is shown to the clients and ``fallback`` returned."""
-        try:
-            return call()
-        except Exception as exc:  # shown to the client, never raised into the SDK's thread
-            self._sink.status(f"{failed}: {exc}", error=True, status_id=status_id)
-            return fallback
+        def __init__(self, sink: FoxgloveSink) -> None:
+            self._sink = sink
 
-    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:
-        return self._shown(lambda: self._sink.get_parameters(param_names), "parameters could not be read",
-                           "parameters", [])
+        def _shown(self, call: Callable[[], Any], failed: str, status_id: str, fallback: Any) -> Any:
+            """``call()``; should it raise, ``failed: <exception>`` is shown to the clients, ``fallback`` returned."""
+            try:
+                return call()
+            except Exception as exc:  # shown to the client, never raised into the SDK's thread
+                self._sink.status(f"{failed}: {exc}", error=True, status_id=status_id)
+                return fallback
 
-    def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:
-        return self._shown(lambda: self._sink.set_parameters(parameters), "parameters could not be set",
-                           "parameters", [])
+        def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:
+            return self._shown(lambda: self._sink.get_parameters(param_names), "parameters could not be read",
+                               "parameters", [])
 
-    def on_playback_control_request(self, playback_control_request: Any) -> Any:
-        return self._shown(lambda: self._sink.handle_playback(playback_control_request),
-                           "playback: the request could not be carried out", "playback", None)
+        def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:
+            return self._shown(lambda: self._sink.set_parameters(parameters), "parameters could not be set",
+                               "parameters", [])
+
+        def on_playback_control_request(self, playback_control_request: Any) -> Any:
+            return self._shown(lambda: self._sink.handle_playback(playback_control_request),
+                               "playback: the request could not be carried out", "playback", None)
+
+    return Listener

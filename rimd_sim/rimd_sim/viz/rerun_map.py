@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from rimd_sim.viz.sinks import require_rerun
+
 __all__ = [
     "CHANNELS",
     "TIMELINE",
@@ -166,6 +168,7 @@ class RigMapper:
         have passed since its last send: faster than real time (lockstep, a fast replay), one send carries more
         blocks instead of sending more often.
         """
+        require_rerun("the Rerun mapping of the rig", "")
         import rerun as rr
 
         if batch < 1:
@@ -373,6 +376,7 @@ def blueprint(*, window: float = 2.0, trail: float = 1.0) -> Any:
     The four channels stacked (last ``window`` s) on the left; on the right the phase plane (last ``trail`` s)
     and the Poincare section (all cycles) side by side, the impact table (and log) below.
     """
+    require_rerun("the Rerun layout of the rig", "")
     import rerun.blueprint as rrb
 
     def recent(seconds: float) -> Any:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from rimd_sim.viz.rerun_map import TIMELINE
+from rimd_sim.viz.sinks import require_rerun
 
 __all__ = ["EntityData", "load_rrd"]
 
@@ -48,6 +49,7 @@ class EntityData:
 
 def load_rrd(path: str | Path) -> dict[str, EntityData]:
     """Entity path (without the leading ``/``) -> its temporal rows on ``sim_time``."""
+    require_rerun("reading .rrd files", "")
     import pyarrow as pa
     from rerun.chunk import RrdReader
 

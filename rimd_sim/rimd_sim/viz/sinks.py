@@ -27,9 +27,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from rimd_sim.dependencies import installed, missing_extra
 from rimd_sim.errors import UnavailableError
 
-__all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment", "spec_from_parameters"]
+__all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment", "require_rerun",
+           "spec_from_parameters"]
 
 SINKS = ("save", "spawn", "connect", "serve_web")
 APPLICATION_ID = "rimd_rig"
@@ -37,6 +39,16 @@ APPLICATION_ID = "rimd_rig"
 
 class SinkError(UnavailableError):
     """The sink cannot be opened (bad name, unwritable path, viewer did not start); one clear line."""
+
+
+def require_rerun(feature: str = "the Rerun bridge", alternative: str = "or run with --no-rerun") -> None:
+    """Refuse a Rerun feature without the Rerun SDK (the extra ``rerun``), before anything starts.
+
+    Raises:
+        SinkError: rerun-sdk is not installed; the message names the feature, the extra and ``alternative``.
+    """
+    if not installed("rerun"):
+        raise SinkError(missing_extra("rerun", feature, alternative))
 
 
 @dataclass(frozen=True)
@@ -62,7 +74,11 @@ class SinkSpec:
     analytics: bool = False
 
     def validate(self) -> None:
-        """Raise :class:`SinkError` naming the value and the rule when the spec cannot work."""
+        """Raise :class:`SinkError` naming the value and the rule when the spec cannot work.
+
+        Every sink needs the Rerun SDK: without it the error names the extra (:func:`require_rerun`).
+        """
+        require_rerun()
         if self.kind not in SINKS:
             raise SinkError(f"unknown sink {self.kind!r}: one of {', '.join(SINKS)}")
         if self.kind == "save":
@@ -179,7 +195,7 @@ def _rerun_executable() -> str:
         pass
     found = shutil.which("rerun")
     if found is None:
-        raise SinkError("the rerun viewer (rerun-sdk) is not installed")
+        raise SinkError(missing_extra("rerun_cli", "the Rerun viewer"))
     return found
 
 

@@ -43,6 +43,13 @@ import numpy as np
 __all__ = ["PulseFit", "PulseSamples", "SpringDashpotPulse", "fit_onsets", "fit_pulses", "onset_scale_errors",
            "pulse_residuals", "pulse_of", "pulse_peaks"]
 
+# The trapezoidal rule: np.trapezoid (NumPy 2); on NumPy 1.26 (the apt NumPy under Ubuntu 24.04's ROS 2 Jazzy,
+# docs/ros-install.md) the same computation under its former name, np.trapz.
+if hasattr(np, "trapezoid"):
+    _trapezoid = np.trapezoid
+else:  # pragma: no cover - NumPy 1.26
+    _trapezoid = np.trapz  # type: ignore[attr-defined]
+
 
 def _state(s: np.ndarray, sigma: float, w0: float, eps: float | np.ndarray,
            eps1: float | np.ndarray = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -204,7 +211,7 @@ class SpringDashpotPulse:
             den = y0 - 2 * y1 + y2
             if den < 0:
                 peak = float(y1 - 0.125 * (y0 - y2) ** 2 / den)
-        return peak, release, float(np.trapezoid(f, s))
+        return peak, release, float(_trapezoid(f, s))
 
 
 def pulse_of(mass: float, stiffness: float, damping: float, *, cos_theta: float = 1.0,

@@ -42,6 +42,10 @@ def main(args: argparse.Namespace) -> int:
 
     if args.port is not None and not args.foxglove:
         raise CommandError("--port is for --foxglove (the Foxglove server's port)")
+    if args.foxglove:   # the extra foxglove: refused before anything starts, naming it
+        from rimd_sim.viz.foxglove_sink import require_sdk
+
+        require_sdk("or replay without --foxglove")
     values = {"rate": args.rate, "start_offset": args.start, "playback_duration": args.duration, "loop": args.loop,
               "clock": args.clock}
     if args.topics:

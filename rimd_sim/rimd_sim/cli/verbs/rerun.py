@@ -64,7 +64,9 @@ def convert(recording: Path, spec, *, namespace: str = "/rig", natural_frequency
 
 def main(args: argparse.Namespace) -> int:
     """Convert or show the recording; print a one-line summary."""
-    from rimd_sim.viz.sinks import SinkSpec
+    from rimd_sim.viz.sinks import SinkSpec, require_rerun
+
+    require_rerun("the Rerun view of a recording", "")
 
     if args.save is not None:
         spec = SinkSpec("save", path=str(args.save), analytics=args.analytics)

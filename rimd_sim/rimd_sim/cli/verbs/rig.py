@@ -47,6 +47,10 @@ def main(args: argparse.Namespace) -> int:
 
     if args.consumer and not args.lockstep:
         raise CommandError("--consumer is for --lockstep (the names the lockstep rig waits for)")
+    if args.foxglove:   # the extra foxglove (Rerun's, rerun-sdk, is refused by the plan when the bridge streams)
+        from rimd_sim.viz.foxglove_sink import require_sdk
+
+        require_sdk("or run without --foxglove")
     plan = plan_rig(args.config, output_dir=args.output_dir, record=not args.no_record, rerun=not args.no_rerun,
                     foxglove=args.foxglove, lockstep=args.lockstep, consumers=args.consumer,
                     real_time_factor=args.real_time_factor)
