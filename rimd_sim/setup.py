@@ -42,6 +42,11 @@ def _config_files() -> list[str]:
                   for path in (HERE / "config").glob(pattern))
 
 
+def _foxglove_layouts() -> list[str]:
+    """The Foxglove layouts (``config/foxglove/*.json``), installed to ``share/rimd_sim/config/foxglove``."""
+    return sorted(str(path.relative_to(HERE)) for path in (HERE / "config" / "foxglove").glob("*.json"))
+
+
 def _launch_files() -> list[str]:
     """The launch files (``launch/*.launch.xml``), relative to this file; installed to ``share/rimd_sim/launch``."""
     return sorted(str(path.relative_to(HERE)) for path in (HERE / "launch").glob("*.launch.xml"))
@@ -107,6 +112,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),
         ("share/" + PACKAGE_NAME + "/config", _config_files()),
+        ("share/" + PACKAGE_NAME + "/config/foxglove", _foxglove_layouts()),
         ("share/" + PACKAGE_NAME + "/launch", _launch_files()),
         *_colcon_launchers(),
     ],

@@ -263,9 +263,7 @@ def sim_wheel_problems(path: Path, version: str) -> list[str]:
     if "testing" not in metadata.get("Provides-Extra", []):
         problems.append("METADATA: no extra 'testing'")
     data = f"rimd_sim-{version}.data/data/"
-    configs = sorted(p.name for p in (ROOT / "rimd_sim" / "config").glob("*.yaml"))
-    for name in [f"share/rimd_sim/config/{c}" for c in configs] + [
-            "share/rimd_sim/package.xml", "share/ament_index/resource_index/packages/rimd_sim"]:
+    for name in sim_data_files():
         if data + name not in files:
             problems.append(f"missing {data}{name}")
     (entry_points,) = [n for n in files if n.endswith(".dist-info/entry_points.txt")]
@@ -274,6 +272,20 @@ def sim_wheel_problems(path: Path, version: str) -> list[str]:
         problems.append("entry_points.txt: no rimd command or no pytest11 plugin")
     problems += [f"unexpected {n}" for n in files if "__pycache__" in n or n.endswith((".nbi", ".nbc"))]
     return problems
+
+
+def sim_data_files() -> list[str]:
+    """The files the rimd_sim wheel must install into the prefix.
+
+    The configurations (parameter files, tables, Foxglove layouts), package.xml, the ament index entry and the
+    launch file.
+    """
+    config = ROOT / "rimd_sim" / "config"
+    configs = sorted(str(p.relative_to(config)) for pattern in ("*.yaml", "*.csv", "foxglove/*.json")
+                     for p in config.glob(pattern))
+    return [f"share/rimd_sim/config/{c}" for c in configs] + [
+        "share/rimd_sim/package.xml", "share/ament_index/resource_index/packages/rimd_sim",
+        "share/rimd_sim/launch/rig.launch.xml"]
 
 
 def check_wheels(pythons: list[str], version: str) -> dict[str, Path]:

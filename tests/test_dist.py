@@ -119,10 +119,7 @@ def _sim_wheel(tmp_path: Path, requires: list[str]) -> Path:
     dist_info = f"rimd_sim-{version}.dist-info"
     data = tmp_path / "data"
     data.write_text("x")
-    files = [(f"rimd_sim-{version}.data/data/share/rimd_sim/config/{p.name}", data)
-             for p in (ROOT / "rimd_sim" / "config").glob("*.yaml")]
-    files += [(f"rimd_sim-{version}.data/data/share/rimd_sim/package.xml", data),
-              (f"rimd_sim-{version}.data/data/share/ament_index/resource_index/packages/rimd_sim", data)]
+    files = [(f"rimd_sim-{version}.data/data/{name}", data) for name in checks.sim_data_files()]
     metadata = "\n".join(["Name: rimd_sim", f"Version: {version}", "Provides-Extra: testing",
                           *(f"Requires-Dist: {r}" for r in requires)]) + "\n"
     build_dist.write_wheel(wheel, files, {

@@ -137,9 +137,11 @@ def test_rerun_features_name_the_extra(repo_root, tmp_path, capsys):
     assert "rimd rerun: the Rerun view of a recording needs rerun-sdk: pip install 'rimd-sim[rerun]'" in err
 
 
-def test_foxglove_features_name_the_extra(tmp_path, capsys):
+def test_foxglove_features_name_the_extra(repo_root, tmp_path, capsys):
     with without(*HIDDEN["foxglove"]):
         from rimd_sim.cli import main
+        from rimd_sim.errors import RimdError
+        from rimd_sim.ros.bringup import plan_rig
         from rimd_sim.viz.foxglove_sink import FoxgloveError, FoxgloveSink, check_address
 
         check_address("127.0.0.1", 8765)   # the settings' checks need no SDK
@@ -147,6 +149,14 @@ def test_foxglove_features_name_the_extra(tmp_path, capsys):
                                                 r"pip install 'rimd-sim\[foxglove\]'$"):
             FoxgloveSink(port=0)
         assert main(["rig", "--foxglove", "--no-rerun", "--no-record"]) == 1
+        # Asked by the configuration (the bridge's foxglove.enabled) instead of --foxglove: refused by the plan.
+        config = tmp_path / "foxglove.yaml"
+        config.write_text((repo_root / "config" / "rimd.yaml").read_text().replace(
+            "    foxglove:\n      enabled: false\n", "    foxglove:\n      enabled: true\n", 1))
+        assert "      enabled: true\n" in config.read_text()
+        with pytest.raises(RimdError, match=r"needs foxglove-sdk: pip install 'rimd-sim\[foxglove\]' "
+                                            r"\(or set foxglove.enabled: false\)"):
+            plan_rig(config, output_dir=tmp_path / "rec", rerun=False)
         assert main(["replay", str(tmp_path / "none.mcap"), "--foxglove"]) == 1
     err = capsys.readouterr().err.splitlines()
     assert "rimd rig: the Foxglove server needs foxglove-sdk: pip install 'rimd-sim[foxglove]' " \

@@ -275,7 +275,14 @@ def _checked(config_path: Path, name: str, check: Any, section: dict) -> Any:
 
 def _bridge_checked(config_path: Path, section: dict, rerun: bool, foxglove: bool) -> str | None:
     """Check the bridge's section; the ws:// address it will serve Foxglove on, or None."""
-    from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT, FoxgloveError, check_address, websocket_url
+    from rimd_sim.viz.foxglove_sink import (
+        DEFAULT_HOST,
+        DEFAULT_PORT,
+        FoxgloveError,
+        check_address,
+        require_sdk,
+        websocket_url,
+    )
     from rimd_sim.viz.sinks import SinkError, spec_from_parameters
 
     try:
@@ -283,6 +290,7 @@ def _bridge_checked(config_path: Path, section: dict, rerun: bool, foxglove: boo
             spec_from_parameters(section).validate()
         if not foxglove:
             return None
+        require_sdk("or set foxglove.enabled: false")   # asked by the section itself (--foxglove is checked earlier)
         host = section.get("foxglove.host", DEFAULT_HOST)
         port = section.get("foxglove.port", DEFAULT_PORT)
         check_address(host, port)

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from rimd_sim.cli import nonnegative_float, real_time_factor
+from rimd_sim.settings import paths
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -61,7 +62,7 @@ def main(args: argparse.Namespace) -> int:
     def announce() -> None:
         if plan.foxglove_address:
             print(f"rimd rig: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
-                  "WebSocket; layout: config/foxglove/rig_layout.json)", flush=True)
+                  f"WebSocket; layout: {paths.config_dir() / 'foxglove' / 'rig_layout.json'})", flush=True)
         print(f"rimd rig: running {', '.join(plan.names)} with {plan.config_path} "
               f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
               f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
