@@ -215,12 +215,16 @@ def find_python(version: str) -> Path:
 # ---- the build venv ------------------------------------------------------------------------------------------
 LOCK_CHECK = """
 import importlib.metadata as md, re, sys
+from packaging.markers import Marker
 missing = []
 for line in open(sys.argv[1], encoding="utf-8"):
     line = line.split("#", 1)[0].strip()
     if not line:
         continue
-    name, version = re.fullmatch(r"([A-Za-z0-9_.-]+)==(\\S+)", line).groups()
+    pin, _, marker = line.partition(";")   # setuptools is pinned per Python: 'setuptools==68.1.2; python_version ...'
+    if marker.strip() and not Marker(marker.strip()).evaluate():
+        continue
+    name, version = re.fullmatch(r"([A-Za-z0-9_.-]+)==(\\S+)", pin.strip()).groups()
     try:
         found = md.version(name)
     except md.PackageNotFoundError:
