@@ -18,6 +18,7 @@ tree, with their module) and derive from one of these kinds::
     │       └── ros.nodes.replay.ReplayError                the replay node cannot start as configured
     ├── CommandError                     a command (to the running model, or a verb's) refused or not carried out
     ├── IntegrationError                 the integrator cannot continue
+    │   └── model.rig_model.ChatteringError                 the chattering guard fired (the valid domain's rule)
     ├── RecordingError                   a recording cannot be read, or made, as asked
     │   ├── io.crop.CropError                               a crop cannot be done as asked
     │   └── viz.mcap_source.McapError                       no rig message can be read from the file

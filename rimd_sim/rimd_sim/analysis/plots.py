@@ -58,6 +58,33 @@ def _save_force_over_impacts(fig: Figure, ax: Axes, ax2: Axes, path: Path, title
     return _save(fig, path, title, ax)
 
 
+def mark_invalid(ax: Axes, x, y, rules, *, top: float | None = None, legend: bool = True) -> None:
+    """Draw points outside the model's valid domain as hollow grey markers, the legend naming their rules.
+
+    ``rules``: each point's ``invalid_rule`` field. A value that is not finite (no measure: the chattering guard
+    stopped the run) is drawn at 0 with a cross. With ``top`` (the largest valid value), values above 1.2 x
+    ``top`` are drawn at the top of the axis as triangles (off-scale), so the valid points keep their scale.
+    """
+    y = np.asarray(y, dtype=float)
+    names = sorted({name for r in rules for name in r.split(";") if name})
+    label = f"outside the model's valid domain: {', '.join(names)}" if legend else None
+    finite = np.isfinite(y)
+    limit = None if top is None or not top > 0 else 1.2 * top
+    on = finite if limit is None else finite & (y <= limit)
+    x = np.asarray(x, dtype=float)
+    if on.any():
+        ax.plot(x[on], y[on], "o", mfc="none", mec="0.5", ms=6, label=label)
+        label = None
+    off = finite & ~on
+    if off.any():
+        ax.set_ylim(top=limit)
+        ax.plot(x[off], np.full(off.sum(), limit * 0.97), "^", mfc="none", mec="0.5", ms=7,
+                label=None if label is None else label + " (off scale)")
+        label = None
+    if (~finite).any():
+        ax.plot(x[~finite], np.zeros((~finite).sum()), "x", color="0.5", ms=7, label=label)
+
+
 def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
     """Non-dimensional peak force F_i/mg versus Omega/omega (the paper's Figs 6 and 8).
 
@@ -66,8 +93,18 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
     fig, ax, ax2 = _force_over_impacts()
     for res in results:
         x = [p.frequency_ratio for p in res.points]
-        ax.plot(x, [p.force_ratio for p in res.points], "-o", ms=3, label=f"gap {res.gap_mm:g} mm, {res.direction}")
-        ax2.plot(x, [p.impacts_per_cycle for p in res.points], "-o", ms=3)
+        # Points outside the model's valid domain break the line and are drawn apart (hollow grey markers).
+        ax.plot(x, [p.force_ratio if p.valid else math.nan for p in res.points], "-o", ms=3,
+                label=f"gap {res.gap_mm:g} mm, {res.direction}")
+        ax2.plot(x, [p.impacts_per_cycle if p.valid else math.nan for p in res.points], "-o", ms=3)
+        invalid = [p for p in res.points if not p.valid]
+        if invalid:
+            xs = [p.frequency_ratio for p in invalid]
+            rules = [p.invalid_rule for p in invalid]
+            mark_invalid(ax, xs, [p.force_ratio for p in invalid], rules,
+                         top=max((p.force_ratio for p in res.points if p.valid), default=None))
+            mark_invalid(ax2, xs, [p.impacts_per_cycle for p in invalid], rules, legend=False,
+                         top=max((p.impacts_per_cycle for p in res.points if p.valid), default=None))
         for band, name in ((res.band_a, "A"), (res.band_b, "B")):
             if band is not None:
                 ax.annotate(f"{name}: {band.frequency_hz:g} Hz, {band.peak_force_n:.0f} N",

@@ -12,7 +12,9 @@ A verb does not catch an error to re-raise it as another or to print it; it catc
 it knows (the option as typed, that the experiment itself ran).
 
 Exit status: 0 success, 1 failure (any :class:`RimdError`, or an ``OSError`` such as an output directory that
-cannot be made, in one line naming the file), 2 usage error (argparse) or not implemented yet, 130 interrupted.
+cannot be made, in one line naming the file), 2 usage error (argparse) or not implemented yet, 3 an analysis ran
+and wrote its files but some of its points lie outside the model's valid domain (:mod:`rimd_sim.model.validity`;
+its last line says how many and which rules; ``--accept-invalid`` makes it 0), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -30,6 +32,8 @@ from rimd_sim import __version__
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
+#: An analysis wrote its files, but some points lie outside the model's valid domain (docs/analyses.md).
+EXIT_INVALID = 3
 EXIT_INTERRUPTED = 130
 
 

@@ -153,7 +153,10 @@ F_ZT0 = 20
 # contact onset (0 = none), the rate (Hz/s) at which it then ramps back, and the setpoint it ramps back to once
 # the sag is over (> 0 while a sag is in progress). See :func:`motor_slip`.
 F_SLIP, F_SLIPRATE, F_SLIPBACK = 21, 22, 23
-N_FSTATE = 24
+# Largest |theta| at the ends of the steps taken since the caller last set it (the valid domain's pendulum_angle
+# rule, rimd_sim.model.validity): the driver only raises it, so it changes no other quantity.
+F_THMAX = 24
+N_FSTATE = 25
 #: Duration (s) of the motor's sag at a contact onset under ``motor_slip``: the frequency falls linearly (a
 #: motor cannot jump: the cart's velocity stays continuous), then ramps back at ``F_SLIPRATE``.
 SLIP_TIME = 0.002
@@ -1222,6 +1225,8 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             if not (math.isfinite(yb[0]) and math.isfinite(yb[1])):
                 return ST_NONFINITE
             fs[F_TB] = t + h
+            if abs(yb[0]) > fs[F_THMAX]:
+                fs[F_THMAX] = abs(yb[0])
             ist[I_PEND] = code
             if mode == CONTACT:
                 drv.track_contact_extremes(fs, p, ya, Q, h)

@@ -33,8 +33,8 @@ from rimd_sim.errors import CommandError, ConfigError, IntegrationError
 from rimd_sim.settings.config import CHANNEL_NAMES, STRUCTURE_MODELS, SimConfig
 
 __all__ = [
-    "MODELS", "Impact", "ModelOutput", "MotorState", "PhysicsModel", "RigModel", "StroboPoint", "as_time",
-    "model_for", "samples_before",
+    "MODELS", "ChatteringError", "Impact", "ModelOutput", "MotorState", "PhysicsModel", "RigModel", "StroboPoint",
+    "as_time", "model_for", "samples_before",
 ]
 
 #: Channel name -> quantity computed by the kernel.
@@ -123,6 +123,9 @@ class ModelOutput:
         truth: ``(first_index, array of shape (11, n))``, rows in :data:`TRUTH_FIELDS` order, or None.
         impacts: Impacts completed in ``[t_start, t_stop)``.
         strobe: Stroboscopic points in ``[t_start, t_stop)``.
+        max_abs_theta: Largest ``|theta|`` (rad) at the ends of the integration steps of the call (the current
+            step's end when it started included): the valid domain's ``pendulum_angle``
+            (:mod:`rimd_sim.model.validity`).
     """
 
     t_start: float
@@ -131,6 +134,7 @@ class ModelOutput:
     truth: tuple[int, np.ndarray] | None
     impacts: list[Impact]
     strobe: list[StroboPoint]
+    max_abs_theta: float = math.nan
 
 
 def samples_before(t: Fraction, rate: Fraction) -> int:
@@ -214,6 +218,20 @@ assert tuple(MODELS) == STRUCTURE_MODELS, "every structure.model value has its e
 def _driver(name: str) -> ModuleType:
     spec = MODELS[name]
     return k.build_driver(spec.physics, name, spec.sources)
+
+
+class ChatteringError(IntegrationError):
+    """The integrator's chattering guard fired: a Zeno accumulation of contact switches.
+
+    The valid domain's ``chattering`` rule (:mod:`rimd_sim.model.validity`).
+
+    Attributes:
+        t: Simulation time (s) where the guard fired.
+    """
+
+    def __init__(self, message: str, t: float = math.nan):
+        super().__init__(message)
+        self.t = t
 
 
 def model_for(config: SimConfig) -> PhysicsModel:
@@ -416,6 +434,7 @@ class RigModel:
         imp_out = np.empty((64, k.N_RECORD))
         st_out = np.empty((int(min(cycles, 1e5)) + 8 if self._want_strobe else 0, k.N_STROBE + self._physics.n_modes))
         tr_base = np.array([tr_first], dtype=np.int64)
+        self._fs[k.F_THMAX] = abs(self._yb[0])
         while True:
             self._is[k.I_IMPOUT] = 0
             self._is[k.I_STROUT] = 0
@@ -434,14 +453,18 @@ class RigModel:
                 continue
             if status == k.ST_STROBE_FULL:
                 continue
-            raise IntegrationError(f"at t = {self._fs[k.F_TB]:.9f} s: {_STATUS_MESSAGES[status]}")
+            message = f"at t = {self._fs[k.F_TB]:.9f} s: {_STATUS_MESSAGES[status]}"
+            if status == k.ST_ZENO:
+                raise ChatteringError(message, float(self._fs[k.F_TB]))
+            raise IntegrationError(message)
         self._time = t_stop
         channels = {
             name: (int(first[i]), ch_out[i, : int(stops[i] - first[i])].copy())
             for i, name in enumerate(self._names)
         }
         truth = (tr_first, tr_out) if self._want_truth else None
-        return ModelOutput(float(t_start), float(t_stop), channels, truth, impacts, strobe)
+        return ModelOutput(float(t_start), float(t_stop), channels, truth, impacts, strobe,
+                           float(self._fs[k.F_THMAX]))
 
     # ---- commands (act now) ----------------------------------------------------------------------
 
@@ -451,7 +474,7 @@ class RigModel:
         self._is[k.I_IMPOUT] = 0
         if not self._kernel.truncate(self._p, self._fs, self._is, self._ya, self._yb, self._fa, self._Q,
                                      float(self._time), buf):
-            raise IntegrationError(f"at t = {float(self._time):.9f} s: {_STATUS_MESSAGES[k.ST_ZENO]}")
+            raise ChatteringError(f"at t = {float(self._time):.9f} s: {_STATUS_MESSAGES[k.ST_ZENO]}", float(self._time))
         return [Impact(*_record(r)) for r in buf[: self._is[k.I_IMPOUT]]]
 
     def _resync(self) -> list[Impact]:

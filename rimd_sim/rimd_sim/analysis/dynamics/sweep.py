@@ -11,6 +11,12 @@ steady impact force at each step. Three directions:
 
 At each point the model runs ``cycles`` excitation cycles (after the ramp) and the steady state is read
 over the last ``measure_cycles``: the largest peak force and the number of impacts per cycle.
+
+Every point is checked against the model's valid domain (:mod:`rimd_sim.model.validity`) over its whole run
+(the ramp and the transient included): the largest ``|theta|``, the largest contact force, the impacts per
+cycle and whether the chattering guard fired. A point outside it is marked (``valid``, ``invalid_rule``); a
+point where the guard fired has no measures (NaN), and a continued sweep goes on from rest at the next
+frequency (``SweepResult.restarts``).
 """
 
 from __future__ import annotations
@@ -26,7 +32,8 @@ import numpy as np
 from rimd_sim.analysis.dynamics.steady import check_frequencies
 from rimd_sim.analysis.executor import run_tasks, scheduler_address
 from rimd_sim.errors import ConfigError
-from rimd_sim.model.rig_model import RigModel
+from rimd_sim.model.rig_model import ChatteringError, RigModel
+from rimd_sim.model.validity import PointMeasures, Verdict, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
@@ -45,6 +52,10 @@ class SweepPoint:
         force_ratio: ``peak_force_n / (m g)``.
         impacts_per_cycle: Impacts per excitation cycle over the measured cycles.
         simulated_seconds: Simulated time spent on this point (s).
+        max_abs_theta_rad: Largest ``|theta|`` over the point's whole run (rad).
+        max_force_n: Largest peak force over the point's whole run (N), the transient included.
+        valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
+        invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
     """
 
     frequency_hz: float
@@ -53,11 +64,19 @@ class SweepPoint:
     force_ratio: float
     impacts_per_cycle: float
     simulated_seconds: float
+    max_abs_theta_rad: float = math.nan
+    max_force_n: float = math.nan
+    valid: bool = True
+    invalid_rule: str = ""
 
 
 @dataclass(frozen=True)
 class SweepResult:
-    """A sweep and its bands (see :func:`band_peak`)."""
+    """A sweep and its bands (see :func:`band_peak`, valid points only).
+
+    ``validity`` is the summary's report of the valid domain (:meth:`~rimd_sim.model.validity.ValidityDomain.report`);
+    ``restarts`` the frequencies where a continued sweep went on from rest after a chattering point.
+    """
 
     gap_mm: float
     direction: str
@@ -67,6 +86,13 @@ class SweepResult:
     simulated_seconds: float
     wall_seconds: float
     workers: int
+    validity: dict | None = None
+    restarts: tuple[float, ...] = ()
+
+    @property
+    def invalid(self) -> tuple[SweepPoint, ...]:
+        """The points outside the model's valid domain."""
+        return tuple(p for p in self.points if not p.valid)
 
     def summary(self) -> dict:
         """The ``summary.json`` content (its keys: docs/interface.md, "Commands")."""
@@ -76,12 +102,13 @@ class SweepResult:
         return {"gap_mm": self.gap_mm, "direction": self.direction, "band_a": band(self.band_a),
                 "band_b": band(self.band_b), "points": len(self.points),
                 "simulated_seconds": self.simulated_seconds, "wall_seconds": self.wall_seconds,
-                "workers": self.workers}
+                "workers": self.workers, "validity": self.validity, "restarts_from_rest_hz": list(self.restarts)}
 
 
 def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, tolerance: float = 0.03) -> SweepPoint | None:
-    """Point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B)."""
-    sel = [p for p in points if abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
+    """Valid point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B)."""
+    sel = [p for p in points
+           if p.valid and abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
     return max(sel, key=lambda p: p.peak_force_n, default=None)
 
 
@@ -91,41 +118,78 @@ def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[floa
     return max((i.peak_force for i in last), default=0.0), len(last) / measure_cycles
 
 
-def _point(cfg: SimConfig, f: float, peak: float, rate: float, seconds: float) -> SweepPoint:
+def _point(cfg: SimConfig, f: float, peak: float, rate: float, seconds: float, max_theta: float,
+           max_force: float) -> SweepPoint:
     rig = cfg.rig
-    return SweepPoint(f, f / rig.natural_frequency, peak, peak / (rig.mass * rig.gravity), rate, seconds)
+    verdict = domain(cfg).check(PointMeasures(max_theta, max_force, rate))
+    return SweepPoint(f, f / rig.natural_frequency, peak, peak / (rig.mass * rig.gravity), rate, seconds,
+                      max_theta, max_force, verdict.valid, verdict.invalid_rule)
+
+
+def _chattering(cfg: SimConfig, f: float, seconds: float) -> SweepPoint:
+    """A point where the chattering guard stopped the run: no measures."""
+    nan = math.nan
+    verdict = domain(cfg).check(PointMeasures(chattering=True))
+    return SweepPoint(f, f / cfg.rig.natural_frequency, nan, nan, nan, seconds, nan, nan, False, verdict.invalid_rule)
 
 
 def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
     base, f, cycles, measure_cycles = args
     cfg = base.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
     duration = cycles / f
-    impacts = RigModel(cfg, channels=False, truth=False).advance(duration).impacts
-    return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration)
+    try:
+        out = RigModel(cfg, channels=False, truth=False).advance(duration)
+    except ChatteringError as error:
+        return _chattering(cfg, f, error.t)
+    impacts = out.impacts
+    return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration, out.max_abs_theta,
+                  max((i.peak_force for i in impacts), default=0.0))
 
 
 def _rest_chunk(jobs: list[tuple[SimConfig, float, int, int]]) -> list[SweepPoint]:
     return [_from_rest(job) for job in jobs]
 
 
-def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=None) -> list[SweepPoint]:
-    """An up or down sweep: one run, the motor ramped from point to point."""
+def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=None
+                ) -> tuple[list[SweepPoint], list[float]]:
+    """An up or down sweep: one run, the motor ramped from point to point.
+
+    Returns the points and the frequencies where the run went on from rest after a chattering point.
+    """
     config, order, cycles, measure_cycles, ramp_rate = job
+
+    def start(f: float) -> RigModel:
+        return RigModel(config.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f}),
+                        channels=False, truth=False)
+
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
-    model = RigModel(cfg, channels=False, truth=False)
+    model = start(order[0])
     points = []
+    restarts = []
+    fresh = True
     for i, f in enumerate(order):
+        if model is None:
+            model, fresh = start(f), True
+            restarts.append(f)
         t0 = model.time
-        if i:
+        if not fresh:
             model.set_motor_frequency(f, ramp_rate)
-        ramp = abs(f - order[i - 1]) / ramp_rate if i else 0.0
-        out = model.advance(t0 + ramp + cycles / f)
-        t_end = float(model.time)
-        points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0)))
+        ramp = 0.0 if fresh else abs(f - order[i - 1]) / ramp_rate
+        fresh = False
+        try:
+            out = model.advance(t0 + ramp + cycles / f)
+        except ChatteringError as error:
+            # The state where the guard fired is no start for the next point: the sweep goes on from rest.
+            points.append(_chattering(cfg, f, error.t - float(t0)))
+            model = None
+        else:
+            t_end = float(model.time)
+            points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0),
+                                 out.max_abs_theta, max((i.peak_force for i in out.impacts), default=0.0)))
         if progress:
             progress(i + 1, len(order))
     points.sort(key=lambda p: p.frequency_hz)
-    return points
+    return points, restarts
 
 
 def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: Direction = "rest", *,
@@ -155,6 +219,7 @@ def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: D
         raise ConfigError("measure_cycles", measure_cycles, f"must be > 0 and <= cycles = {cycles}")
     start = time.perf_counter()
     points: list[SweepPoint] = []
+    restarts: list[float] = []
     n_workers = 1
     if direction == "rest":
         # Chunks of points per task (interleaved, so each holds low and high frequencies): few enough that
@@ -175,15 +240,16 @@ def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: D
         order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
         job = (config, order, cycles, measure_cycles, ramp_rate)
         if scheduler_address(scheduler) is None:
-            points = _continuous(job, progress)
+            points, restarts = _continuous(job, progress)
         else:
-            points = run_tasks(_continuous, [job], scheduler=scheduler, progress=progress and (
+            points, restarts = run_tasks(_continuous, [job], scheduler=scheduler, progress=progress and (
                 lambda d, t: progress(len(order), len(order))))[0][0]
     pts = tuple(points)
     return SweepResult(
         gap_mm=config.rig.gap * 1e3, direction=direction, points=pts, band_a=band_peak(pts, 1.0),
         band_b=band_peak(pts, 0.5), simulated_seconds=math.fsum(p.simulated_seconds for p in pts),
-        wall_seconds=time.perf_counter() - start, workers=n_workers)
+        wall_seconds=time.perf_counter() - start, workers=n_workers,
+        validity=domain(config).report(Verdict.of(p.invalid_rule) for p in pts), restarts=tuple(restarts))
 
 
 def points_table(result: SweepResult) -> list[dict]:

@@ -62,6 +62,28 @@ def add_map_arguments(parser, transient: int) -> None:
     add_scheduler_argument(parser)
 
 
+def add_accept_invalid_argument(parser) -> None:
+    """``--accept-invalid``: exit 0 even when some points lie outside the model's valid domain."""
+    parser.add_argument("--accept-invalid", action="store_true",
+                        help="exit 0 even when some points lie outside the model's valid domain (they stay marked "
+                             "in the files; default: exit status 3)")
+
+
+def validity_exit(verb: str, sentence: str, accept: bool, where: str) -> int:
+    """Print the valid domain's last line of ``rimd VERB`` and return the exit status.
+
+    ``sentence``: :meth:`rimd_sim.model.validity.ValidityDomain.sentence` (empty when every point is valid);
+    ``where``: where the outputs mark the points (``the invalid_rule column of sweep.csv``). Returns 0 when
+    every point is valid or ``accept`` (``--accept-invalid``), else :data:`rimd_sim.cli.EXIT_INVALID` (3).
+    """
+    from rimd_sim.cli import EXIT_INVALID
+
+    if not sentence:
+        return 0
+    print(f"rimd {verb}: {sentence}: see {where}" + (" (accepted: --accept-invalid)" if accept else ""), flush=True)
+    return 0 if accept else EXIT_INVALID
+
+
 def add_scheduler_argument(parser) -> None:
     """``--scheduler tcp://HOST:PORT``: run the tasks on a Dask cluster (docs/analyses.md)."""
     parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",

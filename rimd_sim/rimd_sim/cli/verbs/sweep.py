@@ -12,10 +12,12 @@ import numpy as np
 
 from rimd_sim.cli import CommandError, count
 from rimd_sim.cli.verbs._analysis_io import (
+    add_accept_invalid_argument,
     add_model_arguments,
     add_scheduler_argument,
     check_range,
     progress_printer,
+    validity_exit,
     write_summary,
 )
 from rimd_sim.settings.config import load_config
@@ -33,12 +35,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=count("--workers"), default=None,
                         help="processes for rest sweeps (default: all cores)")
     add_scheduler_argument(parser)
+    add_accept_invalid_argument(parser)
 
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
     from rimd_sim.analysis.dynamics.sweep import points_table, sweep
     from rimd_sim.analysis.plots import plot_sweep
+    from rimd_sim.model.validity import Verdict, domain
 
     check_range("f", args.f_min, args.f_max)
     if args.measure_cycles >= args.cycles:
@@ -63,4 +67,5 @@ def main(args: argparse.Namespace) -> int:
     print(f"gap {args.gap_mm:g} mm, {args.direction}: band A {band(result.band_a)}, band B {band(result.band_b)}; "
           f"{result.simulated_seconds:.0f} s simulated in {result.wall_seconds:.1f} s on {result.workers} "
           f"process(es); files in {args.out}")
-    return 0
+    sentence = domain(config).sentence(Verdict.of(p.invalid_rule) for p in result.points)
+    return validity_exit("sweep", sentence, args.accept_invalid, f"the invalid_rule column of {args.out / 'sweep.csv'}")
