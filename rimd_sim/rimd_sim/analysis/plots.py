@@ -190,11 +190,22 @@ def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
     """Stroboscopic ``l sin(theta) / A0`` versus Omega/omega_n, up and down sweeps (the paper's Fig. 11)."""
     fig, ax = plt.subplots(figsize=(9, 5))
     style = {"up": ("tab:blue", 1.6), "down": ("tab:red", 0.8)}
+    marked = False   # the legend names the invalid points once
     for b in branches:
         colour, size = style.get(b.direction, ("k", 1.0))
-        xs = [p.frequency_ratio for p in b.points for _ in p.u]
-        ys = [float(u) for p in b.points for u in p.u]
+        xs = [p.frequency_ratio for p in b.points if p.valid for _ in p.u]
+        ys = [float(u) for p in b.points if p.valid for u in p.u]
         ax.scatter(xs, ys, s=size, c=colour, label=f"sweep {b.direction}", linewidths=0, alpha=0.8)
+        invalid = [p for p in b.points if not p.valid]
+        if invalid:
+            # Hollow grey markers: the samples of the points outside the model's valid domain (none where the
+            # chattering guard fired: a cross at 0).
+            valid_u = [abs(float(u)) for p in b.points if p.valid for u in p.u]
+            mark_invalid(ax, [p.frequency_ratio for p in invalid for _ in (p.u if len(p.u) else [0])],
+                         [float(u) for p in invalid for u in (p.u if len(p.u) else [math.nan])],
+                         [p.invalid_rule for p in invalid for _ in (p.u if len(p.u) else [0])],
+                         top=max(valid_u, default=None), legend=not marked)
+            marked = True
     ax.set_xlabel("Omega / omega_n")
     ax.set_ylabel("l sin(theta) / A0 (stroboscopic)")
     ax.grid(alpha=0.3)

@@ -7,19 +7,26 @@ state is sampled once per cycle (motor phase a multiple of 2 pi) over ``sample_c
 samples are classified (:func:`rimd_sim.analysis.dynamics.steady.classify`).
 
 Both directions are independent runs: ``both`` runs them in two processes, one per core.
+
+Every frequency is checked against the model's valid domain (:mod:`rimd_sim.model.validity`) over its ramp,
+transient and samples; a point outside it is marked (``valid``, ``invalid_rule``). Where the chattering guard
+fires, the point has no samples and the sweep goes on from rest at the next frequency
+(``BifurcationBranch.restarts``).
 """
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from rimd_sim.analysis.dynamics.steady import check_frequencies, classify, nondimensional
 from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.errors import ConfigError
-from rimd_sim.model.rig_model import RigModel
+from rimd_sim.model.rig_model import ChatteringError, RigModel
+from rimd_sim.model.validity import PointMeasures, Verdict, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["BifurcationBranch", "BifurcationPoint", "bifurcation"]
@@ -35,6 +42,10 @@ class BifurcationPoint:
         u: ``l sin(theta) / A0`` at each sampled cycle.
         label: The class of the sampled motion (``p/n``, ``no impact``, ``chaotic/non-periodic``).
         impacts_per_cycle: Mean impacts per cycle over the samples.
+        max_abs_theta_rad: Largest ``|theta|`` over the point's ramp, transient and samples (rad).
+        max_force_n: Largest peak force over the same (N).
+        valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
+        invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
     """
 
     frequency_hz: float
@@ -42,6 +53,10 @@ class BifurcationPoint:
     u: np.ndarray
     label: str
     impacts_per_cycle: float
+    max_abs_theta_rad: float = math.nan
+    max_force_n: float = math.nan
+    valid: bool = True
+    invalid_rule: str = ""
 
 
 @dataclass(frozen=True)
@@ -51,6 +66,12 @@ class BifurcationBranch:
     direction: str
     points: tuple[BifurcationPoint, ...]
     simulated_seconds: float
+    restarts: tuple[float, ...] = field(default=())
+
+    @property
+    def verdicts(self) -> list[Verdict]:
+        """The valid domain's verdict of each point."""
+        return [Verdict.of(p.invalid_rule) for p in self.points]
 
 
 def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> BifurcationBranch:
@@ -58,27 +79,58 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
     order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
     rig = cfg.rig
-    model = RigModel(cfg, channels=False, truth=False, strobe=True)
+    rules = domain(cfg)
+
+    def start(f: float) -> RigModel:
+        return RigModel(config.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f}),
+                        channels=False, truth=False, strobe=True)
+
+    model: RigModel | None = start(order[0])
     points = []
+    restarts = []
+    simulated = 0.0
+    fresh = True
     for i, f in enumerate(order):
-        if i:
-            model.set_motor_frequency(f, ramp_rate)
-            model.advance(model.time + abs(f - order[i - 1]) / ramp_rate)
-        if transient_cycles:
-            model.advance(model.time + transient_cycles / f)
-        # Window: the stroboscopic points closing cycles c0 + 1 .. c0 + N (c0: the cycle running now, after a
-        # ramp at an arbitrary phase) and the impacts of the cycle each point opens.
-        c0 = model.motor_state().cycle_index
-        out = model.advance(model.time + (sample_cycles + 1.5) / f)
+        if model is None:
+            model, fresh = start(f), True
+            restarts.append(f)
+        spans = []
+        try:
+            if not fresh:
+                model.set_motor_frequency(f, ramp_rate)
+                spans.append(model.advance(model.time + abs(f - order[i - 1]) / ramp_rate))
+            fresh = False
+            if transient_cycles:
+                spans.append(model.advance(model.time + transient_cycles / f))
+            # Window: the stroboscopic points closing cycles c0 + 1 .. c0 + N (c0: the cycle running now, after a
+            # ramp at an arbitrary phase) and the impacts of the cycle each point opens.
+            c0 = model.motor_state().cycle_index
+            out = model.advance(model.time + (sample_cycles + 1.5) / f)
+        except ChatteringError as error:
+            # The state where the guard fired is no start for the next point: the sweep goes on from rest.
+            simulated += error.t
+            verdict = rules.check(PointMeasures(chattering=True))
+            points.append(BifurcationPoint(f, f / rig.natural_frequency, np.zeros(0), "", math.nan, math.nan,
+                                           math.nan, False, verdict.invalid_rule))
+            model = None
+            continue
+        spans.append(out)
         strobe = [s for s in out.strobe if c0 < s.cycle_index <= c0 + sample_cycles]
         counts = np.bincount([i.cycle_index - c0 - 1 for i in out.impacts
                               if c0 < i.cycle_index <= c0 + sample_cycles], minlength=sample_cycles)[:sample_cycles]
         u, v = nondimensional(rig.length, rig.amplitude, f, [s.theta for s in strobe], [s.theta_dot for s in strobe])
         n = min(len(u), len(counts))
         label = classify(u[:n], v[:n], counts[:n])[0]
-        points.append(BifurcationPoint(f, f / rig.natural_frequency, u, label, float(counts.mean())))
+        rate = float(counts.mean())
+        max_theta = max(o.max_abs_theta for o in spans)
+        max_force = max((imp.peak_force for o in spans for imp in o.impacts), default=0.0)
+        verdict = rules.check(PointMeasures(max_theta, max_force, rate))
+        points.append(BifurcationPoint(f, f / rig.natural_frequency, u, label, rate, max_theta, max_force,
+                                       verdict.valid, verdict.invalid_rule))
     points.sort(key=lambda p: p.frequency_hz)
-    return BifurcationBranch(direction, tuple(points), float(model.time))
+    if model is not None:
+        simulated += float(model.time)
+    return BifurcationBranch(direction, tuple(points), simulated, tuple(restarts))
 
 
 def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, transient_cycles: int = 100,
@@ -125,5 +177,11 @@ def branch_table(branches: list[BifurcationBranch]) -> list[dict]:
             for k, u in enumerate(p.u):
                 rows.append({"direction": b.direction, "frequency_hz": p.frequency_hz,
                              "frequency_ratio": p.frequency_ratio, "sample": k, "displacement_ratio": float(u),
-                             "class": p.label, "impacts_per_cycle": p.impacts_per_cycle})
+                             "class": p.label, "impacts_per_cycle": p.impacts_per_cycle, "valid": p.valid,
+                             "invalid_rule": p.invalid_rule})
+            if not len(p.u):   # no sample (the chattering guard fired): the point still has its row
+                rows.append({"direction": b.direction, "frequency_hz": p.frequency_hz,
+                             "frequency_ratio": p.frequency_ratio, "sample": "", "displacement_ratio": "",
+                             "class": p.label, "impacts_per_cycle": p.impacts_per_cycle, "valid": p.valid,
+                             "invalid_rule": p.invalid_rule})
     return rows

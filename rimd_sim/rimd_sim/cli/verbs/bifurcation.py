@@ -11,10 +11,12 @@ import sys
 
 from rimd_sim.cli import CommandError, count, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
+    add_accept_invalid_argument,
     add_model_arguments,
     add_scheduler_argument,
     check_range,
     class_runs,
+    validity_exit,
     write_csv,
     write_summary,
 )
@@ -31,6 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ramp-rate", type=positive_float("--ramp-rate", "Hz/s"), default=2.0,
                         help="motor ramp between steps (Hz/s), default 2")
     add_scheduler_argument(parser)
+    add_accept_invalid_argument(parser)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -39,6 +42,7 @@ def main(args: argparse.Namespace) -> int:
 
     from rimd_sim.analysis.dynamics.bifurcation import bifurcation, branch_table
     from rimd_sim.analysis.plots import plot_bifurcation
+    from rimd_sim.model.validity import domain
     from rimd_sim.settings.config import load_config
 
     if args.direction not in ("up", "down", "both"):
@@ -58,6 +62,8 @@ def main(args: argparse.Namespace) -> int:
         "branches": {b.direction: class_runs([p.frequency_hz for p in b.points], [p.label for p in b.points])
                      for b in branches},
         "simulated_seconds": sum(b.simulated_seconds for b in branches), "wall_seconds": wall, "workers": workers,
+        "validity": domain(config).report(v for b in branches for v in b.verdicts),
+        "restarts_from_rest_hz": {b.direction: list(b.restarts) for b in branches},
     }
     write_summary(args.out, summary)
     plot_bifurcation(branches, args.out / "bifurcation.png",
@@ -69,4 +75,6 @@ def main(args: argparse.Namespace) -> int:
         print(f"sweep {b.direction}: {note}")
     print(f"{summary['simulated_seconds']:.0f} s simulated in {wall:.1f} s on {workers} process(es); "
           f"files in {args.out}")
-    return 0
+    sentence = domain(config).sentence(v for b in branches for v in b.verdicts)
+    return validity_exit("bifurcation", sentence, args.accept_invalid,
+                         f"the invalid_rule column of {args.out / 'bifurcation.csv'}")
