@@ -213,10 +213,20 @@ def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
     return _save(fig, path, title, ax)
 
 
-def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title: str = "") -> Path:
+def plot_message(path: Path, title: str, message: str) -> Path:
+    """A figure that holds only ``message`` (a point without a result: the chattering guard stopped its run)."""
+    fig, ax = plt.subplots(figsize=(8, 3))
+    ax.axis("off")
+    ax.text(0.5, 0.5, message, ha="center", va="center", fontsize=10, color="0.3", wrap=True)
+    return _save(fig, path, title, ax)
+
+
+def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title: str = "", invalid: str = "") -> Path:
     """Displacements over time and the phase plane with the Poincare map (the paper's Figs 9 and 10).
 
     ``x_rimd``, ``x_cart`` in mm (inertial); ``u = l sin(theta) / A0``, ``v`` its rate over ``A0 Omega``.
+    ``invalid``: the point's broken rules of the model's valid domain; its curves are then drawn grey, hatched
+    behind, the rules named in the legend.
     """
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.8))
     ax.plot(t, x_rimd, "b-", lw=1, label="RIMD (inertial)")
@@ -225,8 +235,13 @@ def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title
     ax.set_ylabel("displacement (mm)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")
-    ax2.plot(u, v, "b-", lw=0.6, label="phase plane")
-    ax2.plot(strobe_u, strobe_v, "ro", ms=5, label="Poincare map (motor phase 0)")
+    ax2.plot(u, v, "-", color="0.6" if invalid else "b", lw=0.6, label="phase plane")
+    ax2.plot(strobe_u, strobe_v, "o", mfc="none" if invalid else "r", mec="0.5" if invalid else "r", ms=5,
+             label="Poincare map (motor phase 0)")
+    if invalid:
+        for a in (ax, ax2):
+            a.add_patch(plt.Rectangle((0, 0), 1, 1, transform=a.transAxes, fill=False, hatch="//", ec="0.85",
+                                      lw=0, zorder=0, label=f"outside the model's valid domain: {invalid}"))
     ax2.set_xlabel("l sin(theta) / A0")
     ax2.set_ylabel("l theta' cos(theta) / (A0 Omega)")
     ax2.grid(alpha=0.3)

@@ -56,7 +56,8 @@ import numpy as np
 
 from rimd_sim.analysis.dynamics.steady import CHAOTIC, check_frequency, constant_frequency, steady_orbit
 from rimd_sim.errors import ConfigError
-from rimd_sim.model.rig_model import RigModel
+from rimd_sim.model.rig_model import ChatteringError, RigModel
+from rimd_sim.model.validity import PointMeasures, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["CHAOS_THRESHOLD", "LyapunovResult", "is_chaotic", "largest_lyapunov"]
@@ -78,6 +79,11 @@ class LyapunovResult:
         per_cycle: The same per excitation period (``exponent / f``), the log of the map's growth factor.
         running: Running estimate after each period (1/s): its settling shows convergence.
         cycles: Periods averaged.
+        max_abs_theta_rad: Largest ``|theta|`` of the reference trajectory (rad).
+        max_force_n: Largest peak force of the reference trajectory (N).
+        valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`); where the
+            chattering guard fired (reference or companion) the exponent is NaN.
+        invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
     """
 
     frequency_hz: float
@@ -85,6 +91,10 @@ class LyapunovResult:
     per_cycle: float
     running: np.ndarray
     cycles: int
+    max_abs_theta_rad: float = math.nan
+    max_force_n: float = math.nan
+    valid: bool = True
+    invalid_rule: str = ""
 
 
 def _strobe_after_one_period(config: SimConfig, f: float, theta: float, theta_dot: float,
@@ -121,15 +131,28 @@ def largest_lyapunov(config: SimConfig, frequency_hz: float, *, theta0: float = 
         raise ConfigError("d0", d0, "must be in (0, 1e-3)")
     omega = 2.0 * math.pi * f
     cfg = config.with_parameters(LYAPUNOV_TOLERANCES)
+    rules = domain(config)
+    chattering = LyapunovResult(f, math.nan, math.nan, np.full(cycles, math.nan), cycles, valid=False,
+                                invalid_rule=rules.check(PointMeasures(chattering=True)).invalid_rule)
     ref = RigModel(constant_frequency(cfg, f, theta0, theta_dot0), channels=False, truth=False, strobe=True)
-    out = ref.advance((transient_cycles + cycles + 0.5) / f)
+    try:
+        out = ref.advance((transient_cycles + cycles + 0.5) / f)
+    except ChatteringError:
+        return chattering
+    max_force = max((i.peak_force for i in out.impacts), default=0.0)
+    rate = sum(transient_cycles <= i.cycle_index < transient_cycles + cycles for i in out.impacts) / cycles
+    verdict = rules.check(PointMeasures(out.max_abs_theta, max_force, rate))
     pts = {s.cycle_index: s for s in out.strobe}
     angle = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi)
     w = np.array([math.cos(angle), math.sin(angle)])
     logs = np.empty(cycles)
     for i in range(cycles):
         s, nxt = pts[transient_cycles + i], pts[transient_cycles + i + 1]
-        pth, pom = _strobe_after_one_period(cfg, f, s.theta + d0 * w[0], s.theta_dot + d0 * w[1] * omega, s.modes)
+        try:
+            pth, pom = _strobe_after_one_period(cfg, f, s.theta + d0 * w[0], s.theta_dot + d0 * w[1] * omega,
+                                                s.modes)
+        except ChatteringError:
+            return chattering
         diff = np.array([pth - nxt.theta, (pom - nxt.theta_dot) / omega])
         d = float(np.hypot(*diff))
         if d == 0.0:  # the companion merged (numerically) with the reference: strongest contraction seen
@@ -138,7 +161,8 @@ def largest_lyapunov(config: SimConfig, frequency_hz: float, *, theta0: float = 
         logs[i] = math.log(d / d0)
         w = diff / d
     running = np.cumsum(logs) * f / np.arange(1, cycles + 1)
-    return LyapunovResult(f, float(running[-1]), float(running[-1] / f), running, cycles)
+    return LyapunovResult(f, float(running[-1]), float(running[-1] / f), running, cycles, out.max_abs_theta,
+                          max_force, verdict.valid, verdict.invalid_rule)
 
 
 def is_chaotic(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0, theta_dot0: float = 0.0,

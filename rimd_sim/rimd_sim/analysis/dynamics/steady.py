@@ -32,6 +32,7 @@ import numpy as np
 
 from rimd_sim.errors import ConfigError
 from rimd_sim.model.rig_model import RigModel
+from rimd_sim.model.validity import PointMeasures, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = [
@@ -61,6 +62,10 @@ class Orbit:
         impacts: ``p`` of ``p/n``.
         spread: Largest distance between points ``period`` cycles apart (or 1 cycle apart when non-periodic):
             the measured non-convergence.
+        max_abs_theta_rad: Largest ``|theta|`` over the whole run, transient included (rad).
+        max_force_n: Largest peak force over the whole run (N).
+        valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
+        invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
     """
 
     frequency_hz: float
@@ -75,6 +80,10 @@ class Orbit:
     period: int
     impacts: int
     spread: float
+    max_abs_theta_rad: float = math.nan
+    max_force_n: float = math.nan
+    valid: bool = True
+    invalid_rule: str = ""
 
     @property
     def final_state(self) -> tuple[float, float]:
@@ -165,6 +174,7 @@ def steady_orbit(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0,
 
     Raises:
         ConfigError: For a bad frequency or cycle count (and from the configuration).
+        ChatteringError: When the integrator's chattering guard fires (the valid domain's ``chattering`` rule).
     """
     f = check_frequency(config, frequency_hz)
     if transient_cycles < 0 or measure_cycles < 3:
@@ -172,11 +182,13 @@ def steady_orbit(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0,
                           "need transient_cycles >= 0 and measure_cycles >= 3")
     cfg = constant_frequency(config, f, theta0, theta_dot0)
     model = RigModel(cfg, channels=False, truth=False, strobe=True)
+    spans = []
     if transient_cycles:
-        model.advance((transient_cycles + 0.5) / f)
+        spans.append(model.advance((transient_cycles + 0.5) / f))
     # The stroboscopic point of cycle c is the state at t = c / f, when cycle c starts. Window: the points of
     # cycles first .. first + N - 1 and the impacts started in those cycles.
     out = model.advance((transient_cycles + measure_cycles + 1.5) / f)
+    spans.append(out)
     first = transient_cycles + 1
     strobe = [s for s in out.strobe if first <= s.cycle_index < first + measure_cycles]
     impacts = [i for i in out.impacts if first <= i.cycle_index < first + measure_cycles]
@@ -186,8 +198,12 @@ def steady_orbit(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0,
     u, v = nondimensional(rig.length, rig.amplitude, f, theta, theta_dot)
     counts = np.bincount([i.cycle_index - first for i in impacts], minlength=measure_cycles)
     label, period, p, spread = classify(u, v, counts[:measure_cycles], max_period=max_period, tolerance=tolerance)
+    max_theta = max(o.max_abs_theta for o in spans)
+    max_force = max((i.peak_force for o in spans for i in o.impacts), default=0.0)
+    verdict = domain(cfg).check(PointMeasures(max_theta, max_force, float(counts[:measure_cycles].mean())))
     return Orbit(f, rig.gap * 1e3, u, v, theta, theta_dot, counts[:measure_cycles],
-                 np.array([i.peak_force for i in impacts]), label, period, p, spread)
+                 np.array([i.peak_force for i in impacts]), label, period, p, spread, max_theta, max_force,
+                 verdict.valid, verdict.invalid_rule)
 
 
 def nondimensional(length: float, amplitude: float, frequency_hz: float, theta, theta_dot):

@@ -11,7 +11,14 @@ import argparse
 import sys
 
 from rimd_sim.cli import CommandError, count, number, positive_float
-from rimd_sim.cli.verbs._analysis_io import add_model_arguments, check_positive, write_csv, write_summary
+from rimd_sim.cli.verbs._analysis_io import (
+    add_accept_invalid_argument,
+    add_model_arguments,
+    check_positive,
+    validity_exit,
+    write_csv,
+    write_summary,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stroboscopic points (cycles), default 300")
     parser.add_argument("--plot-cycles", type=count("--plot-cycles"), default=10,
                         help="cycles drawn as trajectory, default 10")
+    add_accept_invalid_argument(parser)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -40,7 +48,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.dynamics.steady import classify, constant_frequency, nondimensional
     from rimd_sim.analysis.plots import plot_poincare
-    from rimd_sim.model.rig_model import TRUTH_FIELDS, RigModel
+    from rimd_sim.model.rig_model import TRUTH_FIELDS, ChatteringError, RigModel
+    from rimd_sim.model.validity import PointMeasures, domain
     from rimd_sim.settings.config import load_config
 
     if args.frequency is not None and args.ratio is not None:
@@ -57,9 +66,14 @@ def main(args: argparse.Namespace) -> int:
     print(f"rimd poincare: gap {args.gap_mm:g} mm, {f:.4g} Hz: simulating...", file=sys.stderr, flush=True)
     model = RigModel(cfg, channels=False, truth=True, strobe=True)
     n0 = args.transient_cycles
-    model.advance(n0 / f)
-    shown = model.advance((n0 + args.plot_cycles) / f)
-    rest = model.advance((n0 + args.cycles + 1.5) / f)
+    rules = domain(base)
+    try:
+        spans = [model.advance(n0 / f)]
+        shown = model.advance((n0 + args.plot_cycles) / f)
+        rest = model.advance((n0 + args.cycles + 1.5) / f)
+    except ChatteringError as error:
+        return _chattering(args, base, f, rules, error)
+    spans += [shown, rest]
     strobe = [s for s in shown.strobe + rest.strobe if n0 < s.cycle_index <= n0 + args.cycles]
     impacts = [i for i in shown.impacts + rest.impacts if n0 < i.cycle_index <= n0 + args.cycles]
     print("rimd poincare: largest Lyapunov exponent...", file=sys.stderr, flush=True)
@@ -76,6 +90,10 @@ def main(args: argparse.Namespace) -> int:
     counts = np.bincount([i.cycle_index - n0 - 1 for i in impacts], minlength=len(strobe))[:len(strobe)]
     label, period, p, spread = classify(su, sv, counts)
     chaotic = lyap.exponent > CHAOS_THRESHOLD and label == CHAOTIC
+    verdict = rules.check(PointMeasures(max(o.max_abs_theta for o in spans),
+                                        max((i.peak_force for o in spans for i in o.impacts), default=0.0),
+                                        float(counts.mean()), chattering=not lyap.valid and "chattering" in
+                                        lyap.invalid_rule))
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "poincare.csv", [
         {"cycle": s.cycle_index, "t_s": s.t, "theta_rad": s.theta, "theta_dot_rad_s": s.theta_dot,
@@ -93,12 +111,40 @@ def main(args: argparse.Namespace) -> int:
         "lyapunov_method": "two trajectories (Benettin) on the stroboscopic map, renormalised every period",
         "chaos_threshold_per_s": CHAOS_THRESHOLD, "chaotic": bool(chaotic),
         "transient_cycles": n0, "cycles": args.cycles,
+        "max_abs_theta_rad": max(o.max_abs_theta for o in spans), "valid": verdict.valid,
+        "invalid_rule": verdict.invalid_rule, "validity": rules.report([verdict]),
     }
     write_summary(args.out, summary)
     plot_poincare(t, rows["rimd_position"] * 1e3, rows["cart_position"] * 1e3, u, v, su, sv,
                   args.out / "poincare.png",
                   f"RIMD model, gap {args.gap_mm:g} mm, Omega/omega_n = {f / rig.natural_frequency:.3g} "
-                  f"({f:.4g} Hz): {label}, lambda_max = {lyap.exponent:.3g} 1/s")
+                  f"({f:.4g} Hz): {label}, lambda_max = {lyap.exponent:.3g} 1/s"
+                  + ("" if verdict.valid else f"\nOUTSIDE THE MODEL'S VALID DOMAIN: {verdict.invalid_rule}"),
+                  invalid=verdict.invalid_rule)
     print(f"gap {args.gap_mm:g} mm, {f:.4g} Hz: {label}, largest Lyapunov exponent {lyap.exponent:.3g} 1/s "
           f"({'chaotic' if chaotic else 'not chaotic'}); files in {args.out}")
-    return 0
+    return validity_exit("poincare", rules.sentence([verdict]), args.accept_invalid,
+                         f"invalid_rule in {args.out / 'summary.json'}")
+
+
+def _chattering(args: argparse.Namespace, base, f: float, rules, error) -> int:
+    """The point where the chattering guard stopped the run: its files say so, no Poincare map."""
+    from rimd_sim.analysis.plots import plot_message
+    from rimd_sim.model.validity import PointMeasures
+
+    verdict = rules.check(PointMeasures(chattering=True))
+    rig = base.rig
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_csv(args.out / "poincare.csv", [])
+    write_csv(args.out / "trajectory.csv", [])
+    write_summary(args.out, {
+        "gap_mm": args.gap_mm, "gap_ratio": rig.gap / rig.amplitude, "frequency_hz": f,
+        "frequency_ratio": f / rig.natural_frequency, "initial_state": [args.theta0, args.theta_dot0],
+        "class": None, "lyapunov_exponent_per_s": None, "chaotic": None, "transient_cycles": args.transient_cycles,
+        "cycles": args.cycles, "valid": False, "invalid_rule": verdict.invalid_rule,
+        "chattering": str(error), "validity": rules.report([verdict])})
+    plot_message(args.out / "poincare.png", f"RIMD model, gap {args.gap_mm:g} mm, {f:.4g} Hz",
+                 f"OUTSIDE THE MODEL'S VALID DOMAIN: {verdict.invalid_rule}\n{error}")
+    print(f"gap {args.gap_mm:g} mm, {f:.4g} Hz: the chattering guard stopped the run ({error}); files in {args.out}")
+    return validity_exit("poincare", rules.sentence([verdict]), args.accept_invalid,
+                         f"invalid_rule in {args.out / 'summary.json'}")
