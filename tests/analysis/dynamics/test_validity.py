@@ -1,0 +1,152 @@
+"""The model's valid domain (rimd_sim.model.validity): every analysis point checked, marked, and said.
+
+The researcher's points: natural frequency 11 Hz (l = 2.05 mm), motor.max_frequency raised to 30 Hz; at gap 1 mm,
+22-23 Hz the pendulum spins over its pivot (|theta| grows to 1e5-1e6 rad) with MN contact forces and ~70 impacts
+per cycle; at gap 0.5 mm, 21 Hz it swings to |theta| = 1.80-2.4 rad (past 90 deg) with ordinary forces; at gap
+1 mm, 22-23 Hz with the Lyapunov run's tolerances (rtol 1e-10, atol 1e-12) the chattering guard fires. Few cycles
+keep the runs short (they show the excursion within 20 cycles).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import pytest
+
+from harness.outputs import read_json
+from rimd_sim import cli
+from rimd_sim.analysis.dynamics.bifurcation import bifurcation
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.model import validity
+from rimd_sim.model.rig_model import ChatteringError, RigModel
+from rimd_sim.settings.config import SimConfig, find_config_file, load_config
+
+FN11 = """/**/rimd_simulator:
+  ros__parameters:
+    natural_frequency: 11.0
+    motor:
+      max_frequency: 30.0
+"""
+
+
+@pytest.fixture
+def fn11(tmp_path):
+    path = tmp_path / "fn11.yaml"
+    path.write_text(FN11)
+    return path
+
+
+def _rows(path):
+    return list(csv.DictReader(open(path)))
+
+
+def test_the_domain_declares_each_rule_with_its_bound_unit_and_reason():
+    config = SimConfig()
+    dom = validity.domain(config)
+    assert [r.name for r in dom.rules] == ["pendulum_angle", "contact_force", "chattering", "impacts_per_cycle"]
+    assert dom.rule("pendulum_angle").bound == math.pi / 2 and dom.rule("pendulum_angle").unit == "rad"
+    # The force bound is the force sensor's compression range, and follows it.
+    assert dom.rule("contact_force").bound == 2224.0 and dom.rule("contact_force").unit == "N"
+    moved = config.with_parameters({"channels.impact_force.range_max": 500.0})
+    assert validity.domain(moved).rule("contact_force").bound == 500.0
+    assert all(r.why for r in dom.rules)
+    assert dom.check(validity.PointMeasures(0.1, 100.0, 1.0)).valid
+    v = dom.check(validity.PointMeasures(1.6, 3000.0, 11.0))
+    assert v.invalid_rule == "pendulum_angle;contact_force;impacts_per_cycle"
+    assert dom.check(validity.PointMeasures(chattering=True)).rules == ("chattering",)
+    assert validity.Verdict.of(v.invalid_rule) == v
+
+
+def test_the_driver_tracks_the_largest_angle_of_each_call():
+    cfg = SimConfig().with_parameters({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75})
+    model = RigModel(cfg, channels=False, truth=True)
+    out = model.advance(4.0)
+    truth_max = abs(out.truth[1][0]).max()  # sampled at 1 kHz: at most the step ends' largest, and close to it
+    assert truth_max * 0.98 <= out.max_abs_theta <= truth_max * 1.02
+    assert out.max_abs_theta < validity.MAX_ANGLE
+
+
+def test_researchers_sweep_is_marked_and_the_verb_exits_3(fn11, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    status = cli.main(["sweep", "--config", str(fn11), "--gap-mm", "1", "--f-min", "22", "--f-max", "23",
+                       "--f-step", "1", "--cycles", "20", "--measure-cycles", "10", "--workers", "1",
+                       "--out", str(out)])
+    assert status == cli.EXIT_INVALID == 3
+    rows = _rows(out / "sweep.csv")
+    assert [r["valid"] for r in rows] == ["False", "False"]
+    for r in rows:
+        assert {"pendulum_angle", "contact_force", "impacts_per_cycle"} <= set(r["invalid_rule"].split(";"))
+        assert float(r["peak_force_n"]) > 1e5    # still reported, but marked
+    summary = read_json(out / "summary.json")
+    assert summary["validity"]["invalid"] == 2 and summary["validity"]["by_rule"]["contact_force"] == 2
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("rimd sweep: 2 of 2 points outside the model's valid domain (")
+    assert "contact_force > 2224 N: 2" in last and "invalid_rule column" in last
+    assert (out / "sweep.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_accept_invalid_exits_0_and_keeps_the_marks(fn11, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    status = cli.main(["sweep", "--config", str(fn11), "--gap-mm", "1", "--f-min", "22", "--f-max", "22",
+                       "--cycles", "20", "--measure-cycles", "10", "--workers", "1", "--out", str(out),
+                       "--accept-invalid"])
+    assert status == 0
+    assert _rows(out / "sweep.csv")[0]["valid"] == "False"
+    assert "accepted: --accept-invalid" in capsys.readouterr().out.strip().splitlines()[-1]
+
+
+def test_a_swing_past_90_degrees_is_marked_pendulum_angle_alone(fn11):
+    config = load_config(fn11, {"gap": 0.5e-3})
+    point = sweep(config, [21.0], "rest", cycles=20, measure_cycles=10, workers=1).points[0]
+    assert point.max_abs_theta_rad > math.pi / 2 and point.max_force_n < 2224.0
+    assert (point.valid, point.invalid_rule) == (False, "pendulum_angle")
+
+
+def test_chattering_is_a_mark_not_a_crash_and_a_continued_sweep_goes_on_from_rest(fn11):
+    config = load_config(fn11, {"gap": 1e-3, "integrator.rtol": 1e-10, "integrator.atol": 1e-12})
+    with pytest.raises(ChatteringError):   # what stopped the analyses before
+        RigModel(config.with_parameters({"motor.initial_frequency": 22.0, "motor.initial_setpoint": 22.0}),
+                 channels=False, truth=False).advance(1.0)
+    result = sweep(config, [22.0, 23.0], "up", cycles=20, measure_cycles=10)
+    assert [p.invalid_rule for p in result.points] == ["chattering", "chattering"]
+    assert all(math.isnan(p.peak_force_n) for p in result.points)
+    assert result.restarts == (23.0,) and result.band_a is None
+    assert result.summary()["validity"]["by_rule"] == {"chattering": 2}
+
+
+def test_poincare_marks_a_chattering_lyapunov_run(fn11, tmp_path, capsys):
+    out = tmp_path / "po"
+    status = cli.main(["poincare", "--config", str(fn11), "--gap-mm", "1", "--frequency", "23",
+                       "--transient-cycles", "20", "--cycles", "12", "--out", str(out)])
+    assert status == 3
+    summary = read_json(out / "summary.json")
+    assert summary["valid"] is False and "chattering" in summary["invalid_rule"].split(";")
+    assert summary["lyapunov_exponent_per_s"] is None
+    assert "chattering" in capsys.readouterr().out.strip().splitlines()[-1]
+
+
+def test_bifurcation_marks_its_points(fn11):
+    config = load_config(fn11, {"gap": 1e-3})
+    (branch,), _, _ = bifurcation(config, [22.0], "up", transient_cycles=5, sample_cycles=6, workers=1)
+    point = branch.points[0]
+    assert not point.valid and "pendulum_angle" in point.invalid_rule.split(";")
+    assert branch.verdicts[0].rules == tuple(point.invalid_rule.split(";"))
+
+
+def test_a_paper_point_is_valid_and_its_outputs_unchanged(tmp_path, capsys):
+    """config/paper_model.yaml, gap 0, 4 Hz: the same peak force as before the valid domain (pinned from the code
+    before it: 170.19 N), valid, and the verb exits 0 with no validity line."""
+    config = load_config(find_config_file("paper_model.yaml"))
+    point = sweep(config, [4.0], "rest", cycles=40, measure_cycles=10, workers=1).points[0]
+    assert point.peak_force_n.hex() == "0x1.545fdf0e3365ap+7"
+    assert (point.impacts_per_cycle, point.simulated_seconds) == (1.0, 10.0)
+    assert point.valid and point.invalid_rule == ""
+    out = tmp_path / "sweep"
+    status = cli.main(["sweep", "--config", str(find_config_file("paper_model.yaml")), "--f-min", "4",
+                       "--f-max", "4", "--cycles", "40", "--measure-cycles", "10", "--workers", "1",
+                       "--out", str(out)])
+    assert status == 0
+    assert _rows(out / "sweep.csv")[0]["valid"] == "True"
+    assert "valid domain" not in capsys.readouterr().out
+    assert read_json(out / "summary.json")["validity"]["invalid"] == 0
