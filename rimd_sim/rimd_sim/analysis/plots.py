@@ -76,7 +76,7 @@ def mark_invalid(ax: Axes, x, y, rules, *, top: float | None = None, legend: boo
         ax.plot(x[on], y[on], "o", mfc="none", mec="0.5", ms=6, label=label)
         label = None
     off = finite & ~on
-    if off.any():
+    if off.any() and limit is not None:
         ax.set_ylim(top=limit)
         ax.plot(x[off], np.full(off.sum(), limit * 0.97), "^", mfc="none", mec="0.5", ms=7,
                 label=None if label is None else label + " (off scale)")

@@ -163,9 +163,9 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
                         channels=False, truth=False)
 
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
-    model = start(order[0])
+    model: RigModel | None = start(order[0])
     points = []
-    restarts = []
+    restarts: list[float] = []
     fresh = True
     for i, f in enumerate(order):
         if model is None:
