@@ -226,10 +226,10 @@ class ChatteringError(IntegrationError):
     The valid domain's ``chattering`` rule (:mod:`rimd_sim.model.validity`).
 
     Attributes:
-        t: Simulation time (s) where the guard fired.
+        t: Simulation time (s) where the guard fired (None when not given).
     """
 
-    def __init__(self, message: str, t: float = math.nan):
+    def __init__(self, message: str, t: float | None = None):
         super().__init__(message)
         self.t = t
 

@@ -108,7 +108,7 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
             out = model.advance(model.time + (sample_cycles + 1.5) / f)
         except ChatteringError as error:
             # The state where the guard fired is no start for the next point: the sweep goes on from rest.
-            simulated += error.t
+            simulated += error.t or 0.0
             verdict = rules.check(PointMeasures(chattering=True))
             points.append(BifurcationPoint(f, f / rig.natural_frequency, np.zeros(0), "", math.nan, math.nan,
                                            math.nan, False, verdict.invalid_rule))

@@ -140,7 +140,7 @@ def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
     try:
         out = RigModel(cfg, channels=False, truth=False).advance(duration)
     except ChatteringError as error:
-        return _chattering(cfg, f, error.t)
+        return _chattering(cfg, f, math.nan if error.t is None else error.t)
     impacts = out.impacts
     return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration, out.max_abs_theta,
                   max((i.peak_force for i in impacts), default=0.0))
@@ -180,7 +180,7 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
             out = model.advance(t0 + ramp + cycles / f)
         except ChatteringError as error:
             # The state where the guard fired is no start for the next point: the sweep goes on from rest.
-            points.append(_chattering(cfg, f, error.t - float(t0)))
+            points.append(_chattering(cfg, f, math.nan if error.t is None else error.t - float(t0)))
             model = None
         else:
             t_end = float(model.time)
