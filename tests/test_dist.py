@@ -226,6 +226,7 @@ def test_the_rimd_msgs_wheel_takes_its_version_and_run_dependencies_from_package
     assert set(info["depends"]) <= set(build_dist.MSGS_RUNTIME_PACKAGES)
 
 
+@pytest.mark.process
 def test_the_project_venv_holds_the_lock_as_make_dist_reads_it():
     """The project venv builds the interfaces for `make dist` when it holds every pin of the lock, markers
     evaluated (setuptools is pinned per Python), instead of a build venv installed for it."""
