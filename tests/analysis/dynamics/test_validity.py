@@ -236,3 +236,15 @@ def test_paper_map_cells_are_valid_and_their_classes_unchanged(tmp_path, capsys)
     assert status == 0
     assert {r["valid"] for r in _rows(out / "peterka.csv")} == {"True"}
     assert "valid domain" not in capsys.readouterr().out
+
+
+def test_a_pulse_past_the_sensors_range_is_marked_and_exits_3(tmp_path, capsys):
+    out = tmp_path / "pulse"
+    assert cli.main(["pulse", "--velocity", "3", "--rate", "1e5", "--out", str(out)]) == 3
+    summary = read_json(out / "summary.json")
+    assert (summary["valid"], summary["invalid_rule"]) == (False, "contact_force")
+    assert summary["max_force_n"] > 2224.0 and summary["validity"]["invalid"] == 1
+    assert "contact_force > 2224 N: 1" in capsys.readouterr().out.strip().splitlines()[-1]
+    assert cli.main(["pulse", "--velocity", "3", "--rate", "1e5", "--out", str(out), "--accept-invalid"]) == 0
+    assert cli.main(["pulse", "--velocity", "0.07", "--rate", "1e5", "--out", str(out)]) == 0
+    assert read_json(out / "summary.json")["valid"] is True
