@@ -248,3 +248,25 @@ def test_a_pulse_past_the_sensors_range_is_marked_and_exits_3(tmp_path, capsys):
     assert cli.main(["pulse", "--velocity", "3", "--rate", "1e5", "--out", str(out), "--accept-invalid"]) == 0
     assert cli.main(["pulse", "--velocity", "0.07", "--rate", "1e5", "--out", str(out)]) == 0
     assert read_json(out / "summary.json")["valid"] is True
+
+
+def test_fit_table_marks_and_counts_its_invalid_rows(fn11, tmp_path, capsys, monkeypatch):
+    """An entry at gap 1 mm, band B, 22 Hz: its grid points (21.5-23 Hz) leave the domain; none is taken as the
+    band's resonance, the row is marked and counted, and the verb exits 3."""
+    from rimd_sim.analysis.dynamics.fit_table import TableEntry, evaluate
+
+    config = load_config(fn11)
+    (row,) = evaluate(config, [TableEntry(1.0, "B", 22.0, None)], cycles=20, measure=10)
+    assert row["valid"] is False and "pendulum_angle" in row["invalid_rule"].split(";")
+    table = tmp_path / "table.csv"
+    table.write_text("gap_mm,band,frequency_hz\n1.0,B,22.0\n,natural,11.0\n")
+    out = tmp_path / "fit"
+    import rimd_sim.analysis.dynamics.fit_table as ft
+
+    monkeypatch.setattr(ft, "evaluate", lambda cfg, entries, cycles, measure: evaluate(cfg, entries, 20, 10))
+    status = cli.main(["fit-table", str(table), "--config", str(fn11), "--max-evaluations", "1", "--out", str(out)])
+    assert status == 3
+    assert _rows(out / "fit_table.csv")[0]["valid"] == "False"
+    summary = read_json(out / "summary.json")
+    assert summary["validity"]["invalid"] == 1 and summary["invalid_sets"] == 1
+    assert "1 of 1 entries outside the model's valid domain" in capsys.readouterr().out.strip().splitlines()[-1]
