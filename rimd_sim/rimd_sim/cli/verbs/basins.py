@@ -66,8 +66,9 @@ def main(args: argparse.Namespace) -> int:
                 f"(Omega/omega_n = {args.frequency / rig.natural_frequency:.3g}): basins of attraction")
     classes = ", ".join(f"{k}: {v}" for k, v in result.class_counts().items())
     print(f"{classes}; {result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}")
-    run = result.labels != "inside the stop"
-    sentence = domain(config).sentence((Verdict.of(r) for r in result.invalid_rule[run].tolist()),
+    run = (result.labels != "inside the stop").ravel().tolist()
+    rules = [] if result.invalid_rule is None else result.invalid_rule.ravel().tolist()
+    sentence = domain(config).sentence((Verdict.of(r) for r, ran in zip(rules, run, strict=False) if ran),
                                        "initial conditions")
     return validity_exit("basins", sentence, args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'basins.csv'}")
