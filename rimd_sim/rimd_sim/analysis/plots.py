@@ -162,6 +162,36 @@ def _class_image(ax, x, y, labels, palette):
     ax.pcolormesh(x, y, grid, cmap=cmap, vmin=-0.5, vmax=len(names) - 0.5, shading="nearest")
 
 
+def _half_widths(v) -> np.ndarray:
+    """Half the spacing around each value of a map axis (half the value's size, or 0.5, for a single one)."""
+    v = np.asarray(v, dtype=float)
+    if v.size < 2:
+        return np.full(v.size, 0.5 * abs(float(v[0])) if v.size and v[0] else 0.5)
+    d = np.abs(np.diff(v)) / 2
+    return np.concatenate(([d[0]], (d[:-1] + d[1:]) / 2, [d[-1]]))
+
+
+def _mark_invalid_cells(ax, x, y, rules) -> list:
+    """Cover the cells outside the model's valid domain with hatched grey; returns the legend's entry.
+
+    ``rules``: each cell's ``invalid_rule`` field (rows along ``y``, columns along ``x``); empty when valid.
+    """
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Patch, Rectangle
+
+    rows, cols = np.nonzero(rules != "")
+    if not len(rows):
+        return []
+    hx, hy = _half_widths(x), _half_widths(y)
+    boxes = [Rectangle((x[j] - hx[j], y[i] - hy[i]), 2 * hx[j], 2 * hy[i]) for i, j in zip(rows, cols, strict=True)]
+    # Grey at 60 % over the class colour (still guessable beneath), hatched: distinct from every class colour.
+    ax.add_collection(PatchCollection(boxes, facecolor=(0.6, 0.6, 0.6, 0.6), edgecolor=(0.3, 0.3, 0.3, 1.0),
+                                      hatch="//", lw=0, zorder=3))
+    names = sorted({name for r in rules[rows, cols].tolist() for name in r.split(";") if name})
+    return [Patch(facecolor=(0.6, 0.6, 0.6, 0.6), edgecolor=(0.3, 0.3, 0.3, 1.0), hatch="//",
+                  label="outside the model's valid domain:\n" + ", ".join(names))]
+
+
 def map_dpi(shape) -> int:
     """Resolution that gives each cell of a map at least about one pixel (120 to 300 dpi).
 
@@ -274,6 +304,9 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
         ms = max(1.0, min(4.0, 400.0 / max(result.primary.shape)))
         ax.plot(result.frequency_ratio[fj], result.gap_ratio[gi], "x", color="0.25", ms=ms, mew=0.6)
         marks = [Line2D([], [], marker="x", ls="", color="0.25", label="coexisting attractors")]
+    if getattr(result, "invalid_rules", None) is not None:
+        # A cell where any start left the valid domain (its class is still in the CSV, marked).
+        marks = [*marks, *_mark_invalid_cells(ax, result.frequency_ratio, result.gap_ratio, result.invalid_rule)]
     ax.set_xlabel("Omega / omega_n")
     ax.set_ylabel("gap / A0")
     _class_legend(ax, palette, marks)
@@ -285,9 +318,12 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
     palette = class_palette(result.labels.ravel().tolist())
     fig, ax = plt.subplots(figsize=(9, 6))
     _class_image(ax, result.theta0 * 1e3, result.theta_dot0, result.labels, palette)
+    marks = []
+    if getattr(result, "invalid_rule", None) is not None:
+        marks = _mark_invalid_cells(ax, result.theta0 * 1e3, result.theta_dot0, result.invalid_rule)
     ax.set_xlabel("initial theta (mrad)")
     ax.set_ylabel("initial theta' (rad/s)")
-    _class_legend(ax, palette)
+    _class_legend(ax, palette, marks)
     return _save(fig, path, title, ax, dpi=map_dpi(result.labels.shape))
 
 

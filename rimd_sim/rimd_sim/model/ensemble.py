@@ -41,7 +41,13 @@ class.
 Codes returned per cell: ``period`` (0 for no impact or non-periodic), ``impacts`` p, ``kind`` (0 periodic or
 no impact, 1 non-periodic, 2 integration failed), ``cycles`` whose points were used (at most the cap when it
 stopped early, the cap + 1 when it ran to the cap), the final stroboscopic state ``(theta, theta_dot)`` and
-the step count. A cell starts with the model's own modes at rest (a continuation too: it goes on from the
+the step count. And what the model's valid domain (:mod:`rimd_sim.model.validity`) needs, over the cell's
+whole run: the largest ``|theta|`` at the ends of the steps (the driver's ``F_THMAX``), the largest peak force
+of its impacts (0 without impact), the impacts per cycle of the classified window (NaN for a failed cell) and
+the driver's status (``ST_OK``, or the failure: ``ST_ZENO`` is the chattering guard). Tracking them costs a
+comparison per impact record: the integration is untouched, so every other output is the same.
+
+A cell starts with the model's own modes at rest (a continuation too: it goes on from the
 previous cell's ``(theta, theta_dot)``, as ``steady_orbit`` from an orbit's ``final_state``).
 """
 
@@ -57,6 +63,7 @@ import numpy as np
 import rimd_sim.model.kernel as k
 from rimd_sim.errors import ConfigError
 from rimd_sim.model.rig_model import MODELS
+from rimd_sim.model.validity import PointMeasures
 
 __all__ = [
     "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "EnsembleResult", "StopRule", "run_cells",
@@ -117,6 +124,24 @@ class EnsembleResult:
     cycles: np.ndarray
     final: np.ndarray   # (theta, theta_dot) per cell
     steps: np.ndarray
+    max_abs_theta: np.ndarray | None = None   # rad, over the whole run
+    peak_force: np.ndarray | None = None      # N, the largest impact of the run, 0 without impact
+    impacts_per_cycle: np.ndarray | None = None   # over the classified window, NaN when failed
+    status: np.ndarray | None = None          # the driver's status: k.ST_OK, k.ST_ZENO (chattering), ...
+
+    def measures(self) -> list[PointMeasures]:
+        """Per cell, what the model's valid domain checks (:meth:`~rimd_sim.model.validity.ValidityDomain.check`).
+
+        A cell the chattering guard stopped has no measures (as a sweep point: its run stopped there); another
+        failed cell is checked on what it ran before the failure.
+        """
+        assert self.max_abs_theta is not None and self.peak_force is not None
+        assert self.impacts_per_cycle is not None and self.status is not None
+        out = []
+        for th, f, rate, st in zip(self.max_abs_theta.tolist(), self.peak_force.tolist(),
+                                   self.impacts_per_cycle.tolist(), self.status.tolist(), strict=True):
+            out.append(PointMeasures(chattering=True) if st == k.ST_ZENO else PointMeasures(th, f, rate))
+        return out
 
     def labels(self) -> list[str]:
         """The class labels of :mod:`rimd_sim.analysis.dynamics.steady` (``p/n``, ``no impact``, ...)."""
@@ -177,6 +202,15 @@ def _settled(u, v, counts, c, max_period, min_window, confirm, stol):
     return 0, 0
 
 
+@_jit
+def _rate(counts, lo, hi):
+    """Impacts per cycle over cycles ``lo .. hi - 1``."""
+    total = 0
+    for i in range(lo, hi):
+        total += counts[i]
+    return total / (hi - lo)
+
+
 @cache
 def _loop(name: str) -> types.ModuleType:
     """The compiled loop over the cells of model ``name``, built at its first use.
@@ -223,7 +257,11 @@ def _loop(name: str) -> types.ModuleType:
     @compiled
     def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
                 ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out):
-        """One trajectory; returns ``(period, impacts, kind, cycles, theta, theta_dot, steps)``."""
+        """One trajectory.
+
+        Returns ``(period, impacts, kind, cycles, theta, theta_dot, steps, max_abs_theta, peak_force,
+        impacts_per_cycle, status)``.
+        """
         min_cycles = int(rule[0])
         cap = int(rule[1])
         measure = int(rule[2])
@@ -234,6 +272,8 @@ def _loop(name: str) -> types.ModuleType:
         stol = rule[7]
         early = rule[8] > 0.0
         loop.init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, p[k.P_HMAX], imp_out)
+        fs[k.F_THMAX] = abs(ya[0])   # the start counts, as in RigModel.advance
+        peak = 0.0
         length_l = p[k.P_L]
         a0 = p[k.P_A0]
         omega = 2.0 * math.pi * f
@@ -261,22 +301,27 @@ def _loop(name: str) -> types.ModuleType:
                 cyc = int(imp_out[j, k.R_CYCLE])
                 if 0 <= cyc <= cap + 1:
                     counts[cyc] += 1
+                if imp_out[j, k.R_PEAK] > peak:
+                    peak = imp_out[j, k.R_PEAK]
             if status == k.ST_STROBE_FULL or status == k.ST_IMPACTS_FULL:
                 continue
             if status != k.ST_OK:
                 return (0, 0, KIND_FAILED, c_done, th_s[max(c_done - 1, 0)], om_s[max(c_done - 1, 0)],
-                        ist[k.I_NSTEP])
+                        ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status)
             c_done += 1
             if early and min_cycles <= c_done <= cap:
                 n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
                 if n > 0:
-                    period, imp, kind = _classify_window(u, v, counts, c_done - length - n, c_done, max_period, tol)
-                    return period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP]
+                    lo = c_done - length - n
+                    period, imp, kind = _classify_window(u, v, counts, lo, c_done, max_period, tol)
+                    return (period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP], fs[k.F_THMAX],
+                            peak, _rate(counts, lo, c_done), status)
             if c_done > cap:
                 # The fixed-length window of RigModel-based runs (transient cap - measure cycles, then measure
                 # cycles): points and impacts of cycles cap - measure + 1 .. cap.
                 period, imp, kind = _classify_window(u, v, counts, cap - measure + 1, cap + 1, max_period, tol)
-                return period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP]
+                return (period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP], fs[k.F_THMAX], peak,
+                        _rate(counts, cap - measure + 1, cap + 1), status)
 
     @compiled
     def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f):
@@ -313,7 +358,7 @@ def _loop(name: str) -> types.ModuleType:
             if chain[i] and i > 0:
                 th0 = prev_th
                 om0 = prev_om
-            period, imp, kind, cycles, th_end, om_end, steps = loop.run_one(
+            period, imp, kind, cycles, th_end, om_end, steps, th_max, peak, rate, status = loop.run_one(
                 params[gap_index[i]], freqs[i], th0, om0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts,
                 imp_out, st_out, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base,
                 tr_out)
@@ -322,8 +367,12 @@ def _loop(name: str) -> types.ModuleType:
             out_i[i, 2] = kind
             out_i[i, 3] = cycles
             out_i[i, 4] = steps
+            out_i[i, 5] = status
             out_f[i, 0] = th_end
             out_f[i, 1] = om_end
+            out_f[i, 2] = th_max
+            out_f[i, 3] = peak
+            out_f[i, 4] = rate
             if kind == KIND_FAILED:
                 # A continuation goes on from the fallback state after a failure (the pool path: the final state
                 # from rest at the same frequency).
@@ -363,8 +412,8 @@ def run_cells(model: str, params: np.ndarray, gap_index, freqs, theta0, theta_do
     if chain is None:
         chain = np.zeros(n, dtype=np.bool_)
     fb_th, fb_om = (theta0, theta_dot0) if fallback is None else fallback
-    out_i = np.zeros((n, 5), dtype=np.int64)
-    out_f = np.zeros((n, 2))
+    out_i = np.zeros((n, 6), dtype=np.int64)
+    out_f = np.zeros((n, 5))
     _loop(model).run_cells(np.ascontiguousarray(params, dtype=np.float64),
                            np.ascontiguousarray(gap_index, dtype=np.int64), freqs,
                            np.ascontiguousarray(theta0, dtype=np.float64),
@@ -372,4 +421,5 @@ def run_cells(model: str, params: np.ndarray, gap_index, freqs, theta0, theta_do
                            np.ascontiguousarray(chain, dtype=np.bool_),
                            np.ascontiguousarray(fb_th, dtype=np.float64), np.ascontiguousarray(fb_om, dtype=np.float64),
                            rule.vector(), out_i, out_f)
-    return EnsembleResult(out_i[:, 0], out_i[:, 1], out_i[:, 2], out_i[:, 3], out_f, out_i[:, 4])
+    return EnsembleResult(out_i[:, 0], out_i[:, 1], out_i[:, 2], out_i[:, 3], out_f[:, :2], out_i[:, 4],
+                          out_f[:, 2], out_f[:, 3], out_f[:, 4], out_i[:, 5])

@@ -164,13 +164,16 @@ class ValidityDomain:
                 "by_rule": {name: n for name, n in by_rule.items() if n},
                 "rules": [r.as_dict() for r in self.rules]}
 
-    def sentence(self, verdicts) -> str:
-        """``3 of 40 points outside the model's valid domain (contact_force > 2224 N: 3)``, or ``""`` if none."""
+    def sentence(self, verdicts, points: str = "points") -> str:
+        """``3 of 40 points outside the model's valid domain (contact_force > 2224 N: 3)``, or ``""`` if none.
+
+        ``points`` names what the verdicts are of (a map's ``cells``, ``initial conditions``).
+        """
         rep = self.report(verdicts)
         if not rep["invalid"]:
             return ""
         rules = ", ".join(f"{self.rule(name).describe()}: {n}" for name, n in rep["by_rule"].items())
-        return f"{rep['invalid']} of {rep['points']} points outside the model's valid domain ({rules})"
+        return f"{rep['invalid']} of {rep['points']} {points} outside the model's valid domain ({rules})"
 
 
 def force_bound(config: SimConfig) -> float:

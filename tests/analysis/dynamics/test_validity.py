@@ -150,3 +150,123 @@ def test_a_paper_point_is_valid_and_its_outputs_unchanged(tmp_path, capsys):
     assert _rows(out / "sweep.csv")[0]["valid"] == "True"
     assert "valid domain" not in capsys.readouterr().out
     assert read_json(out / "summary.json")["validity"]["invalid"] == 0
+
+
+# ---- the maps (rimd peterka, rimd basins): each cell checked by the compiled ensemble's measures ----------------
+
+
+def test_researchers_peterka_cells_are_marked_and_the_verb_exits_3(fn11, tmp_path, capsys):
+    out = tmp_path / "pk"
+    argv = ["peterka", "--config", str(fn11), "--gap-min-mm", "1", "--gap-max-mm", "1", "--gaps", "1",
+            "--f-min", "22", "--f-max", "23", "--freqs", "2", "--transient-cycles", "20", "--measure-cycles", "12",
+            "--workers", "1", "--out", str(out)]
+    assert cli.main(argv) == cli.EXIT_INVALID
+    rows = _rows(out / "peterka.csv")
+    assert [r["valid"] for r in rows] == ["False", "False"]
+    for r in rows:
+        assert {"pendulum_angle", "contact_force", "impacts_per_cycle"} <= set(r["invalid_rule"].split(";"))
+        assert float(r["max_force_n"]) > 1e5 and float(r["max_abs_theta_rad"]) > math.pi / 2
+        assert r["class_rest"]    # still classified, but marked
+    summary = read_json(out / "summary.json")
+    assert summary["validity"]["points"] == 2 and summary["validity"]["by_rule"]["contact_force"] == 2
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("rimd peterka: 2 of 2 cells outside the model's valid domain (")
+    assert "invalid_rule column" in last
+    assert (out / "peterka.png").read_bytes()[:4] == b"\x89PNG"
+    assert cli.main([*argv, "--accept-invalid"]) == 0
+    assert "accepted: --accept-invalid" in capsys.readouterr().out.strip().splitlines()[-1]
+
+
+def test_a_map_cell_swinging_past_90_degrees_is_marked_pendulum_angle_alone(fn11):
+    """Gap 0.5 mm, 21 Hz from rest: the ensemble sees the swing past 90 deg the sweep sees (same trajectory)."""
+    from rimd_sim.analysis.dynamics.peterka import peterka
+
+    result = peterka(load_config(fn11), [0.5e-3], [21.0], transient_cycles=20, measure_cycles=12, workers=1)
+    assert result.invalid_rules[0, 0, 0] == "pendulum_angle"
+    assert result.max_abs_theta[0, 0, 0] > math.pi / 2 and result.max_force[0, 0, 0] < 2224.0
+
+
+def test_the_ensemble_reports_chattering_as_its_own_status():
+    """A cell the chattering guard stops is KIND_FAILED with status ST_ZENO, and its verdict is chattering."""
+    import numpy as np
+
+    import rimd_sim.model.kernel as k
+    from rimd_sim.model.ensemble import KIND_FAILED, StopRule, run_cells
+    from rimd_sim.model.rig_model import model_for
+
+    config = load_config(find_config_file("rimd.yaml"), {"natural_frequency": 11.0, "motor.max_frequency": 30.0,
+                                                          "gap": 1e-3, "integrator.rtol": 1e-10,
+                                                          "integrator.atol": 1e-12})
+    model = model_for(config)
+    res = run_cells(model.name, model.params(config)[None, :], np.zeros(1, dtype=np.int64), np.array([22.0]),
+                    np.zeros(1), np.zeros(1), StopRule(max_cycles=20, measure_cycles=10, min_cycles=20))
+    assert res.kind[0] == KIND_FAILED and res.status[0] == k.ST_ZENO
+    assert validity.domain(config).check(res.measures()[0]).rules == ("chattering",)
+
+
+def test_researchers_basins_are_marked_and_the_verb_exits_3(fn11, tmp_path, capsys):
+    out = tmp_path / "bs"
+    status = cli.main(["basins", "--config", str(fn11), "--gap-mm", "1", "--frequency", "22", "--size", "2",
+                       "--theta-min", "-0.2", "--theta-max", "0.0", "--theta-dot-min", "-1", "--theta-dot-max", "1",
+                       "--transient-cycles", "20", "--measure-cycles", "12", "--workers", "1", "--out", str(out)])
+    assert status == 3
+    rows = _rows(out / "basins.csv")
+    assert rows and all(r["valid"] == "False" and "pendulum_angle" in r["invalid_rule"] for r in rows)
+    assert read_json(out / "summary.json")["validity"]["invalid"] == len(rows)
+    assert "initial conditions outside the model's valid domain" in capsys.readouterr().out.strip().splitlines()[-1]
+
+
+def test_paper_map_cells_are_valid_and_their_classes_unchanged(tmp_path, capsys):
+    """The default rig's map at gap 0 and 2.4 mm: every cell valid, the verb exits 0 with no validity line, and
+    the classes and cycles are those of the map before the valid domain (pinned from the code before it)."""
+    from rimd_sim.analysis.dynamics.peterka import peterka
+
+    result = peterka(SimConfig(), [0.0, 2.4e-3], [3.0, 5.5, 8.0], transient_cycles=30, measure_cycles=24,
+                     workers=1)
+    assert result.labels.tolist() == [[["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
+                                      [["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
+                                      [["1/1", "3/2", "1/2"], ["no impact", "no impact", "no impact"]]]
+    assert result.cycles.tolist() == [[[31, 30, 39], [55, 55, 54]], [[31, 30, 42], [55, 55, 55]],
+                                      [[31, 30, 39], [60, 81, 85]]]
+    assert result.valid.all() and result.validity["invalid"] == 0 and result.validity["points"] == 6
+    out = tmp_path / "pk"
+    status = cli.main(["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3",
+                       "--f-max", "8", "--freqs", "3", "--transient-cycles", "30", "--measure-cycles", "24",
+                       "--workers", "1", "--out", str(out)])
+    assert status == 0
+    assert {r["valid"] for r in _rows(out / "peterka.csv")} == {"True"}
+    assert "valid domain" not in capsys.readouterr().out
+
+
+def test_a_pulse_past_the_sensors_range_is_marked_and_exits_3(tmp_path, capsys):
+    out = tmp_path / "pulse"
+    assert cli.main(["pulse", "--velocity", "3", "--rate", "1e5", "--out", str(out)]) == 3
+    summary = read_json(out / "summary.json")
+    assert (summary["valid"], summary["invalid_rule"]) == (False, "contact_force")
+    assert summary["max_force_n"] > 2224.0 and summary["validity"]["invalid"] == 1
+    assert "contact_force > 2224 N: 1" in capsys.readouterr().out.strip().splitlines()[-1]
+    assert cli.main(["pulse", "--velocity", "3", "--rate", "1e5", "--out", str(out), "--accept-invalid"]) == 0
+    assert cli.main(["pulse", "--velocity", "0.07", "--rate", "1e5", "--out", str(out)]) == 0
+    assert read_json(out / "summary.json")["valid"] is True
+
+
+def test_fit_table_marks_and_counts_its_invalid_rows(fn11, tmp_path, capsys, monkeypatch):
+    """An entry at gap 1 mm, band B, 22 Hz: its grid points (21.5-23 Hz) leave the domain; none is taken as the
+    band's resonance, the row is marked and counted, and the verb exits 3."""
+    from rimd_sim.analysis.dynamics.fit_table import TableEntry, evaluate
+
+    config = load_config(fn11)
+    (row,) = evaluate(config, [TableEntry(1.0, "B", 22.0, None)], cycles=20, measure=10)
+    assert row["valid"] is False and "pendulum_angle" in row["invalid_rule"].split(";")
+    table = tmp_path / "table.csv"
+    table.write_text("gap_mm,band,frequency_hz\n1.0,B,22.0\n,natural,11.0\n")
+    out = tmp_path / "fit"
+    import rimd_sim.analysis.dynamics.fit_table as ft
+
+    monkeypatch.setattr(ft, "evaluate", lambda cfg, entries, cycles, measure: evaluate(cfg, entries, 20, 10))
+    status = cli.main(["fit-table", str(table), "--config", str(fn11), "--max-evaluations", "1", "--out", str(out)])
+    assert status == 3
+    assert _rows(out / "fit_table.csv")[0]["valid"] == "False"
+    summary = read_json(out / "summary.json")
+    assert summary["validity"]["invalid"] == 1 and summary["invalid_sets"] == 1
+    assert "1 of 1 entries outside the model's valid domain" in capsys.readouterr().out.strip().splitlines()[-1]

@@ -16,6 +16,13 @@ neighbours gives the optimiser a continuous resonance. ``scipy.optimize.least_sq
 parameters (default ``damping_ratio`` and ``mass``) to the resonances (scale 0.25 Hz) and the peak forces
 (scale 5 %); of every set it evaluated, the one with the smallest misfit whose grid resonances all lie within
 0.25 Hz of the table is returned (the starting set when none does better).
+
+Every grid point run is checked against the model's valid domain (:mod:`rimd_sim.model.validity`, the whole
+run as a sweep point). A point outside it is not the twin's rig: it is never taken as a band's resonance (as
+:func:`rimd_sim.analysis.dynamics.sweep.band_peak`), each row is marked with the rules its grid points broke
+(``valid``, ``invalid_rule``), and a parameter set with a marked row is chosen only when no set without one is
+as good a candidate (all resonances within 0.25 Hz first): a fit must not be won on physics the model does
+not hold.
 """
 
 from __future__ import annotations
@@ -29,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from rimd_sim.errors import ConfigError, InputError
-from rimd_sim.model.rig_model import RigModel
+from rimd_sim.model.rig_model import ChatteringError, RigModel
+from rimd_sim.model.validity import PointMeasures, Verdict, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["TableEntry", "TableError", "evaluate", "fit_table", "read_table"]
@@ -106,13 +114,21 @@ def read_table(path: Path) -> tuple[list[TableEntry], float | None]:
     return entries, natural
 
 
-def _steady(config: SimConfig, gap_mm: float, f: float, cycles: int, measure: int) -> tuple[float, float]:
+def _steady(config: SimConfig, gap_mm: float, f: float, cycles: int, measure: int) -> tuple[float, float, str]:
+    """Steady peak force, impacts per cycle and the valid domain's ``invalid_rule`` of one grid point."""
     cfg = config.with_parameters({"gap": gap_mm * 1e-3, "motor.initial_frequency": f, "motor.initial_setpoint": f,
                                   "motor.max_frequency": max(config.motor.max_frequency, f)})
     duration = cycles / f
-    impacts = RigModel(cfg, channels=False, truth=False).advance(duration).impacts
+    try:
+        out = RigModel(cfg, channels=False, truth=False).advance(duration)
+    except ChatteringError:
+        return math.nan, math.nan, domain(cfg).check(PointMeasures(chattering=True)).invalid_rule
+    impacts = out.impacts
     last = [i for i in impacts if i.t_start >= duration - measure / f]
-    return max((i.peak_force for i in last), default=0.0), len(last) / measure
+    peak, rate = max((i.peak_force for i in last), default=0.0), len(last) / measure
+    verdict = domain(cfg).check(PointMeasures(out.max_abs_theta, max((i.peak_force for i in impacts), default=0.0),
+                                              rate))
+    return peak, rate, verdict.invalid_rule
 
 
 def evaluate(config: SimConfig, entries: list[TableEntry], cycles: int = 150, measure: int = 50) -> list[dict]:
@@ -122,10 +138,15 @@ def evaluate(config: SimConfig, entries: list[TableEntry], cycles: int = 150, me
         freqs = [round(e.frequency_hz + k * GRID, 6) for k in OFFSETS]
         points = [(f, *_steady(config, e.gap_mm, f, cycles, measure)) for f in freqs if f > 0]
         target = IMPACTS[e.band]
-        inband = [i for i, p in enumerate(points) if abs(p[2] - target) <= 0.03 * target]
+        # Only points in the model's valid domain can be the band's resonance.
+        inband = [i for i, p in enumerate(points) if not p[3] and abs(p[2] - target) <= 0.03 * target]
+        rules = sorted({name for p in points for name in p[3].split(";") if name},
+                       key=("pendulum_angle", "contact_force", "chattering", "impacts_per_cycle").index)
+        marks = {"valid": not rules, "invalid_rule": ";".join(rules)}
         if not inband:
             out.append({"gap_mm": e.gap_mm, "band": e.band, "frequency_hz": e.frequency_hz, "twin_grid_hz": None,
-                        "twin_interpolated_hz": None, "twin_peak_force_n": None, "peak_force_n": e.peak_force_n})
+                        "twin_interpolated_hz": None, "twin_peak_force_n": None, "peak_force_n": e.peak_force_n,
+                        **marks})
             continue
         k = max(inband, key=lambda i: points[i][1])
         f_grid, peak = points[k][0], points[k][1]
@@ -139,7 +160,7 @@ def evaluate(config: SimConfig, entries: list[TableEntry], cycles: int = 150, me
                 p_int = y1 - 0.25 * (y0 - y2) * shift
         out.append({"gap_mm": e.gap_mm, "band": e.band, "frequency_hz": e.frequency_hz, "twin_grid_hz": f_grid,
                     "twin_interpolated_hz": f_int, "twin_peak_force_n": p_int, "twin_grid_peak_force_n": peak,
-                    "peak_force_n": e.peak_force_n})
+                    "peak_force_n": e.peak_force_n, **marks})
     return out
 
 
@@ -197,9 +218,15 @@ def fit_table(base: SimConfig, entries: list[TableEntry], parameters: tuple[str,
                           bounds=(0.3 * x0, 3.0 * x0))   # within a factor 3 of the base: the map is not smooth
         except (ValueError, ConfigError):   # ConfigError: a step beyond a parameter's bounds ends the search
             pass
-    candidates = [s for s in seen if s[1]] or seen
+    def valid(s) -> bool:
+        return all(r["valid"] for r in s[3])
+
+    # Sets whose rows all lie in the model's valid domain first, then those within the grid step.
+    candidates = ([s for s in seen if s[1] and valid(s)] or [s for s in seen if valid(s)]
+                  or [s for s in seen if s[1]] or seen)
     best = min(candidates, key=lambda s: s[0])
     start = seen[0]
     return {"config": base.with_parameters(best[2]), "values": best[2], "rows": best[3], "misfit": best[0],
             "start": {"values": start[2], "misfit": start[0], "rows": start[3]}, "evaluations": len(seen),
-            "all_within_grid_step": best[1]}
+            "all_within_grid_step": best[1], "invalid_sets": sum(not valid(s) for s in seen),
+            "validity": domain(base).report(Verdict.of(r["invalid_rule"]) for r in best[3])}

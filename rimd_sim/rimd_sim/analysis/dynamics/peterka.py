@@ -23,6 +23,15 @@ Basins of attraction
 --------------------
 At one (gap, frequency), a grid of initial conditions ``(theta0, theta_dot0)`` (hammer not inside the stop)
 each classified the same way; one grid row per task in the pool.
+
+The model's valid domain
+------------------------
+Every trajectory is checked against :mod:`rimd_sim.model.validity` over its whole run: the compiled loop
+returns its largest ``|theta|``, its largest impact force, its impacts per cycle over the classified window and
+whether the chattering guard stopped it (:mod:`rimd_sim.model.ensemble`); the verdicts are made here, in the
+calling process, from those plain numbers (they travel back from the tasks with the classes). A Peterka cell is
+outside the domain when any of its three starts is (its rules: the union over the starts, in the domain's
+order); a basin's initial condition when its trajectory is. The classes are reported as before, and marked.
 """
 
 from __future__ import annotations
@@ -39,6 +48,16 @@ from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.errors import ConfigError, IntegrationError
 from rimd_sim.model.ensemble import StopRule, run_cells
 from rimd_sim.model.rig_model import model_for
+from rimd_sim.model.validity import (
+    CHATTERING,
+    CONTACT_FORCE,
+    IMPACTS_PER_CYCLE,
+    PENDULUM_ANGLE,
+    PointMeasures,
+    ValidityDomain,
+    Verdict,
+    domain,
+)
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["BasinsResult", "PeterkaResult", "START_NAMES", "basins", "peterka"]
@@ -63,6 +82,11 @@ class PeterkaResult:
         cycles: Cycles each trajectory ran, same shape as ``labels`` (cap + 1 where it ran to the cap).
         early_stop: Whether trajectories stopped when their motion was known.
         where: ``local`` or the Dask scheduler's address.
+        invalid_rules: The rules of the model's valid domain each trajectory broke (``;``-separated, ``""``
+            when valid), same shape as ``labels``.
+        max_abs_theta: Largest ``|theta|`` (rad) of each trajectory's run, same shape (NaN where chattering).
+        max_force: Largest impact force (N) of each trajectory's run, same shape (NaN where chattering).
+        validity: The summary's report of the valid domain, one point per cell.
     """
 
     gaps_mm: np.ndarray
@@ -76,6 +100,25 @@ class PeterkaResult:
     cycles: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
     early_stop: bool = False
     where: str = "local"
+    invalid_rules: np.ndarray | None = None
+    max_abs_theta: np.ndarray | None = None
+    max_force: np.ndarray | None = None
+    validity: dict | None = None
+
+    @property
+    def invalid_rule(self) -> np.ndarray:
+        """Per cell, the rules its starts broke (the union, in the domain's order), ``""`` when valid."""
+        if self.invalid_rules is None:
+            return np.full(self.primary.shape, "", dtype=object)
+        out = np.full(self.primary.shape, "", dtype=object)
+        for i, j in np.ndindex(*out.shape):
+            out[i, j] = _union(self.invalid_rules[:, i, j])
+        return out
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Per cell, whether every start stayed in the model's valid domain."""
+        return self.invalid_rule == ""
 
     @property
     def primary(self) -> np.ndarray:
@@ -90,6 +133,24 @@ class PeterkaResult:
     def class_counts(self) -> dict[str, int]:
         """Cells per class (from rest)."""
         return dict(Counter(self.primary.ravel().tolist()).most_common())
+
+
+_ORDER = (PENDULUM_ANGLE, CONTACT_FORCE, CHATTERING, IMPACTS_PER_CYCLE)   # the domain's order
+
+
+def _union(rules) -> str:
+    """The union of ``invalid_rule`` fields, in the domain's order."""
+    names = {name for r in rules for name in r.split(";") if name}
+    return ";".join(n for n in _ORDER if n in names)
+
+
+def _measures(res) -> list[tuple[float, float, float, bool]]:
+    """Per cell of an :class:`~rimd_sim.model.ensemble.EnsembleResult`, its measures as plain tuples (for a task)."""
+    return [(m.max_abs_theta, m.peak_force, m.impacts_per_cycle, m.chattering) for m in res.measures()]
+
+
+def _verdicts(dom: ValidityDomain, measures) -> list[str]:
+    return [dom.check(PointMeasures(*m)).invalid_rule for m in measures]
 
 
 def _classify(config: SimConfig, f: float, theta0: float, theta_dot0: float, transient: int, measure: int):
@@ -125,7 +186,8 @@ def _row(args: tuple[SimConfig, float, list[float], int, int, int]) -> list[tupl
 def _row_ensemble(args: tuple[str, np.ndarray, float, np.ndarray, StopRule, StopRule]):
     """One gap row in two compiled calls: rest and kick starts, then the continuation along the row.
 
-    Returns ``(labels, cycles)``: per start, the class and the cycles run of each frequency.
+    Returns ``(labels, cycles, measures)``: per start, the class, the cycles run and the valid domain's measures
+    (:func:`_measures`) of each frequency.
     """
     model, p, kick, freqs, rule, continued_rule = args
     nf = len(freqs)
@@ -137,8 +199,10 @@ def _row_ensemble(args: tuple[str, np.ndarray, float, np.ndarray, StopRule, Stop
     cont = run_cells(model, p[None, :], np.zeros(nf, dtype=np.int64), freqs, zeros, zeros, continued_rule,
                      chain=chain, fallback=(both.final[:nf, 0].copy(), both.final[:nf, 1].copy()))
     labels = both.labels()
+    measures = _measures(both)
     return ([labels[:nf], labels[nf:], cont.labels()],
-            [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()])
+            [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()],
+            [measures[:nf], measures[nf:], _measures(cont)])
 
 
 def _check_cycles(transient: int, measure: int) -> None:
@@ -194,22 +258,53 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
     rows, n, where = run_tasks(_row_ensemble, jobs, workers=workers, scheduler=scheduler, progress=progress)
     labels = np.array([r[0] for r in rows], dtype=object).transpose(1, 0, 2)
     cycles = np.array([r[1] for r in rows], dtype=np.int64).transpose(1, 0, 2)
-    return PeterkaResult(np.array(gaps) * 1e3, np.array(freqs), np.array(gaps) / rig.amplitude,
-                         np.array(freqs) / rig.natural_frequency, labels, time.perf_counter() - start, n,
-                         transient_cycles + measure_cycles, cycles, early_stop, where)
+    # The domain does not depend on the gap (its force bound is the sensor's range): one for the whole map.
+    dom = domain(config)
+    measures = [r[2] for r in rows]   # row, start, frequency -> (max |theta|, peak force, rate, chattering)
+    rules = np.array([[_verdicts(dom, per_start) for per_start in row] for row in measures],
+                     dtype=object).transpose(1, 0, 2)
+    nan = math.nan
+
+    def take(index: int) -> np.ndarray:
+        return np.array([[[nan if m[3] else m[index] for m in per_start] for per_start in row] for row in measures],
+                        dtype=float).transpose(1, 0, 2)
+
+    result = PeterkaResult(np.array(gaps) * 1e3, np.array(freqs), np.array(gaps) / rig.amplitude,
+                           np.array(freqs) / rig.natural_frequency, labels, time.perf_counter() - start, n,
+                           transient_cycles + measure_cycles, cycles, early_stop, where, rules, take(0), take(1))
+    return _with_validity(result, dom)
+
+
+def _with_validity(result, dom: ValidityDomain):
+    from dataclasses import replace
+
+    return replace(result, validity=dom.report(Verdict.of(r) for r in result.invalid_rule.ravel().tolist()))
 
 
 def peterka_table(result: PeterkaResult) -> list[dict]:
-    """CSV rows, one per cell."""
+    """CSV rows, one per cell; the valid domain's columns after the classes (max over the starts)."""
     rows = []
+    cell_rules = result.invalid_rule
     for i, g in enumerate(result.gaps_mm):
         for j, f in enumerate(result.frequencies_hz):
             row = {"gap_mm": float(g), "gap_ratio": float(result.gap_ratio[i]), "frequency_hz": float(f),
                    "frequency_ratio": float(result.frequency_ratio[j])}
             row.update({f"class_{name}": result.labels[k, i, j] for k, name in enumerate(START_NAMES)})
             row["coexisting"] = bool(result.coexisting[i, j])
+            row.update(_validity_columns(result, (slice(None), i, j), cell_rules[i, j]))
             rows.append(row)
     return rows
+
+
+def _validity_columns(result, index, invalid_rule: str) -> dict:
+    """The valid domain's columns of a CSV row: the largest |theta| and impact force, ``valid``, ``invalid_rule``."""
+    if result.max_abs_theta is None:
+        return {}
+    th = result.max_abs_theta[index]
+    f = result.max_force[index]
+    return {"max_abs_theta_rad": float(np.nanmax(th)) if np.isfinite(th).any() else math.nan,
+            "max_force_n": float(np.nanmax(f)) if np.isfinite(f).any() else math.nan,
+            "valid": not invalid_rule, "invalid_rule": invalid_rule}
 
 
 def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, measure_cycles: int, *,
@@ -285,6 +380,11 @@ class BasinsResult:
         workers: Processes (or Dask worker threads) used.
         cycles: Cycles each trajectory ran (0 where not run).
         where: ``local`` or the Dask scheduler's address.
+        invalid_rule: The rules of the model's valid domain each trajectory broke, same shape as ``labels``
+            (``""`` when valid or not run).
+        max_abs_theta: Largest ``|theta|`` (rad) of each run (NaN where not run or chattering).
+        max_force: Largest impact force (N) of each run (NaN where not run or chattering).
+        validity: The summary's report of the valid domain, one point per initial condition run.
     """
 
     gap_mm: float
@@ -296,6 +396,17 @@ class BasinsResult:
     workers: int
     cycles: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
     where: str = "local"
+    invalid_rule: np.ndarray | None = None
+    max_abs_theta: np.ndarray | None = None
+    max_force: np.ndarray | None = None
+    validity: dict | None = None
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Per initial condition, whether its run stayed in the model's valid domain (True where not run)."""
+        if self.invalid_rule is None:
+            return np.ones(self.labels.shape, dtype=bool)
+        return self.invalid_rule == ""
 
     def class_counts(self) -> dict[str, int]:
         """Initial conditions per class."""
@@ -306,19 +417,24 @@ INSIDE = "inside the stop"
 
 
 def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, StopRule]
-               ) -> tuple[list[str], list[int]]:
-    """One row of initial conditions (one rate, every angle) in one compiled call: ``(labels, cycles)``."""
+               ) -> tuple[list[str], list[int], list]:
+    """One row of initial conditions (one rate, every angle) in one compiled call.
+
+    Returns ``(labels, cycles, measures)``; the measures (:func:`_measures`) are None where not run.
+    """
     model, p, f, thetas, theta_dot, limit, rule = args
     run = np.flatnonzero(thetas <= limit)
     labels = [INSIDE] * len(thetas)
     cycles = [0] * len(thetas)
+    measures: list = [None] * len(thetas)
     if len(run):
         res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
                         np.full(len(run), theta_dot), rule)
-        for j, label, c in zip(run.tolist(), res.labels(), res.cycles.tolist(), strict=True):
+        for j, label, c, m in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res), strict=True):
             labels[j] = label
             cycles[j] = c
-    return labels, cycles
+            measures[j] = m
+    return labels, cycles, measures
 
 
 def default_basin_ranges(config: SimConfig) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -369,12 +485,25 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
     rule = stop_rule(transient_cycles, measure_cycles, early_stop)
     jobs = [(model.name, p, frequency_hz, thetas, float(r), limit, rule) for r in rates]
     rows, n, where = run_tasks(_basin_row, jobs, workers=workers, scheduler=scheduler, progress=progress)
+    dom = domain(config)
+    measures = [m for r in rows for m in r[2]]
+    rules = ["" if m is None else dom.check(PointMeasures(*m)).invalid_rule for m in measures]
+    shape = (len(rows), len(thetas))
+    nan = math.nan
+
+    def take(index: int) -> np.ndarray:
+        return np.array([nan if m is None or m[3] else m[index] for m in measures], dtype=float).reshape(shape)
+
     return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates,
                         np.array([r[0] for r in rows], dtype=object), time.perf_counter() - start, n,
-                        np.array([r[1] for r in rows], dtype=np.int64), where)
+                        np.array([r[1] for r in rows], dtype=np.int64), where,
+                        np.array(rules, dtype=object).reshape(shape), take(0), take(1),
+                        dom.report(Verdict.of(r) for r, m in zip(rules, measures, strict=True) if m is not None))
 
 
 def basins_table(result: BasinsResult) -> list[dict]:
-    """CSV rows, one per initial condition."""
-    return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j]}
+    """CSV rows, one per initial condition; the valid domain's columns after the class."""
+    rules = result.invalid_rule
+    return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j],
+             **({} if rules is None else _validity_columns(result, (i, j), rules[i, j]))}
             for i, r in enumerate(result.theta_dot0) for j, th in enumerate(result.theta0)]

@@ -4,6 +4,11 @@ The cart is at rest and the hammer arrives at the force sensor with the given ve
 the accelerometer are sampled (noise-free) at ``rate`` from just before contact. The summary reads the pulse
 as a DAQ team would: its largest force, the second force peak (the structure's impulse back), the contact
 duration and the frequency of the accelerometer's ringing after the impact.
+
+The run is checked against the model's valid domain (:mod:`rimd_sim.model.validity`): its largest contact
+force against the force sensor's range, its largest ``|theta|``; the summary carries ``valid``,
+``invalid_rule`` and the ``validity`` entry. Impacts per cycle do not apply (the motor is at rest), and a pulse
+the chattering guard stops has nothing to show: it stays an error.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import numpy as np
 
 from rimd_sim.errors import ConfigError
 from rimd_sim.model.rig_model import RigModel
+from rimd_sim.model.validity import PointMeasures, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["PulseResult", "force_peaks", "pulse", "ring_frequency"]
@@ -143,6 +149,11 @@ def pulse(config: SimConfig, velocity: float, rate: float = 1e6, span: float = P
         "impacts_in_span": len(out.impacts),
         "model": cfg.rig.structure.model,
     }
+    dom = domain(cfg)
+    verdict = dom.check(PointMeasures(out.max_abs_theta, max(i.peak_force for i in out.impacts)))
+    summary.update({"max_abs_theta_rad": out.max_abs_theta, "max_force_n": max(i.peak_force for i in out.impacts),
+                    "valid": verdict.valid, "invalid_rule": verdict.invalid_rule,
+                    "validity": dom.report([verdict])})
     return PulseResult(t, force, acc, summary)
 
 

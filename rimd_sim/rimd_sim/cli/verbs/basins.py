@@ -9,9 +9,11 @@ import argparse
 
 from rimd_sim.cli import count, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
+    add_accept_invalid_argument,
     add_map_arguments,
     add_model_arguments,
     progress_printer,
+    validity_exit,
     write_csv,
     write_summary,
 )
@@ -28,12 +30,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             parser.add_argument(f"--{name}-{end}", type=number(f"--{name}-{end}", unit), default=None,
                                 help=f"{word} {what} ({unit})")
     add_map_arguments(parser, transient=160)
+    add_accept_invalid_argument(parser)
 
 
 def main(args: argparse.Namespace) -> int:
     """Compute the basins and write their files."""
     from rimd_sim.analysis.dynamics.peterka import basins, basins_table, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
+    from rimd_sim.model.validity import Verdict, domain
     from rimd_sim.settings.config import load_config
 
     config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
@@ -54,7 +58,7 @@ def main(args: argparse.Namespace) -> int:
         "frequency_ratio": args.frequency / rig.natural_frequency, "theta0_range_rad": list(t_range),
         "theta_dot0_range_rad_s": list(r_range), "size": args.size, "classes": result.class_counts(),
         "coexisting_attractors": len(set(result.class_counts()) - {"inside the stop"}) > 1,
-        "wall_seconds": result.wall_seconds, "workers": result.workers,
+        "wall_seconds": result.wall_seconds, "workers": result.workers, "validity": result.validity,
     }
     write_summary(args.out, summary)
     plot_basins(result, args.out / "basins.png",
@@ -62,4 +66,9 @@ def main(args: argparse.Namespace) -> int:
                 f"(Omega/omega_n = {args.frequency / rig.natural_frequency:.3g}): basins of attraction")
     classes = ", ".join(f"{k}: {v}" for k, v in result.class_counts().items())
     print(f"{classes}; {result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}")
-    return 0
+    run = (result.labels != "inside the stop").ravel().tolist()
+    rules = [] if result.invalid_rule is None else result.invalid_rule.ravel().tolist()
+    sentence = domain(config).sentence((Verdict.of(r) for r, ran in zip(rules, run, strict=False) if ran),
+                                       "initial conditions")
+    return validity_exit("basins", sentence, args.accept_invalid,
+                         f"the invalid_rule column of {args.out / 'basins.csv'}")

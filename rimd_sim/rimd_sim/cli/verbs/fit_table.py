@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from rimd_sim.cli import count
+from rimd_sim.cli.verbs._analysis_io import add_accept_invalid_argument
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="parameters fitted (default: damping_ratio mass; the others are held at the base)")
     parser.add_argument("--max-evaluations", type=count("--max-evaluations"), default=20,
                         help="most parameter sets evaluated (default 20)")
+    add_accept_invalid_argument(parser)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -34,7 +36,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.fit_table import SCALES, fit_table, read_table
     from rimd_sim.analysis.outputs import write_parameter_file
     from rimd_sim.cli import CommandError
-    from rimd_sim.cli.verbs._analysis_io import write_csv, write_summary
+    from rimd_sim.cli.verbs._analysis_io import validity_exit, write_csv, write_summary
+    from rimd_sim.model.validity import Verdict, domain
     from rimd_sim.settings.config import find_config_file, load_config
 
     for p in args.parameters:
@@ -66,6 +69,7 @@ def main(args: argparse.Namespace) -> int:
                "all_resonances_within_0.25_hz": result["all_within_grid_step"], "entries": rows,
                "start": {"values": result["start"]["values"], "misfit": result["start"]["misfit"]},
                "evaluations": result["evaluations"], "wall_seconds": time.perf_counter() - start,
+               "validity": result["validity"], "invalid_sets": result["invalid_sets"],
                "determines": "damping_ratio and mass (the force scale) at most, with A0, the gaps and the contact "
                              "law given; not contact.stiffness and contact.damping separately, nor A0 apart from "
                              "the gaps"}
@@ -78,4 +82,6 @@ def main(args: argparse.Namespace) -> int:
         print(f"{r['gap_mm']:>8.2f} {r['band']:>4} {r['frequency_hz']:>10.2f} {twin:>9} {pf:>11} {tf:>10}")
     print("fitted: " + ", ".join(f"{p} = {v:.6g}" for p, v in result["values"].items())
           + f" ({result['evaluations']} sets evaluated); files in {out}")
-    return 0
+    sentence = domain(base).sentence((Verdict.of(r["invalid_rule"]) for r in rows), "entries")
+    return validity_exit("fit-table", sentence, args.accept_invalid,
+                         f"the invalid_rule column of {out / 'fit_table.csv'}")

@@ -13,10 +13,12 @@ import sys
 
 from rimd_sim.cli import count, gap_mm
 from rimd_sim.cli.verbs._analysis_io import (
+    add_accept_invalid_argument,
     add_map_arguments,
     add_model_arguments,
     check_range,
     progress_printer,
+    validity_exit,
     write_csv,
     write_summary,
 )
@@ -32,6 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gaps", type=count("--gaps"), default=31, help="gap values, default 31")
     parser.add_argument("--freqs", type=count("--freqs"), default=61, help="frequency values, default 61")
     add_map_arguments(parser, transient=120)
+    add_accept_invalid_argument(parser)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the cap) and list the differing cells in "
                              "summary.json, each with the class of a 10x longer run")
@@ -50,6 +53,7 @@ def main(args: argparse.Namespace) -> int:
         save_peterka_npz,
     )
     from rimd_sim.analysis.plots import plot_peterka
+    from rimd_sim.model.validity import Verdict, domain
     from rimd_sim.settings.config import load_config
 
     check_range("gap", args.gap_min_mm, args.gap_max_mm, allow_zero=True, unit="-mm")
@@ -78,6 +82,7 @@ def main(args: argparse.Namespace) -> int:
         "measure_cycles": args.measure_cycles, "early_stop": result.early_stop,
         "cycles_run": cycles_summary(result.cycles, result.cycles_per_start),
         "wall_seconds": result.wall_seconds, "workers": result.workers, "where": result.where,
+        "validity": result.validity,
     }
     if comparison is not None:
         summary["comparison"] = comparison
@@ -92,4 +97,6 @@ def main(args: argparse.Namespace) -> int:
     on = "process(es)" if result.where == "local" else f"Dask worker thread(s) of {result.where}"
     print(f"{result.primary.size} cells, {summary['coexisting_cells']} with coexisting attractors, in "
           f"{result.wall_seconds:.1f} s on {result.workers} {on}; files in {args.out}", file=sys.stdout)
-    return 0
+    sentence = domain(config).sentence((Verdict.of(r) for r in result.invalid_rule.ravel().tolist()), "cells")
+    return validity_exit("peterka", sentence, args.accept_invalid,
+                         f"the invalid_rule column of {args.out / 'peterka.csv'}")

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from rimd_sim.cli import number
+from rimd_sim.cli.verbs._analysis_io import add_accept_invalid_argument
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,6 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=number("--rate", "Hz", ge=1e3, le=1e6), default=1e6,
                         help="sample rate (Hz), default 1e6 (1 MHz)")
     parser.add_argument("--out", type=Path, default=Path("out/pulse"), help="output directory")
+    add_accept_invalid_argument(parser)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -29,10 +31,12 @@ def main(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rimd_sim.analysis.dynamics.pulse import plot_pulse, pulse
-    from rimd_sim.cli.verbs._analysis_io import write_summary
+    from rimd_sim.cli.verbs._analysis_io import validity_exit, write_summary
+    from rimd_sim.model.validity import Verdict, domain
     from rimd_sim.settings.config import load_config
 
-    result = pulse(load_config(args.config), args.velocity, rate=args.rate)
+    config = load_config(args.config)
+    result = pulse(config, args.velocity, rate=args.rate)
     args.out.mkdir(parents=True, exist_ok=True)
     np.savetxt(args.out / "pulse.csv", np.column_stack([result.t, result.force, result.acceleration]),
                delimiter=",", header="t_from_contact_s,impact_force_n,rimd_acceleration_m_s2", comments="",
@@ -43,4 +47,5 @@ def main(args: argparse.Namespace) -> int:
     print(f"peak {s['peak_force_n']:.2f} N, second peak {s['second_peak_force_n']:.2f} N, duration "
           f"{s['duration_s'] * 1e3:.3f} ms, ringing {s['ring_frequency_hz']:.0f} Hz; files in {args.out}",
           file=sys.stdout)
-    return 0
+    sentence = domain(config).sentence([Verdict.of(s["invalid_rule"])], "pulses")
+    return validity_exit("pulse", sentence, args.accept_invalid, f"invalid_rule in {args.out / 'summary.json'}")
