@@ -13,6 +13,7 @@ import pytest
 
 from harness.domains import lease_domain_id
 from harness.processes import ProcessFailure, ProcessManager
+from rimd_sim.errors import UnavailableError
 from rimd_sim.ros.testing import configured_domain_range
 
 pytestmark = pytest.mark.process  # every test here starts a process
@@ -37,7 +38,7 @@ def test_all_domains_taken_is_an_error(tmp_path):
         first, last = configured_domain_range()
         for _ in range(last - first + 1):
             leases.append(lease_domain_id(lock_dir=tmp_path))
-        with pytest.raises(RuntimeError, match="all ROS domain ids"):
+        with pytest.raises(UnavailableError, match="all ROS domain ids"):
             lease_domain_id(lock_dir=tmp_path)
     finally:
         for lease in leases:

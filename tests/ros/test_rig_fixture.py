@@ -95,7 +95,7 @@ def test_leases_stay_within_the_range_until_it_is_full(tmp_path):
     leases = [lease_domain_id(lock_dir=tmp_path, domain_range=(140, 142)) for _ in range(3)]
     try:
         assert sorted(lease.domain_id for lease in leases) == [140, 141, 142]
-        with pytest.raises(RuntimeError, match=r"all ROS domain ids 140\.\.142 are leased .*RIMD_DOMAIN_RANGE"):
+        with pytest.raises(UnavailableError, match=r"all ROS domain ids 140\.\.142 are leased .*RIMD_DOMAIN_RANGE"):
             lease_domain_id(lock_dir=tmp_path, domain_range=(140, 142))
         with lease_domain_id(lock_dir=tmp_path, domain_range=(140, 143)) as more:   # the same lock files
             assert more.domain_id == 143

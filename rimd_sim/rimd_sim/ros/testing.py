@@ -220,7 +220,7 @@ def lease_domain_id(*, lock_dir: Path = LOCK_DIR, domain_range: tuple[int, int] 
             (``RIMD_DOMAIN_RANGE``, else 1..100).
 
     Raises:
-        RuntimeError: Every id of the range is held by someone else.
+        UnavailableError: Every id of the range is held by someone else.
         InputError: ``RIMD_DOMAIN_RANGE`` is refused (no range given).
     """
     first, last = configured_domain_range() if domain_range is None else domain_range
@@ -239,7 +239,7 @@ def lease_domain_id(*, lock_dir: Path = LOCK_DIR, domain_range: tuple[int, int] 
             os.close(descriptor)
             continue
         return DomainLease(domain_id, descriptor)
-    raise RuntimeError(f"all ROS domain ids {first}..{last} are leased (lock files in {lock_dir}); a wider range: "
+    raise UnavailableError(f"all ROS domain ids {first}..{last} are leased (lock files in {lock_dir}); a wider range: "
                        f"{DOMAIN_RANGE_ENV} or the ini key {DOMAIN_RANGE_INI} (docs/testing.md)")
 
 
