@@ -38,13 +38,15 @@ from rimd_sim.settings.config import SimConfig
 
 __all__ = [
     "CHATTERING", "CONTACT_FORCE", "IMPACTS_PER_CYCLE", "MAX_ANGLE", "MAX_IMPACTS_PER_CYCLE", "PENDULUM_ANGLE",
-    "PointMeasures", "Rule", "ValidityDomain", "Verdict", "domain", "force_bound",
+    "RULE_NAMES", "PointMeasures", "Rule", "ValidityDomain", "Verdict", "domain", "force_bound", "joined",
 ]
 
 PENDULUM_ANGLE = "pendulum_angle"
 CONTACT_FORCE = "contact_force"
 CHATTERING = "chattering"
 IMPACTS_PER_CYCLE = "impacts_per_cycle"
+#: The rules' names in the domain's order (the order of :func:`domain` and of every ``invalid_rule`` field).
+RULE_NAMES = (PENDULUM_ANGLE, CONTACT_FORCE, CHATTERING, IMPACTS_PER_CYCLE)
 
 #: Largest pendulum angle magnitude of the model's geometry (rad): the hammer level with its pivot.
 MAX_ANGLE = math.pi / 2.0
@@ -176,13 +178,19 @@ class ValidityDomain:
         return f"{rep['invalid']} of {rep['points']} {points} outside the model's valid domain ({rules})"
 
 
+def joined(names) -> str:
+    """Rule names (any order, repeats allowed) as one ``invalid_rule`` field, in the domain's order."""
+    present = set(names)
+    return ";".join(name for name in RULE_NAMES if name in present)
+
+
 def force_bound(config: SimConfig) -> float:
     """The ``contact_force`` bound of ``config`` (N): the force sensor's compression range."""
     return next(c.range_max for c in config.channels if c.name == "impact_force")
 
 
 def domain(config: SimConfig) -> ValidityDomain:
-    """The model's valid domain for ``config`` (module docstring)."""
+    """The model's valid domain for ``config`` (module docstring), its rules in :data:`RULE_NAMES`' order."""
     return ValidityDomain((
         Rule(PENDULUM_ANGLE, "largest |theta| over the run", MAX_ANGLE, "rad",
              "the hammer hangs on wires and meets the stop along l sin(theta): past 90 deg it would stand above "

@@ -270,3 +270,11 @@ def test_fit_table_marks_and_counts_its_invalid_rows(fn11, tmp_path, capsys, mon
     summary = read_json(out / "summary.json")
     assert summary["validity"]["invalid"] == 1 and summary["invalid_sets"] == 1
     assert "1 of 1 entries outside the model's valid domain" in capsys.readouterr().out.strip().splitlines()[-1]
+
+
+def test_rule_names_are_the_domains_order_and_fields_join_in_it():
+    config = load_config(find_config_file("rimd.yaml"))
+    assert validity.RULE_NAMES == tuple(r.name for r in validity.domain(config).rules)
+    assert validity.joined(["impacts_per_cycle", "pendulum_angle", "pendulum_angle"]) == \
+        "pendulum_angle;impacts_per_cycle"
+    assert validity.joined([]) == ""

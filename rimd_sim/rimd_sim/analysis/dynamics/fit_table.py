@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from rimd_sim.errors import ConfigError, InputError
+from rimd_sim.model import validity
 from rimd_sim.model.rig_model import ChatteringError, RigModel
 from rimd_sim.model.validity import PointMeasures, Verdict, domain
 from rimd_sim.settings.config import SimConfig
@@ -140,9 +141,8 @@ def evaluate(config: SimConfig, entries: list[TableEntry], cycles: int = 150, me
         target = IMPACTS[e.band]
         # Only points in the model's valid domain can be the band's resonance.
         inband = [i for i, p in enumerate(points) if not p[3] and abs(p[2] - target) <= 0.03 * target]
-        rules = sorted({name for p in points for name in p[3].split(";") if name},
-                       key=("pendulum_angle", "contact_force", "chattering", "impacts_per_cycle").index)
-        marks = {"valid": not rules, "invalid_rule": ";".join(rules)}
+        rules = validity.joined(name for p in points for name in p[3].split(";") if name)
+        marks = {"valid": not rules, "invalid_rule": rules}
         if not inband:
             out.append({"gap_mm": e.gap_mm, "band": e.band, "frequency_hz": e.frequency_hz, "twin_grid_hz": None,
                         "twin_interpolated_hz": None, "twin_peak_force_n": None, "peak_force_n": e.peak_force_n,

@@ -46,13 +46,10 @@ import numpy as np
 from rimd_sim.analysis.dynamics.steady import check_frequencies, check_frequency, steady_orbit
 from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.errors import ConfigError, IntegrationError
+from rimd_sim.model import validity
 from rimd_sim.model.ensemble import StopRule, run_cells
 from rimd_sim.model.rig_model import model_for
 from rimd_sim.model.validity import (
-    CHATTERING,
-    CONTACT_FORCE,
-    IMPACTS_PER_CYCLE,
-    PENDULUM_ANGLE,
     PointMeasures,
     ValidityDomain,
     Verdict,
@@ -135,13 +132,9 @@ class PeterkaResult:
         return dict(Counter(self.primary.ravel().tolist()).most_common())
 
 
-_ORDER = (PENDULUM_ANGLE, CONTACT_FORCE, CHATTERING, IMPACTS_PER_CYCLE)   # the domain's order
-
-
 def _union(rules) -> str:
     """The union of ``invalid_rule`` fields, in the domain's order."""
-    names = {name for r in rules for name in r.split(";") if name}
-    return ";".join(n for n in _ORDER if n in names)
+    return validity.joined(name for r in rules for name in r.split(";") if name)
 
 
 def _measures(res) -> list[tuple[float, float, float, bool]]:
