@@ -559,6 +559,22 @@ def fix_staged_text(stage: Path) -> None:
         parent.write_text("")
 
 
+def recorded_wheel(stamp: Path, dist: Path, key: str) -> Path | None:
+    """The wheel ``stamp`` records for the inputs ``key``, when it is still in ``dist`` unchanged; else None."""
+    if not stamp.is_file():
+        return None
+    recorded = json.loads(stamp.read_text())
+    wheel = dist / recorded.get("wheel", "")
+    if recorded.get("key") == key and wheel.is_file() and sha256_file(wheel) == recorded.get("sha256"):
+        return wheel
+    return None
+
+
+def record_wheel(stamp: Path, key: str, wheel: Path) -> None:
+    """Record that ``wheel`` was built from the inputs ``key`` (read back by :func:`recorded_wheel`)."""
+    stamp.write_text(json.dumps({"key": key, "wheel": wheel.name, "sha256": sha256_file(wheel)}) + "\n")
+
+
 def build_msgs_wheel(version: str, dist: Path, build_dir: Path) -> Path:
     """Build (or find up to date) the rimd_msgs wheel for Python ``version``; return its path."""
     tag_python = "cp" + version.replace(".", "")
@@ -571,12 +587,10 @@ def build_msgs_wheel(version: str, dist: Path, build_dir: Path) -> Path:
                         (venv / ".rimd-dist-build.sha256").read_text() if (venv / ".rimd-dist-build.sha256").is_file()
                         else (ROOT / "requirements.txt").read_text())
     stamp = work / "wheel.json"
-    if stamp.is_file():
-        recorded = json.loads(stamp.read_text())
-        wheel = dist / recorded.get("wheel", "")
-        if recorded.get("key") == key and wheel.is_file() and sha256_file(wheel) == recorded.get("sha256"):
-            log(f"Python {version}: {wheel.name} is up to date")
-            return wheel
+    wheel = recorded_wheel(stamp, dist, key)
+    if wheel is not None:
+        log(f"Python {version}: {wheel.name} is up to date")
+        return wheel
     started = time.monotonic()
     log(f"Python {version}: building rimd_msgs with CMake (output in {work / 'build.log'})")
     stage = build_msgs(venv, version, work)
@@ -610,7 +624,7 @@ def build_msgs_wheel(version: str, dist: Path, build_dir: Path) -> Path:
         f"{dist_info_dir}/WHEEL": wheel_file,
         f"{dist_info_dir}/top_level.txt": MSGS_PACKAGE + "\n",
     })
-    stamp.write_text(json.dumps({"key": key, "wheel": wheel.name, "sha256": sha256_file(wheel)}) + "\n")
+    record_wheel(stamp, key, wheel)
     log(f"Python {version}: wrote {wheel.relative_to(ROOT) if wheel.is_relative_to(ROOT) else wheel} "
         f"in {time.monotonic() - started:.0f} s")
     return wheel
@@ -626,12 +640,10 @@ def build_sim_wheel(dist: Path, build_dir: Path, python: Path) -> Path:
     source = ROOT / SIM_PACKAGE
     key = inputs_digest([*tree_files(source), Path(__file__).resolve()])
     stamp = build_dir / "rimd_sim-wheel.json"
-    if stamp.is_file():
-        recorded = json.loads(stamp.read_text())
-        wheel = dist / recorded.get("wheel", "")
-        if recorded.get("key") == key and wheel.is_file() and sha256_file(wheel) == recorded.get("sha256"):
-            log(f"{wheel.name} is up to date")
-            return wheel
+    wheel = recorded_wheel(stamp, dist, key)
+    if wheel is not None:
+        log(f"{wheel.name} is up to date")
+        return wheel
     started = time.monotonic()
     log_file = build_dir / "rimd_sim-wheel.log"
     log_file.write_text("")
@@ -649,7 +661,7 @@ def build_sim_wheel(dist: Path, build_dir: Path, python: Path) -> Path:
             old.unlink()
         wheel = dist / built[0].name
         shutil.copyfile(built[0], wheel)
-    stamp.write_text(json.dumps({"key": key, "wheel": wheel.name, "sha256": sha256_file(wheel)}) + "\n")
+    record_wheel(stamp, key, wheel)
     log(f"wrote {wheel.relative_to(ROOT) if wheel.is_relative_to(ROOT) else wheel} "
         f"in {time.monotonic() - started:.0f} s")
     return wheel

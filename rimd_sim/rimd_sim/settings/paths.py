@@ -79,9 +79,13 @@ def config_dirs() -> list[Path]:
     ``share/rimd_sim/config``. Only these: a ``config/`` directory that happens to be above the package (a lab's
     own repository holding the venv) is not the twin's.
     """
+    given = [Path(os.environ["RIMD_CONFIG_DIR"])] if os.environ.get("RIMD_CONFIG_DIR") else []
+    return given + _shipped_config_dirs()
+
+
+def _shipped_config_dirs() -> list[Path]:
+    """The source checkout's ``config/`` (when this package runs from one), then the installed share's."""
     dirs = []
-    if os.environ.get("RIMD_CONFIG_DIR"):
-        dirs.append(Path(os.environ["RIMD_CONFIG_DIR"]))
     root = source_root()
     if root is not None:
         dirs.append(root / "config")
@@ -100,13 +104,7 @@ def config_dir() -> Path:
     Raises:
         FileNotFoundError: Neither exists.
     """
-    candidates = []
-    root = source_root()
-    if root is not None:
-        candidates.append(root / "config")
-    share = installed_share_dir()
-    if share is not None:
-        candidates.append(share / "config")
+    candidates = _shipped_config_dirs()
     for candidate in candidates:
         if candidate.is_dir():
             return candidate
