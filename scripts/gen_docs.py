@@ -56,6 +56,7 @@ VERB_PAGES = {
     "sweep": "docs/analyses.md",
     "bifurcation": "docs/analyses.md",
     "poincare": "docs/analyses.md",
+    "continue": "docs/analyses.md",
     "peterka": "docs/analyses.md",
     "basins": "docs/analyses.md",
     "experiment": "docs/analyses.md",

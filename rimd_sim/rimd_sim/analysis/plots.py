@@ -243,6 +243,80 @@ def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
     return _save(fig, path, title, ax)
 
 
+#: Marker and colour of each bifurcation kind in :func:`plot_continuation`.
+_BIFURCATION_STYLE = {"period_doubling": ("v", "tab:red", "period doubling"), "fold": ("s", "tab:purple", "fold"),
+                      "neimark_sacker": ("D", "tab:green", "Neimark-Sacker"), "grazing": ("X", "k", "grazing"),
+                      "branch_point": ("P", "tab:orange", "branch point")}
+
+
+def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: float, length_m: float,
+                      amplitude_m: float, diagram=None) -> Path:
+    """Branches of periodic orbits (stable solid, unstable dashed) over the brute-force bifurcation diagram.
+
+    Top: the stroboscopic ``l sin(theta) / A0`` of every orbit's ``n`` points against the parameter (for the
+    frequency: Omega/omega_n below, Hz above), the bifurcations marked; ``diagram`` (the
+    :func:`~rimd_sim.analysis.dynamics.bifurcation.bifurcation` branches) in grey behind. Bottom: the largest
+    Floquet multiplier's modulus (log scale) with the stability limit 1. Points outside the model's valid domain
+    are drawn hollow grey.
+    """
+    freq = result.parameter == "frequency"
+    scale_x = (1.0 / natural_frequency_hz) if freq else 1.0
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(10, 7.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.2]})
+    if diagram:
+        for b in diagram:
+            xs = [p.frequency_ratio for p in b.points for _ in p.u]
+            ys = [float(u) for p in b.points for u in p.u]
+            ax.scatter(xs, ys, s=2, c="0.65" if b.direction == "up" else "0.8", linewidths=0,
+                       label=f"brute force, sweep {b.direction}", zorder=1)
+    colours = plt.get_cmap("tab10")
+    seen_periods: set[int] = set()
+    for br in result.branches:
+        colour = colours((br.period.bit_length() - 1) % 10)
+        x = np.array([p.parameter for p in br.points]) * scale_x
+        stable = np.array([p.stable for p in br.points])
+        valid = np.array([p.valid for p in br.points])
+        mu = np.array([p.max_multiplier for p in br.points])
+        n = br.period
+        u = np.array([[length_m * math.sin(o[0]) / amplitude_m for o in p.orbit[:n]]
+                      + [math.nan] * (n - len(p.orbit[:n])) for p in br.points])
+        label = f"period {n}" if n not in seen_periods else None
+        seen_periods.add(n)
+        for i in range(len(x) - 1):
+            style = "-" if stable[i] and stable[i + 1] else "--"
+            for j in range(n):
+                ax.plot(x[i:i + 2], u[i:i + 2, j], style, color=colour, lw=1.6, zorder=3,
+                        label=label if (i == 0 and j == 0) else None)
+            ax2.plot(x[i:i + 2], mu[i:i + 2], style, color=colour, lw=1.4)
+        if len(x) == 1:
+            ax.plot(x, u[:, 0], "o", color=colour, label=label)
+        bad = ~valid
+        if bad.any():
+            mark_invalid(ax, np.repeat(x[bad], n), u[bad].ravel(), [p.invalid_rule for p in br.points if not p.valid
+                                                                      for _ in range(n)], legend=True)
+    marked: set[str] = set()
+    for bif in result.bifurcations:
+        marker, colour, name = _BIFURCATION_STYLE.get(bif.kind, ("o", "k", bif.kind))
+        bx = bif.parameter * scale_x
+        by = length_m * math.sin(float(bif.point[0])) / amplitude_m
+        ax.plot([bx], [by], marker, color=colour, ms=9, mfc="none" if bif.kind == "grazing" else colour, mew=1.5,
+                zorder=5, label=name if bif.kind not in marked else None)
+        ax2.axvline(bx, color=colour, lw=0.8, ls=":")
+        marked.add(bif.kind)
+    ax2.axhline(1.0, color="k", lw=0.8)
+    ax2.set_yscale("log")
+    ax2.set_ylabel("largest |multiplier|")
+    ax.set_ylabel("l sin(theta) / A0 (stroboscopic)")
+    ax2.set_xlabel("Omega / omega_n" if freq else result.parameter)
+    if freq:
+        top = ax.secondary_xaxis("top", functions=(lambda r: r * natural_frequency_hz,
+                                                   lambda f: f / natural_frequency_hz))
+        top.set_xlabel("motor frequency (Hz)")
+    for a in (ax, ax2):
+        a.grid(alpha=0.3)
+    ax.legend(fontsize=8, markerscale=1.0, loc="best", ncols=2)
+    return _save(fig, path, title, None)
+
+
 def plot_message(path: Path, title: str, message: str) -> Path:
     """A figure that holds only ``message`` (a point without a result: the chattering guard stopped its run)."""
     fig, ax = plt.subplots(figsize=(8, 3))

@@ -166,6 +166,8 @@ VERBS: tuple[Verb, ...] = (
          "rimd_sim.cli.verbs.sweep"),
     Verb("bifurcation", "bifurcation diagram: stroboscopic l sin(theta)/A0 versus frequency ratio, up and down",
          "rimd_sim.cli.verbs.bifurcation"),
+    Verb("continue", "continuation of periodic orbits in frequency (or a parameter): stability, period doubling, "
+         "fold, Neimark-Sacker, grazing", "rimd_sim.cli.verbs.continuation"),
     Verb("peterka", "Peterka diagram: impact regimes (p impacts / n cycles) in the (frequency, gap) plane",
          "rimd_sim.cli.verbs.peterka"),
     Verb("poincare", "phase plane, Poincare map and largest Lyapunov exponent of the simulated motion",
