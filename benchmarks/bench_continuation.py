@@ -29,7 +29,8 @@ from rimd_sim.settings.config import find_config_file, load_config
 
 
 def _load() -> str:
-    return "load average %.2f %.2f %.2f" % os.getloadavg()
+    la = os.getloadavg()
+    return f"load average {la[0]:.2f} {la[1]:.2f} {la[2]:.2f}"
 
 
 def _median_wall(fn, repeat: int):
