@@ -314,15 +314,24 @@ class _Problem:
                 xp[j] += sgn * h * self.scale[j]
                 xs.append(xp)
                 lams.append(lam)
-        for sgn in (1.0, -1.0):
+        # The parameter's column: central, or one-sided at a bound of the parameter (a gap of 0).
+        offsets = [h, -h]
+        for i, off in enumerate(offsets):
+            try:
+                self.params_at(lam + off * self.lam_scale)
+            except ConfigError:
+                offsets[i] = 0.0
+        if offsets == [0.0, 0.0]:
+            raise ConfigError(self.parameter, lam, "has no valid neighbour for the derivative")
+        for off in offsets:
             xs.append(x)
-            lams.append(lam + sgn * h * self.lam_scale)
+            lams.append(lam + off * self.lam_scale)
         out = self.flow(np.array(xs), np.array(lams))
         g = (out[0] - x) / self.scale
         jac = np.empty((d, d + 1))
         for j in range(d):
             jac[:, j] = (out[1 + 2 * j] - out[2 + 2 * j]) / (2.0 * h) / self.scale
-        jac[:, d] = (out[1 + 2 * d] - out[2 + 2 * d]) / (2.0 * h) / self.scale
+        jac[:, d] = (out[1 + 2 * d] - out[2 + 2 * d]) / (offsets[0] - offsets[1]) / self.scale
         monodromy_scaled = jac[:, :d].copy()
         jac[:, :d] -= np.eye(d)
         return g, jac, monodromy_scaled

@@ -147,8 +147,9 @@ def main(args: argparse.Namespace) -> int:
         diagram, _, _ = bifurcation(config, freqs, "both")
         summary["diagram_frequencies"] = len(freqs)
     write_summary(args.out, summary)
-    title = f"RIMD model, gap {args.gap_mm:g} mm: periodic orbits by continuation" + (
-        "" if freq else f" in {args.parameter} at {f_fixed:g} Hz")
+    title = (f"RIMD model, gap {args.gap_mm:g} mm: periodic orbits by continuation" if freq else
+             f"RIMD model: periodic orbits by continuation in {args.parameter} at {f_fixed:g} Hz"
+             + ("" if args.parameter == "gap" else f", gap {args.gap_mm:g} mm"))
     plot_continuation(result, args.out / "continuation.png", title, natural_frequency_hz=rig.natural_frequency,
                       length_m=rig.length, amplitude_m=rig.amplitude, diagram=diagram)
     for b in result.branches:
