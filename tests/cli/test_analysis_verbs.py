@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 
+import numpy as np
 import pytest
 
 from harness.outputs import read_json
@@ -87,7 +88,28 @@ def test_peterka_small_map_has_period_1_and_half_and_marks_coexistence(tmp_path)
     assert cells[(2.4, 5.25)]["class_rest"] == "1/2"
     assert cells[(2.4, 5.25)]["class_continued"] == "no impact"
     assert cells[(2.4, 5.25)]["coexisting"] == "True"
+    assert cells[(2.4, 5.25)]["classes_found"] == "1/2;no impact" and cells[(2.4, 5.25)]["starts"] == "4"
     assert summary["coexisting_cells"] >= 1
+    assert summary["coexistence"]["lower_bound"] is True and summary["coexistence"]["starts_per_cell"] == 4
+    data = np.load(out / "peterka.npz")
+    assert data["starts"].tolist() == ["rest", "kick", "continued", "free"] and data["codes"].shape == (4, 2, 3)
+    assert data["valid"].shape == (2, 3) and data["valid"].all() and (data["invalid_rule"] == "").all()
+
+
+def test_peterka_starts_option_adds_halton_starts_and_0_is_the_three_start_map(tmp_path):
+    """``--starts 0`` writes the three named starts only; ``--starts 5`` the forced response and 4 Halton
+    points, and the named starts' classes are the same."""
+    argv = ["peterka", "--gap-min-mm", "2.4", "--gap-max-mm", "2.4", "--gaps", "1", "--f-min", "2.45",
+            "--f-max", "2.548", "--freqs", "2", "--workers", "1"]
+    assert cli.main([*argv, "--starts", "0", "--out", str(tmp_path / "a")]) == 0
+    assert cli.main([*argv, "--starts", "5", "--out", str(tmp_path / "b")]) == 0
+    a = list(csv.DictReader(open(tmp_path / "a" / "peterka.csv")))
+    b = list(csv.DictReader(open(tmp_path / "b" / "peterka.csv")))
+    assert [r["starts"] for r in a] == ["3", "3"] and [r["starts"] for r in b] == ["8", "8"]
+    assert [r["class_rest"] for r in a] == [r["class_rest"] for r in b]
+    assert a[1]["classes_found"] == "1/1" and b[1]["classes_found"] == "1/1;no impact"
+    starts = np.load(tmp_path / "b" / "peterka.npz")["starts"].tolist()
+    assert starts[3:] == ["free", *(f"halton{i}" for i in range(1, 5))]
 
 
 def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
