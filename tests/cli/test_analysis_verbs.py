@@ -122,6 +122,26 @@ def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
     assert {"1/2", "no impact"} <= set(summary["classes"]) and summary["coexisting_attractors"] is True
 
 
+def test_basins_give_each_initial_condition_its_attractor(tmp_path, capsys):
+    """Gap 2.4 mm, 2.548 Hz (config/rimd.yaml): two attractors, the 1/1 impact motion and the motion without
+    impact (33 of 576 initial conditions); each initial condition's attractor id in basins.csv, the attractors
+    listed in summary.json with a stroboscopic point and the peak force, their points drawn on the plot."""
+    out = tmp_path / "b"
+    assert cli.main(["basins", "--frequency", "2.548", "--size", "24", "--workers", "1", "--out", str(out)]) == 0
+    summary = _files(out, "basins.png", "basins.csv", "summary.json")
+    rows = list(csv.DictReader(open(out / "basins.csv")))
+    attractors = {a["id"]: a for a in summary["attractors"]}
+    assert sorted(a["class"] for a in attractors.values()) == ["1/1", "no impact"]
+    for r in rows:   # one id per class here, and every initial condition has the id of its class
+        assert attractors[int(r["attractor_id"])]["class"] == r["class"]
+    by_class = {a["class"]: a for a in attractors.values()}
+    assert by_class["no impact"]["cells"] == 33 and by_class["1/1"]["cells"] == 543
+    assert by_class["1/1"]["settled"] and by_class["1/1"]["period"] == 1
+    assert by_class["1/1"]["peak_force_n"] > 10 and by_class["no impact"]["peak_force_n"] == 0.0
+    assert by_class["1/1"]["theta_rad"] < 0 and abs(by_class["1/1"]["u"] + 3.87) < 0.01
+    assert "2 attractor(s)" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["bifurcation", "--f-min", "5", "--f-max", "3"], "--f-min 5 > --f-max 3"),
     (["bifurcation", "--direction", "sideways"], "--direction 'sideways' refused"),

@@ -323,6 +323,14 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
     marks = []
     if getattr(result, "invalid_rule", None) is not None:
         marks = _mark_invalid_cells(ax, result.theta0 * 1e3, result.theta_dot0, result.invalid_rule)
+    # Each attractor's stroboscopic points (theta, theta') in the axes' units, its id beside them.
+    for a in getattr(result, "attractors", None) or []:
+        th = np.asarray(a["theta_rad"]) * 1e3
+        om = np.asarray(a["theta_dot_rad_s"])
+        line, = ax.plot(th, om, "o" if a["period"] else "s", ms=7, mfc="white", mec="black", mew=1.2, ls="",
+                        label=f"attractor {a['id']}: {a['class']}" + ("" if a["period"] else " (not settled)"))
+        ax.annotate(str(a["id"]), (th[0], om[0]), textcoords="offset points", xytext=(5, 5), fontsize=8)
+        marks.append(line)
     ax.set_xlabel("initial theta (mrad)")
     ax.set_ylabel("initial theta' (rad/s)")
     _class_legend(ax, palette, marks)

@@ -118,3 +118,27 @@ def test_extra_starts_nest_and_stay_in_the_basins_region():
     (t_lo, t_hi), (r_lo, r_hi) = default_basin_ranges(cfg)
     assert ((t_lo <= th[1:]) & (th[1:] <= t_hi)).all() and ((r_lo <= om[1:]) & (om[1:] <= r_hi)).all()
     assert len({(a, b) for a, b in zip(th[1:, 0], om[1:, 0], strict=True)}) == 15
+
+
+def test_cluster_orbits_tells_apart_two_orbits_of_one_class_and_compares_them_as_sets():
+    """Synthetic stroboscopic points (u, v): two different 1/2 orbits get two ids, one orbit met at either of
+    its two phases (its points in the other order, 1e-4 apart) one id; two different 1/1 orbits two ids;
+    non-periodic trajectories of one class share one; a trajectory not run gets -1."""
+    from rimd_sim.analysis.dynamics.steady import cluster_orbits, orbit_points, same_orbit
+
+    a = np.array([[0.0, -1.0], [2.0, 1.0]])
+    a_shifted = a[::-1] + 1e-4
+    b = np.array([[0.0, -1.0], [2.5, 1.0]])          # shares a point with a, not the other
+    one, other = np.array([[-3.87, -1.26]]), np.array([[-1.0, 0.5]])
+    labels = ["1/2", "1/2", "1/2", "1/1", "1/1", "1/1", CHAOTIC, CHAOTIC, None]
+    orbits = [a, a_shifted, b, one, other, one + 5e-4, None, None, None]
+    ids, reps = cluster_orbits(labels, orbits)
+    assert ids.tolist() == [0, 0, 1, 2, 3, 2, 4, 4, -1] and reps == [0, 2, 3, 4, 6]
+    assert same_orbit(a, a_shifted) and not same_orbit(a, b) and not same_orbit(a, one)
+    # orbit_points: the last n points of a p/n class; the smallest repeating set of a no-impact motion.
+    u = np.array([5.0, 0.0, 2.0, 0.0, 2.0, 0.0, 2.0])
+    v = np.array([5.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
+    assert orbit_points(u, v, "1/2").tolist() == [[0.0, -1.0], [2.0, 1.0]]
+    assert orbit_points(u[1:], v[1:], NO_IMPACT).shape == (2, 2) and orbit_points(u, v, NO_IMPACT) is None
+    assert orbit_points(u, v, CHAOTIC) is None and orbit_points(np.arange(8.0), np.zeros(8), NO_IMPACT) is None
+    assert orbit_points(np.full(3, np.nan), np.zeros(3), "1/1") is None

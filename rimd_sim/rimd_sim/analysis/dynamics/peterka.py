@@ -37,6 +37,16 @@ Basins of attraction
 At one (gap, frequency), a grid of initial conditions ``(theta0, theta_dot0)`` (hammer not inside the stop)
 each classified the same way; one grid row per task in the pool.
 
+Each initial condition also gets an attractor id: the orbit it ends on, its stroboscopic points (the last
+``n`` of the classified window for a ``p/n`` class, or the smallest repeating set of a no-impact motion) in
+the non-dimensional ``(u, v)`` of :mod:`rimd_sim.analysis.dynamics.steady`, compared as a set with the
+orbits met before to the classification tolerance (:func:`~rimd_sim.analysis.dynamics.steady.cluster_orbits`):
+the same orbit shares an id, another orbit of the same class (another 1/1, a 1/2 shifted by one cycle) gets
+its own. Only settled motions are told apart by their orbit: a trajectory that ran to the cap without
+settling (a non-periodic motion, or a slow transient: near a period doubling a 2/4 read at the cap is still
+converging to 1/2, its points spread by 1e-2 from one initial condition to the next) has no orbit to compare,
+and those of one class share one id (``settled`` false in the list of attractors).
+
 The model's valid domain
 ------------------------
 Every trajectory is checked against :mod:`rimd_sim.model.validity` over its whole run: the compiled loop
@@ -56,7 +66,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rimd_sim.analysis.dynamics.steady import check_frequencies, check_frequency, steady_orbit
+from rimd_sim.analysis.dynamics.steady import (
+    check_frequencies,
+    check_frequency,
+    cluster_orbits,
+    orbit_points,
+    steady_orbit,
+)
 from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.errors import ConfigError, IntegrationError
 from rimd_sim.model import validity
@@ -523,6 +539,12 @@ class BasinsResult:
         max_abs_theta: Largest ``|theta|`` (rad) of each run (NaN where not run or chattering).
         max_force: Largest impact force (N) of each run (NaN where not run or chattering).
         validity: The summary's report of the valid domain, one point per initial condition run.
+        attractor_id: The attractor each initial condition ends on (module docstring), same shape as
+            ``labels``; -1 where not run or failed.
+        attractors: Per id, a dict: ``id``, ``class``, ``settled``, ``period`` (points of its orbit; 0 when not
+            settled), ``u``, ``v`` and ``theta_rad``, ``theta_dot_rad_s`` (its stroboscopic points; the last one
+            of its first initial condition when not settled), ``peak_force_n`` (the largest impact of the
+            classified window of its first initial condition), ``cells`` (initial conditions ending on it).
     """
 
     gap_mm: float
@@ -538,6 +560,8 @@ class BasinsResult:
     max_abs_theta: np.ndarray | None = None
     max_force: np.ndarray | None = None
     validity: dict | None = None
+    attractor_id: np.ndarray | None = None
+    attractors: list | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -558,21 +582,27 @@ def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, Sto
                ) -> tuple[list[str], list[int], list]:
     """One row of initial conditions (one rate, every angle) in one compiled call.
 
-    Returns ``(labels, cycles, measures)``; the measures (:func:`_measures`) are None where not run.
+    Returns ``(labels, cycles, measures, points, window_peaks)``; the measures (:func:`_measures`), the last
+    stroboscopic points ``(u, v)`` and the largest impact of the classified window are None where not run.
     """
     model, p, f, thetas, theta_dot, limit, rule = args
     run = np.flatnonzero(thetas <= limit)
     labels = [INSIDE] * len(thetas)
     cycles = [0] * len(thetas)
     measures: list = [None] * len(thetas)
+    points: list = [None] * len(thetas)
+    peaks: list = [None] * len(thetas)
     if len(run):
         res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
                         np.full(len(run), theta_dot), rule)
-        for j, label, c, m in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res), strict=True):
+        for j, label, c, m, pts, pk in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res),
+                                           res.points, res.window_peak.tolist(), strict=True):
             labels[j] = label
             cycles[j] = c
             measures[j] = m
-    return labels, cycles, measures
+            points[j] = pts
+            peaks[j] = pk
+    return labels, cycles, measures, points, peaks
 
 
 def default_basin_ranges(config: SimConfig) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -632,16 +662,47 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
     def take(index: int) -> np.ndarray:
         return np.array([nan if m is None or m[3] else m[index] for m in measures], dtype=float).reshape(shape)
 
-    return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates,
-                        np.array([r[0] for r in rows], dtype=object), time.perf_counter() - start, n,
-                        np.array([r[1] for r in rows], dtype=np.int64), where,
+    labels = np.array([r[0] for r in rows], dtype=object)
+    cycles = np.array([r[1] for r in rows], dtype=np.int64)
+    settled = (cycles.ravel() <= rule.max_cycles).tolist()
+    ids, attractors = _attractors(config, float(frequency_hz), labels.ravel().tolist(),
+                                  [pt for r in rows for pt in r[3]], [pk for r in rows for pk in r[4]], settled,
+                                  rule.tolerance)
+    return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates, labels,
+                        time.perf_counter() - start, n, cycles, where,
                         np.array(rules, dtype=object).reshape(shape), take(0), take(1),
-                        dom.report(Verdict.of(r) for r, m in zip(rules, measures, strict=True) if m is not None))
+                        dom.report(Verdict.of(r) for r, m in zip(rules, measures, strict=True) if m is not None),
+                        ids.reshape(shape), attractors)
+
+
+def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], points: list, peaks: list,
+                settled: list[bool], tolerance: float) -> tuple[np.ndarray, list[dict]]:
+    """Attractor ids of the basins' initial conditions and the list of attractors (module docstring)."""
+    rig = config.rig
+    keep = [None if pts is None or label == FAILED else label for label, pts in zip(labels, points, strict=True)]
+    orbits = [None if label is None or not done else orbit_points(pts[:, 0], pts[:, 1], label, tolerance)
+              for label, pts, done in zip(keep, points, settled, strict=True)]
+    ids, reps = cluster_orbits(keep, orbits, tolerance)
+    omega = 2.0 * math.pi * frequency_hz
+    out = []
+    for a, r in enumerate(reps):
+        orbit = orbits[r] if orbits[r] is not None else points[r][-1:]
+        u, v = orbit[:, 0], orbit[:, 1]
+        theta = np.arcsin(np.clip(u * rig.amplitude / rig.length, -1.0, 1.0))
+        theta_dot = v * rig.amplitude * omega / (rig.length * np.cos(theta))
+        out.append({"id": a, "class": labels[r], "settled": orbits[r] is not None,
+                    "period": 0 if orbits[r] is None else len(orbit),
+                    "u": u.tolist(), "v": v.tolist(), "theta_rad": theta.tolist(),
+                    "theta_dot_rad_s": theta_dot.tolist(),
+                    "peak_force_n": float(peaks[r]), "cells": int((ids == a).sum())})
+    return ids, out
 
 
 def basins_table(result: BasinsResult) -> list[dict]:
-    """CSV rows, one per initial condition; the valid domain's columns after the class."""
+    """CSV rows, one per initial condition; the attractor id after the class, then the valid domain's columns."""
     rules = result.invalid_rule
+    ids = result.attractor_id
     return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j],
+             **({} if ids is None else {"attractor_id": int(ids[i, j])}),
              **({} if rules is None else _validity_columns(result, (i, j), rules[i, j]))}
             for i, r in enumerate(result.theta_dot0) for j, th in enumerate(result.theta0)]
