@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 
+import numpy as np
 import pytest
 
 from harness.outputs import read_json
@@ -87,7 +88,28 @@ def test_peterka_small_map_has_period_1_and_half_and_marks_coexistence(tmp_path)
     assert cells[(2.4, 5.25)]["class_rest"] == "1/2"
     assert cells[(2.4, 5.25)]["class_continued"] == "no impact"
     assert cells[(2.4, 5.25)]["coexisting"] == "True"
+    assert cells[(2.4, 5.25)]["classes_found"] == "1/2;no impact" and cells[(2.4, 5.25)]["starts"] == "4"
     assert summary["coexisting_cells"] >= 1
+    assert summary["coexistence"]["lower_bound"] is True and summary["coexistence"]["starts_per_cell"] == 4
+    data = np.load(out / "peterka.npz")
+    assert data["starts"].tolist() == ["rest", "kick", "continued", "free"] and data["codes"].shape == (4, 2, 3)
+    assert data["valid"].shape == (2, 3) and data["valid"].all() and (data["invalid_rule"] == "").all()
+
+
+def test_peterka_starts_option_adds_halton_starts_and_0_is_the_three_start_map(tmp_path):
+    """``--starts 0`` writes the three named starts only; ``--starts 5`` the forced response and 4 Halton
+    points, and the named starts' classes are the same."""
+    argv = ["peterka", "--gap-min-mm", "2.4", "--gap-max-mm", "2.4", "--gaps", "1", "--f-min", "2.45",
+            "--f-max", "2.548", "--freqs", "2", "--workers", "1"]
+    assert cli.main([*argv, "--starts", "0", "--out", str(tmp_path / "a")]) == 0
+    assert cli.main([*argv, "--starts", "5", "--out", str(tmp_path / "b")]) == 0
+    a = list(csv.DictReader(open(tmp_path / "a" / "peterka.csv")))
+    b = list(csv.DictReader(open(tmp_path / "b" / "peterka.csv")))
+    assert [r["starts"] for r in a] == ["3", "3"] and [r["starts"] for r in b] == ["8", "8"]
+    assert [r["class_rest"] for r in a] == [r["class_rest"] for r in b]
+    assert a[1]["classes_found"] == "1/1" and b[1]["classes_found"] == "1/1;no impact"
+    starts = np.load(tmp_path / "b" / "peterka.npz")["starts"].tolist()
+    assert starts[3:] == ["free", *(f"halton{i}" for i in range(1, 5))]
 
 
 def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
@@ -98,6 +120,26 @@ def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
                      "--workers", "1", "--out", str(out)]) == 0
     summary = _files(out, "basins.png", "basins.csv", "summary.json")
     assert {"1/2", "no impact"} <= set(summary["classes"]) and summary["coexisting_attractors"] is True
+
+
+def test_basins_give_each_initial_condition_its_attractor(tmp_path, capsys):
+    """Gap 2.4 mm, 2.548 Hz (config/rimd.yaml): two attractors, the 1/1 impact motion and the motion without
+    impact (33 of 576 initial conditions); each initial condition's attractor id in basins.csv, the attractors
+    listed in summary.json with a stroboscopic point and the peak force, their points drawn on the plot."""
+    out = tmp_path / "b"
+    assert cli.main(["basins", "--frequency", "2.548", "--size", "24", "--workers", "1", "--out", str(out)]) == 0
+    summary = _files(out, "basins.png", "basins.csv", "summary.json")
+    rows = list(csv.DictReader(open(out / "basins.csv")))
+    attractors = {a["id"]: a for a in summary["attractors"]}
+    assert sorted(a["class"] for a in attractors.values()) == ["1/1", "no impact"]
+    for r in rows:   # one id per class here, and every initial condition has the id of its class
+        assert attractors[int(r["attractor_id"])]["class"] == r["class"]
+    by_class = {a["class"]: a for a in attractors.values()}
+    assert by_class["no impact"]["cells"] == 33 and by_class["1/1"]["cells"] == 543
+    assert by_class["1/1"]["settled"] and by_class["1/1"]["period"] == 1
+    assert by_class["1/1"]["peak_force_n"] > 10 and by_class["no impact"]["peak_force_n"] == 0.0
+    assert by_class["1/1"]["theta_rad"] < 0 and abs(by_class["1/1"]["u"] + 3.87) < 0.01
+    assert "2 attractor(s)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(("argv", "message"), [

@@ -361,6 +361,8 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
     fig, ax = plt.subplots(figsize=(10, 6))
     _class_image(ax, result.frequency_ratio, result.gap_ratio, result.primary, palette)
     gi, fj = np.nonzero(result.coexisting)
+    # The mark is a lower bound: an attractor none of the starts reaches is not found (docs/analyses.md).
+    found = f"at least: found from {getattr(result, 'starts', 3)} starts per cell"
     marks: list[Artist] = []
     dense = max(result.primary.shape) > DENSE_CELLS
     if len(gi) and dense:
@@ -373,11 +375,11 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
         ax.imshow(np.where(result.coexisting, 1.0, np.nan), cmap=ListedColormap(["black"]), alpha=0.3,
                   origin="lower", aspect="auto", interpolation="nearest",
                   extent=(x[0] - dx, x[-1] + dx, y[0] - dy, y[-1] + dy))
-        marks = [Patch(facecolor="black", alpha=0.3, label="coexisting attractors (shaded)")]
+        marks = [Patch(facecolor="black", alpha=0.3, label=f"coexisting attractors (shaded; {found})")]
     elif len(gi):
         ms = max(1.0, min(4.0, 400.0 / max(result.primary.shape)))
         ax.plot(result.frequency_ratio[fj], result.gap_ratio[gi], "x", color="0.25", ms=ms, mew=0.6)
-        marks = [Line2D([], [], marker="x", ls="", color="0.25", label="coexisting attractors")]
+        marks = [Line2D([], [], marker="x", ls="", color="0.25", label=f"coexisting attractors ({found})")]
     if getattr(result, "invalid_rules", None) is not None:
         # A cell where any start left the valid domain (its class is still in the CSV, marked).
         marks = [*marks, *_mark_invalid_cells(ax, result.frequency_ratio, result.gap_ratio, result.invalid_rule)]
@@ -395,6 +397,14 @@ def plot_basins(result, path: Path, title: str = "") -> Path:
     marks = []
     if getattr(result, "invalid_rule", None) is not None:
         marks = _mark_invalid_cells(ax, result.theta0 * 1e3, result.theta_dot0, result.invalid_rule)
+    # Each attractor's stroboscopic points (theta, theta') in the axes' units, its id beside them.
+    for a in getattr(result, "attractors", None) or []:
+        th = np.asarray(a["theta_rad"]) * 1e3
+        om = np.asarray(a["theta_dot_rad_s"])
+        line, = ax.plot(th, om, "o" if a["period"] else "s", ms=7, mfc="white", mec="black", mew=1.2, ls="",
+                        label=f"attractor {a['id']}: {a['class']}" + ("" if a["period"] else " (not settled)"))
+        ax.annotate(str(a["id"]), (th[0], om[0]), textcoords="offset points", xytext=(5, 5), fontsize=8)
+        marks.append(line)
     ax.set_xlabel("initial theta (mrad)")
     ax.set_ylabel("initial theta' (rad/s)")
     _class_legend(ax, palette, marks)

@@ -45,7 +45,10 @@ the step count. And what the model's valid domain (:mod:`rimd_sim.model.validity
 whole run: the largest ``|theta|`` at the ends of the steps (the driver's ``F_THMAX``), the largest peak force
 of its impacts (0 without impact), the impacts per cycle of the classified window (NaN for a failed cell) and
 the driver's status (``ST_OK``, or the failure: ``ST_ZENO`` is the chattering guard). Tracking them costs a
-comparison per impact record: the integration is untouched, so every other output is the same.
+comparison per impact record: the integration is untouched, so every other output is the same. And, to tell
+attractors of one class apart (``rimd basins``' attractor ids), the last ``max_period`` stroboscopic points
+``(u, v)`` of the classified window (NaN for a failed cell, or before cycle 0) and the largest peak force of
+the impacts started in that window.
 
 A cell starts with the model's own modes at rest (a continuation too: it goes on from the
 previous cell's ``(theta, theta_dot)``, as ``steady_orbit`` from an orbit's ``final_state``).
@@ -128,6 +131,8 @@ class EnsembleResult:
     peak_force: np.ndarray | None = None      # N, the largest impact of the run, 0 without impact
     impacts_per_cycle: np.ndarray | None = None   # over the classified window, NaN when failed
     status: np.ndarray | None = None          # the driver's status: k.ST_OK, k.ST_ZENO (chattering), ...
+    points: np.ndarray | None = None          # (cells, max_period, 2): the window's last (u, v) points
+    window_peak: np.ndarray | None = None     # N, the largest impact started in the classified window, 0 without
 
     def measures(self) -> list[PointMeasures]:
         """Per cell, what the model's valid domain checks (:meth:`~rimd_sim.model.validity.ValidityDomain.check`).
@@ -203,6 +208,28 @@ def _settled(u, v, counts, c, max_period, min_window, confirm, stol):
 
 
 @_jit
+def _window_out(u, v, peaks, lo, hi, pts):
+    """The largest peak of cycles ``lo .. hi - 1``.
+
+    And the last ``pts.shape[0]`` points ``(u, v)`` of cycles up to ``hi - 1`` into ``pts`` (NaN before cycle 0).
+    """
+    m = pts.shape[0]
+    for j in range(m):
+        idx = hi - m + j
+        if idx >= 0:
+            pts[j, 0] = u[idx]
+            pts[j, 1] = v[idx]
+        else:
+            pts[j, 0] = math.nan
+            pts[j, 1] = math.nan
+    peak = 0.0
+    for i in range(lo, hi):
+        if peaks[i] > peak:
+            peak = peaks[i]
+    return peak
+
+
+@_jit
 def _rate(counts, lo, hi):
     """Impacts per cycle over cycles ``lo .. hi - 1``."""
     total = 0
@@ -256,11 +283,11 @@ def _loop(name: str) -> types.ModuleType:
 
     @compiled
     def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
-                ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out):
+                ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out, peaks, pts):
         """One trajectory.
 
         Returns ``(period, impacts, kind, cycles, theta, theta_dot, steps, max_abs_theta, peak_force,
-        impacts_per_cycle, status)``.
+        impacts_per_cycle, status, window_peak)``; the window's last points in ``pts``.
         """
         min_cycles = int(rule[0])
         cap = int(rule[1])
@@ -279,6 +306,7 @@ def _loop(name: str) -> types.ModuleType:
         omega = 2.0 * math.pi * f
         for i in range(cap + 2):
             counts[i] = 0
+            peaks[i] = 0.0
         # Point of cycle c: state at c / f (emitted once the integration passes it). Impacts of cycle c are final
         # once the integration has passed (c + 1.5) / f (a contact lasts milliseconds), as in steady_orbit.
         c_done = 0  # cycles 0 .. c_done - 1 have their point and impact count final
@@ -301,30 +329,38 @@ def _loop(name: str) -> types.ModuleType:
                 cyc = int(imp_out[j, k.R_CYCLE])
                 if 0 <= cyc <= cap + 1:
                     counts[cyc] += 1
+                    if imp_out[j, k.R_PEAK] > peaks[cyc]:
+                        peaks[cyc] = imp_out[j, k.R_PEAK]
                 if imp_out[j, k.R_PEAK] > peak:
                     peak = imp_out[j, k.R_PEAK]
             if status == k.ST_STROBE_FULL or status == k.ST_IMPACTS_FULL:
                 continue
             if status != k.ST_OK:
+                for j in range(pts.shape[0]):
+                    pts[j, 0] = math.nan
+                    pts[j, 1] = math.nan
                 return (0, 0, KIND_FAILED, c_done, th_s[max(c_done - 1, 0)], om_s[max(c_done - 1, 0)],
-                        ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status)
+                        ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status, math.nan)
             c_done += 1
             if early and min_cycles <= c_done <= cap:
                 n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
                 if n > 0:
                     lo = c_done - length - n
                     period, imp, kind = _classify_window(u, v, counts, lo, c_done, max_period, tol)
+                    w_peak = _window_out(u, v, peaks, lo, c_done, pts)
                     return (period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP], fs[k.F_THMAX],
-                            peak, _rate(counts, lo, c_done), status)
+                            peak, _rate(counts, lo, c_done), status, w_peak)
             if c_done > cap:
                 # The fixed-length window of RigModel-based runs (transient cap - measure cycles, then measure
                 # cycles): points and impacts of cycles cap - measure + 1 .. cap.
                 period, imp, kind = _classify_window(u, v, counts, cap - measure + 1, cap + 1, max_period, tol)
+                w_peak = _window_out(u, v, peaks, cap - measure + 1, cap + 1, pts)
                 return (period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP], fs[k.F_THMAX], peak,
-                        _rate(counts, cap - measure + 1, cap + 1), status)
+                        _rate(counts, cap - measure + 1, cap + 1), status, w_peak)
 
     @compiled
-    def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f):
+    def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f,
+                  out_pts):
         """Run every cell; ``chain[i]`` true starts cell ``i`` from the final state of cell ``i - 1``."""
         cap = int(rule[1])
         fs = np.zeros(k.N_FSTATE)
@@ -338,6 +374,7 @@ def _loop(name: str) -> types.ModuleType:
         th_s = np.zeros(cap + 2)
         om_s = np.zeros(cap + 2)
         counts = np.zeros(cap + 2, dtype=np.int64)
+        peaks = np.zeros(cap + 2)
         imp_out = np.empty((256, k.N_RECORD))
         st_out = np.empty((8, n_strobe))
         ch_rate = np.zeros(0)
@@ -358,10 +395,10 @@ def _loop(name: str) -> types.ModuleType:
             if chain[i] and i > 0:
                 th0 = prev_th
                 om0 = prev_om
-            period, imp, kind, cycles, th_end, om_end, steps, th_max, peak, rate, status = loop.run_one(
+            period, imp, kind, cycles, th_end, om_end, steps, th_max, peak, rate, status, w_peak = loop.run_one(
                 params[gap_index[i]], freqs[i], th0, om0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts,
                 imp_out, st_out, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base,
-                tr_out)
+                tr_out, peaks, out_pts[i])
             out_i[i, 0] = period
             out_i[i, 1] = imp
             out_i[i, 2] = kind
@@ -373,6 +410,7 @@ def _loop(name: str) -> types.ModuleType:
             out_f[i, 2] = th_max
             out_f[i, 3] = peak
             out_f[i, 4] = rate
+            out_f[i, 5] = w_peak
             if kind == KIND_FAILED:
                 # A continuation goes on from the fallback state after a failure (the pool path: the final state
                 # from rest at the same frequency).
@@ -413,13 +451,14 @@ def run_cells(model: str, params: np.ndarray, gap_index, freqs, theta0, theta_do
         chain = np.zeros(n, dtype=np.bool_)
     fb_th, fb_om = (theta0, theta_dot0) if fallback is None else fallback
     out_i = np.zeros((n, 6), dtype=np.int64)
-    out_f = np.zeros((n, 5))
+    out_f = np.zeros((n, 6))
+    out_pts = np.zeros((n, max(1, rule.max_period), 2))
     _loop(model).run_cells(np.ascontiguousarray(params, dtype=np.float64),
                            np.ascontiguousarray(gap_index, dtype=np.int64), freqs,
                            np.ascontiguousarray(theta0, dtype=np.float64),
                            np.ascontiguousarray(theta_dot0, dtype=np.float64),
                            np.ascontiguousarray(chain, dtype=np.bool_),
                            np.ascontiguousarray(fb_th, dtype=np.float64), np.ascontiguousarray(fb_om, dtype=np.float64),
-                           rule.vector(), out_i, out_f)
+                           rule.vector(), out_i, out_f, out_pts)
     return EnsembleResult(out_i[:, 0], out_i[:, 1], out_i[:, 2], out_i[:, 3], out_f[:, :2], out_i[:, 4],
-                          out_f[:, 2], out_f[:, 3], out_f[:, 4], out_i[:, 5])
+                          out_f[:, 2], out_f[:, 3], out_f[:, 4], out_i[:, 5], out_pts, out_f[:, 5])

@@ -77,3 +77,68 @@ def test_period_doubling_with_the_defaults_starts_at_4_95_hz():
     cfg = SimConfig()
     assert steady_orbit(cfg, 4.9).label == "1/1"
     assert steady_orbit(cfg, 5.0).label == "2/2"
+
+
+@pytest.mark.parametrize("name", ["paper_model.yaml", "rimd.yaml"])
+def test_peterka_finds_the_no_impact_motion_beside_1_1_at_2_4mm_2_548hz(name):
+    """docs/analyses.md, "rimd peterka": at gap 2.4 mm, 2.548 Hz (Omega/omega_n = 1.4) ``rimd basins`` finds the
+    no-impact motion beside 1/1 (config/rimd.yaml: 33 of 576 initial conditions; config/paper_model.yaml: 1).
+    The three named starts all end on 1/1; the default extra start (the no-impact forced response) finds it, and
+    so do Halton starts over the basins' region without it (rimd.yaml: the 3rd point)."""
+    from rimd_sim.analysis.dynamics.peterka import DEFAULT_EXTRA_STARTS, extra_starts, peterka, stop_rule
+    from rimd_sim.model.ensemble import run_cells
+    from rimd_sim.model.rig_model import model_for
+
+    cfg = load_config(find_config_file(name), {"gap": 2.4e-3})
+    three = peterka(cfg, [2.4e-3], [2.45, 2.548], workers=1, starts=0)
+    assert three.classes_found.tolist() == [["1/1", "1/1"]] and not three.coexisting.any()
+    assert DEFAULT_EXTRA_STARTS >= 1
+    default = peterka(cfg, [2.4e-3], [2.45, 2.548], workers=1)
+    assert default.starts == 3 + DEFAULT_EXTRA_STARTS
+    assert (default.labels == three.labels).all()   # the named starts are untouched
+    assert default.classes_found[0, 1] == "1/1;no impact" and default.coexisting[0, 1]
+    assert default.extra_labels[0, 0, 1] == "no impact"
+    # The Halton starts alone (start 0, the forced response, left out).
+    th, om = extra_starts(cfg, [2.548], 8)
+    model = model_for(cfg)
+    res = run_cells(model.name, model.params(cfg)[None, :], np.zeros(7, dtype=np.int64), np.full(7, 2.548),
+                    th[1:, 0], om[1:, 0], stop_rule(120, 72, True))
+    if name == "rimd.yaml":
+        assert "no impact" in res.labels()
+
+
+def test_extra_starts_nest_and_stay_in_the_basins_region():
+    from rimd_sim.analysis.dynamics.peterka import default_basin_ranges, extra_starts, free_response
+
+    cfg = load_config(find_config_file("rimd.yaml"), {"gap": 1e-3})
+    th, om = extra_starts(cfg, [2.0, 3.0], 16)
+    th8, om8 = extra_starts(cfg, [2.0, 3.0], 8)
+    assert (th[:8] == th8).all() and (om[:8] == om8).all()
+    assert th[0, 1] == free_response(cfg, 3.0)[0] and om[0, 1] == free_response(cfg, 3.0)[1]
+    (t_lo, t_hi), (r_lo, r_hi) = default_basin_ranges(cfg)
+    assert ((t_lo <= th[1:]) & (th[1:] <= t_hi)).all() and ((r_lo <= om[1:]) & (om[1:] <= r_hi)).all()
+    assert len({(a, b) for a, b in zip(th[1:, 0], om[1:, 0], strict=True)}) == 15
+
+
+def test_cluster_orbits_tells_apart_two_orbits_of_one_class_and_compares_them_as_sets():
+    """Synthetic stroboscopic points (u, v): two different 1/2 orbits get two ids, one orbit met at either of
+    its two phases (its points in the other order, 1e-4 apart) one id; two different 1/1 orbits two ids;
+    non-periodic trajectories of one class share one; a trajectory not run gets -1."""
+    from rimd_sim.analysis.dynamics.steady import cluster_orbits, orbit_points, same_orbit
+
+    a = np.array([[0.0, -1.0], [2.0, 1.0]])
+    a_shifted = a[::-1] + 1e-4
+    b = np.array([[0.0, -1.0], [2.5, 1.0]])          # shares a point with a, not the other
+    one, other = np.array([[-3.87, -1.26]]), np.array([[-1.0, 0.5]])
+    labels = ["1/2", "1/2", "1/2", "1/1", "1/1", "1/1", CHAOTIC, CHAOTIC, None]
+    orbits = [a, a_shifted, b, one, other, one + 5e-4, None, None, None]
+    ids, reps = cluster_orbits(labels, orbits)
+    assert ids.tolist() == [0, 0, 1, 2, 3, 2, 4, 4, -1] and reps == [0, 2, 3, 4, 6]
+    assert same_orbit(a, a_shifted) and not same_orbit(a, b) and not same_orbit(a, one)
+    # orbit_points: the last n points of a p/n class; the smallest repeating set of a no-impact motion.
+    u = np.array([5.0, 0.0, 2.0, 0.0, 2.0, 0.0, 2.0])
+    v = np.array([5.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
+    assert orbit_points(u, v, "1/2").tolist() == [[0.0, -1.0], [2.0, 1.0]]
+    assert orbit_points(u[1:], v[1:], NO_IMPACT).shape == (2, 2) and orbit_points(u, v, NO_IMPACT) is None
+    assert orbit_points(u, v, CHAOTIC) is None and orbit_points(np.arange(8.0), np.zeros(8), NO_IMPACT) is None
+    assert orbit_points(np.full(3, np.nan), np.zeros(3), "1/1") is None

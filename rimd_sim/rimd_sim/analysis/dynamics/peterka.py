@@ -10,8 +10,21 @@ initial conditions, the motor at phase 0 and constant frequency:
   the stop in free flight (the paper's "energy inserted", Fig. 12 right);
 * ``continued``: the final state of the neighbouring cell at the next lower frequency, as an upward sweep.
 
-The cell's class is the one from rest; a cell where the three classes differ is marked as holding coexisting
-attractors. Each trajectory stops as soon as its motion is known (the rule of
+The cell's class is the one from rest. More starts look for the other attractors (``starts`` extra per cell,
+default 1, ``rimd peterka --starts N``), run in the same compiled call per row:
+
+* the first, ``free``: the hammer on the no-impact forced response of the linearised pendulum (its state at
+  phase 0, clipped to the stop), so the no-impact motion is found wherever it coexists with impacting ones
+  (at gap 2.4 mm, 2.548 Hz, Omega/omega_n = 1.4: with 1/1 for both configurations; its basin from the region
+  below is 33 of 576 initial conditions in config/rimd.yaml, 1 of 576 in config/paper_model.yaml);
+* the others: the points of a Halton sequence (bases 2, 3; the first N - 1 points after the origin) over the
+  region of ``rimd basins`` (:func:`default_basin_ranges`: angles from ``-3 (gap + A0) / l`` to the stop,
+  rates within ``+-3 omega_n (gap + A0) / l``); the sequence nests, so raising N only adds starts.
+
+A cell is marked as holding coexisting attractors when its starts end on more than one class
+(``classes_found``). The mark is a lower bound: an attractor whose basin misses every start is not found;
+with N - 1 Halton points, a basin that covers less than about 1 / (N - 1) of the region can be missed.
+``starts=0`` is the three-start map. Each trajectory stops as soon as its motion is known (the rule of
 :mod:`rimd_sim.model.ensemble`: a period n <= 12 repeated to 1e-4 over max(24, 4 n) cycles, after at least 30
 cycles) or at the cap, ``transient_cycles + measure_cycles`` (default 120 + 72, twice the fixed length the
 map used before early stopping), where its last ``measure_cycles`` are classified. One gap row is one task:
@@ -24,13 +37,23 @@ Basins of attraction
 At one (gap, frequency), a grid of initial conditions ``(theta0, theta_dot0)`` (hammer not inside the stop)
 each classified the same way; one grid row per task in the pool.
 
+Each initial condition also gets an attractor id: the orbit it ends on, its stroboscopic points (the last
+``n`` of the classified window for a ``p/n`` class, or the smallest repeating set of a no-impact motion) in
+the non-dimensional ``(u, v)`` of :mod:`rimd_sim.analysis.dynamics.steady`, compared as a set with the
+orbits met before to the classification tolerance (:func:`~rimd_sim.analysis.dynamics.steady.cluster_orbits`):
+the same orbit shares an id, another orbit of the same class (another 1/1, a 1/2 shifted by one cycle) gets
+its own. Only settled motions are told apart by their orbit: a trajectory that ran to the cap without
+settling (a non-periodic motion, or a slow transient: near a period doubling a 2/4 read at the cap is still
+converging to 1/2, its points spread by 1e-2 from one initial condition to the next) has no orbit to compare,
+and those of one class share one id (``settled`` false in the list of attractors).
+
 The model's valid domain
 ------------------------
 Every trajectory is checked against :mod:`rimd_sim.model.validity` over its whole run: the compiled loop
 returns its largest ``|theta|``, its largest impact force, its impacts per cycle over the classified window and
 whether the chattering guard stopped it (:mod:`rimd_sim.model.ensemble`); the verdicts are made here, in the
 calling process, from those plain numbers (they travel back from the tasks with the classes). A Peterka cell is
-outside the domain when any of its three starts is (its rules: the union over the starts, in the domain's
+outside the domain when any of its starts is (its rules: the union over the starts, in the domain's
 order); a basin's initial condition when its trajectory is. The classes are reported as before, and marked.
 """
 
@@ -43,7 +66,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rimd_sim.analysis.dynamics.steady import check_frequencies, check_frequency, steady_orbit
+from rimd_sim.analysis.dynamics.steady import (
+    check_frequencies,
+    check_frequency,
+    cluster_orbits,
+    orbit_points,
+    steady_orbit,
+)
 from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.errors import ConfigError, IntegrationError
 from rimd_sim.model import validity
@@ -57,9 +86,12 @@ from rimd_sim.model.validity import (
 )
 from rimd_sim.settings.config import SimConfig
 
-__all__ = ["BasinsResult", "PeterkaResult", "START_NAMES", "basins", "peterka"]
+__all__ = ["BasinsResult", "DEFAULT_EXTRA_STARTS", "PeterkaResult", "START_NAMES", "basins", "extra_starts",
+           "peterka"]
 
 START_NAMES = ("rest", "kick", "continued")
+#: Extra starts per Peterka cell by default: the no-impact forced response (module docstring).
+DEFAULT_EXTRA_STARTS = 1
 FAILED = "integration failed"
 
 
@@ -84,6 +116,10 @@ class PeterkaResult:
         max_abs_theta: Largest ``|theta|`` (rad) of each trajectory's run, same shape (NaN where chattering).
         max_force: Largest impact force (N) of each trajectory's run, same shape (NaN where chattering).
         validity: The summary's report of the valid domain, one point per cell.
+        extra_labels: Class per extra start (module docstring), shape ``(starts, rows, columns)``.
+        extra_invalid_rules: The valid domain's rules per extra start, same shape.
+        extra_max_abs_theta: Largest ``|theta|`` per extra start, same shape.
+        extra_max_force: Largest impact force per extra start, same shape.
     """
 
     gaps_mm: np.ndarray
@@ -101,15 +137,33 @@ class PeterkaResult:
     max_abs_theta: np.ndarray | None = None
     max_force: np.ndarray | None = None
     validity: dict | None = None
+    extra_labels: np.ndarray | None = None
+    extra_invalid_rules: np.ndarray | None = None
+    extra_max_abs_theta: np.ndarray | None = None
+    extra_max_force: np.ndarray | None = None
+
+    @property
+    def starts(self) -> int:
+        """Starts per cell: the three named ones and the extra ones."""
+        return len(START_NAMES) + (0 if self.extra_labels is None else len(self.extra_labels))
+
+    @property
+    def all_labels(self) -> np.ndarray:
+        """Class per start, the named ones then the extra ones, shape ``(starts, rows, columns)``."""
+        return self.labels if self.extra_labels is None else np.concatenate([self.labels, self.extra_labels])
+
+    def _all(self, named, extra):
+        return named if named is None or extra is None else np.concatenate([named, extra])
 
     @property
     def invalid_rule(self) -> np.ndarray:
         """Per cell, the rules its starts broke (the union, in the domain's order), ``""`` when valid."""
         if self.invalid_rules is None:
             return np.full(self.primary.shape, "", dtype=object)
+        rules = self._all(self.invalid_rules, self.extra_invalid_rules)
         out = np.full(self.primary.shape, "", dtype=object)
         for i, j in np.ndindex(*out.shape):
-            out[i, j] = _union(self.invalid_rules[:, i, j])
+            out[i, j] = _union(rules[:, i, j])
         return out
 
     @property
@@ -124,8 +178,18 @@ class PeterkaResult:
 
     @property
     def coexisting(self) -> np.ndarray:
-        """Cells where the starts end on different classes."""
-        return np.any(self.labels != self.labels[:1], axis=0)
+        """Cells where the starts end on different classes (a lower bound: module docstring)."""
+        labels = self.all_labels
+        return np.any(labels != labels[:1], axis=0)
+
+    @property
+    def classes_found(self) -> np.ndarray:
+        """Per cell, the classes its starts ended on, sorted, ``;``-joined."""
+        labels = self.all_labels
+        out = np.full(self.primary.shape, "", dtype=object)
+        for i, j in np.ndindex(*out.shape):
+            out[i, j] = ";".join(sorted(set(labels[:, i, j].tolist())))
+        return out
 
     def class_counts(self) -> dict[str, int]:
         """Cells per class (from rest)."""
@@ -176,13 +240,17 @@ def _row(args: tuple[SimConfig, float, list[float], int, int, int]) -> list[tupl
     return out
 
 
-def _row_ensemble(args: tuple[str, np.ndarray, float, np.ndarray, StopRule, StopRule]):
+def _row_ensemble(args):
     """One gap row in two compiled calls: rest and kick starts, then the continuation along the row.
 
+    A third call runs the extra starts, when any (``args[6]``: ``(theta0, theta_dot0)`` arrays of shape
+    ``(starts, frequencies)``).
+
     Returns ``(labels, cycles, measures)``: per start, the class, the cycles run and the valid domain's measures
-    (:func:`_measures`) of each frequency.
+    (:func:`_measures`) of each frequency; the extra starts after the three named ones.
     """
-    model, p, kick, freqs, rule, continued_rule = args
+    model, p, kick, freqs, rule, continued_rule = args[:6]
+    extra = args[6] if len(args) > 6 else None
     nf = len(freqs)
     zeros = np.zeros(nf)
     both = run_cells(model, p[None, :], np.zeros(2 * nf, dtype=np.int64), np.concatenate([freqs, freqs]),
@@ -193,9 +261,66 @@ def _row_ensemble(args: tuple[str, np.ndarray, float, np.ndarray, StopRule, Stop
                      chain=chain, fallback=(both.final[:nf, 0].copy(), both.final[:nf, 1].copy()))
     labels = both.labels()
     measures = _measures(both)
-    return ([labels[:nf], labels[nf:], cont.labels()],
-            [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()],
-            [measures[:nf], measures[nf:], _measures(cont)])
+    out = ([labels[:nf], labels[nf:], cont.labels()],
+           [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()],
+           [measures[:nf], measures[nf:], _measures(cont)])
+    if extra is not None and extra[0].size:
+        th0, om0 = extra
+        ns = th0.shape[0]
+        res = run_cells(model, p[None, :], np.zeros(ns * nf, dtype=np.int64), np.tile(freqs, ns), th0.ravel(),
+                        om0.ravel(), rule)
+        labels, cycles, measures = res.labels(), res.cycles.tolist(), _measures(res)
+        for s in range(ns):
+            out[0].append(labels[s * nf:(s + 1) * nf])
+            out[1].append(cycles[s * nf:(s + 1) * nf])
+            out[2].append(measures[s * nf:(s + 1) * nf])
+    return out
+
+
+def _halton(index: int, base: int) -> float:
+    """Point ``index`` of the van der Corput sequence in ``base`` (in [0, 1))."""
+    f, r = 1.0, 0.0
+    while index > 0:
+        f /= base
+        r += f * (index % base)
+        index //= base
+    return r
+
+
+def free_response(config: SimConfig, frequency_hz: float) -> tuple[float, float]:
+    """``(theta, theta_dot)`` at phase 0 of the no-impact forced response of the linearised pendulum.
+
+    ``theta'' + 2 zeta omega_n theta' + omega_n^2 theta = (A0 Omega^2 / l) sin(Omega t)`` (docs/physics.md without
+    contact, small angles); the angle clipped to the stop. ``(0, 0)`` at an undamped resonance.
+    """
+    rig = config.rig
+    w = 2.0 * math.pi * float(frequency_hz)
+    den = complex(rig.omega_n ** 2 - w * w, 2.0 * rig.damping_ratio * rig.omega_n * w)
+    if den == 0:
+        return 0.0, 0.0
+    amp = rig.amplitude * w * w / rig.length / den
+    limit = math.asin(min(1.0, rig.gap / rig.length))
+    return min(amp.imag, limit), w * amp.real
+
+
+def extra_starts(config: SimConfig, frequencies_hz, starts: int) -> tuple[np.ndarray, np.ndarray]:
+    """The extra starts of a Peterka row (module docstring): ``(theta0, theta_dot0)``, each ``(starts, freqs)``.
+
+    Start 0 is :func:`free_response` at each frequency; start ``s >= 1`` is Halton point ``s`` (bases 2 and 3)
+    over :func:`default_basin_ranges`, the same at every frequency.
+    """
+    freqs = np.asarray(frequencies_hz, dtype=float)
+    th = np.zeros((starts, len(freqs)))
+    om = np.zeros((starts, len(freqs)))
+    if starts:
+        free = [free_response(config, f) for f in freqs]
+        th[0] = [t for t, _ in free]
+        om[0] = [o for _, o in free]
+    (t_lo, t_hi), (r_lo, r_hi) = default_basin_ranges(config)
+    for s in range(1, starts):
+        th[s] = t_lo + (t_hi - t_lo) * _halton(s, 2)
+        om[s] = r_lo + (r_hi - r_lo) * _halton(s, 3)
+    return th, om
 
 
 def _check_cycles(transient: int, measure: int) -> None:
@@ -210,8 +335,8 @@ def stop_rule(transient_cycles: int, measure_cycles: int, early_stop: bool) -> S
 
 
 def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int = 120, measure_cycles: int = 72,
-            continued_transient_cycles: int = 60, early_stop: bool = True, workers: int | None = None,
-            scheduler: str | None = None, progress=None) -> PeterkaResult:
+            continued_transient_cycles: int = 60, early_stop: bool = True, starts: int = DEFAULT_EXTRA_STARTS,
+            workers: int | None = None, scheduler: str | None = None, progress=None) -> PeterkaResult:
     """Classify every (gap, frequency) cell from three starts (module docstring).
 
     Args:
@@ -224,6 +349,8 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
             attractor).
         early_stop: Stop each trajectory when its motion is known (False: every one runs to the cap, the
             fixed-length run).
+        starts: Extra starts per cell looking for coexisting attractors (module docstring), >= 0; 0 is the
+            three-start map.
         workers: Local processes (default: all cores).
         scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
         progress: Optional callable ``progress(rows_done, rows)``.
@@ -238,6 +365,8 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
     freqs = sorted(check_frequencies(config, frequencies_hz))
     _check_cycles(transient_cycles, measure_cycles)
     _check_cycles(continued_transient_cycles, measure_cycles)
+    if not (isinstance(starts, int | np.integer) and 0 <= starts <= 4096):
+        raise ConfigError("starts", starts, "must be an integer in [0, 4096]")
     start = time.perf_counter()
     rule = stop_rule(transient_cycles, measure_cycles, early_stop)
     continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop)
@@ -247,24 +376,33 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
         cfg = config.with_parameters({"gap": g})
         kick = rig.omega_n * (g + 2.0 * rig.amplitude) / rig.length  # rad/s
         model = model_for(cfg)
-        jobs.append((model.name, model.params(cfg), kick, np.array(freqs), rule, continued_rule))
+        job = (model.name, model.params(cfg), kick, np.array(freqs), rule, continued_rule)
+        jobs.append(job + (extra_starts(cfg, freqs, starts),) if starts else job)
     rows, n, where = run_tasks(_row_ensemble, jobs, workers=workers, scheduler=scheduler, progress=progress)
-    labels = np.array([r[0] for r in rows], dtype=object).transpose(1, 0, 2)
-    cycles = np.array([r[1] for r in rows], dtype=np.int64).transpose(1, 0, 2)
+    all_labels = np.array([r[0] for r in rows], dtype=object).transpose(1, 0, 2)
+    labels = all_labels[:len(START_NAMES)]
+    cycles = np.array([r[1] for r in rows], dtype=np.int64).transpose(1, 0, 2)[:len(START_NAMES)]
     # The domain does not depend on the gap (its force bound is the sensor's range): one for the whole map.
     dom = domain(config)
     measures = [r[2] for r in rows]   # row, start, frequency -> (max |theta|, peak force, rate, chattering)
-    rules = np.array([[_verdicts(dom, per_start) for per_start in row] for row in measures],
-                     dtype=object).transpose(1, 0, 2)
+    all_rules = np.array([[_verdicts(dom, per_start) for per_start in row] for row in measures],
+                         dtype=object).transpose(1, 0, 2)
+    named = len(START_NAMES)
     nan = math.nan
 
     def take(index: int) -> np.ndarray:
         return np.array([[[nan if m[3] else m[index] for m in per_start] for per_start in row] for row in measures],
                         dtype=float).transpose(1, 0, 2)
 
+    theta, force = take(0), take(1)
+    extra = {}
+    if starts:
+        extra = {"extra_labels": all_labels[named:], "extra_invalid_rules": all_rules[named:],
+                 "extra_max_abs_theta": theta[named:], "extra_max_force": force[named:]}
     result = PeterkaResult(np.array(gaps) * 1e3, np.array(freqs), np.array(gaps) / rig.amplitude,
                            np.array(freqs) / rig.natural_frequency, labels, time.perf_counter() - start, n,
-                           transient_cycles + measure_cycles, cycles, early_stop, where, rules, take(0), take(1))
+                           transient_cycles + measure_cycles, cycles, early_stop, where, all_rules[:named],
+                           theta[:named], force[:named], **extra)
     return _with_validity(result, dom)
 
 
@@ -275,18 +413,33 @@ def _with_validity(result, dom: ValidityDomain):
 
 
 def peterka_table(result: PeterkaResult) -> list[dict]:
-    """CSV rows, one per cell; the valid domain's columns after the classes (max over the starts)."""
+    """CSV rows, one per cell; the valid domain's columns after the classes (max over the starts).
+
+    ``coexisting`` and ``classes_found`` are over every start (``starts``: the three named ones and the extra
+    ones), a lower bound (module docstring).
+    """
     rows = []
     cell_rules = result.invalid_rule
+    found = result.classes_found
     for i, g in enumerate(result.gaps_mm):
         for j, f in enumerate(result.frequencies_hz):
             row = {"gap_mm": float(g), "gap_ratio": float(result.gap_ratio[i]), "frequency_hz": float(f),
                    "frequency_ratio": float(result.frequency_ratio[j])}
             row.update({f"class_{name}": result.labels[k, i, j] for k, name in enumerate(START_NAMES)})
             row["coexisting"] = bool(result.coexisting[i, j])
-            row.update(_validity_columns(result, (slice(None), i, j), cell_rules[i, j]))
+            row["classes_found"] = found[i, j]
+            row["starts"] = result.starts
+            row.update(_validity_columns(_AllStarts(result), (slice(None), i, j), cell_rules[i, j]))
             rows.append(row)
     return rows
+
+
+class _AllStarts:
+    """The largest angle and force of a map's every start (named and extra), as :func:`_validity_columns` reads."""
+
+    def __init__(self, result: PeterkaResult) -> None:
+        self.max_abs_theta = result._all(result.max_abs_theta, result.extra_max_abs_theta)
+        self.max_force = result._all(result.max_force, result.extra_max_force)
 
 
 def _validity_columns(result, index, invalid_rule: str) -> dict:
@@ -346,16 +499,24 @@ def cycles_summary(cycles: np.ndarray, cap: int) -> dict:
 def save_peterka_npz(result: PeterkaResult, path) -> None:
     """Write the map as arrays (compact for big maps), NumPy ``.npz``.
 
-    Arrays: ``classes`` (names), ``codes`` (start x gap x frequency, indices into ``classes``), ``starts``,
-    ``coexisting``, ``cycles``, ``gaps_mm``, ``frequencies_hz``, ``gap_ratio``, ``frequency_ratio``.
+    Arrays: ``classes`` (names), ``codes`` (start x gap x frequency, indices into ``classes``; the named starts
+    then the extra ones), ``starts`` (their names: ``rest``, ``kick``, ``continued``, ``free``, ``halton1``,
+    ...), ``coexisting`` (over every start, a lower bound), ``cycles`` (the named starts), ``gaps_mm``,
+    ``frequencies_hz``, ``gap_ratio``, ``frequency_ratio``, ``valid`` and ``invalid_rule`` (per cell, the
+    model's valid domain over every start).
     """
-    names = sorted(set(result.labels.ravel().tolist()))
+    labels = result.all_labels
+    names = sorted(set(labels.ravel().tolist()))
     index = {c: i for i, c in enumerate(names)}
-    codes = np.vectorize(index.__getitem__, otypes=[np.int16])(result.labels)
-    np.savez_compressed(path, classes=np.array(names), codes=codes, starts=np.array(START_NAMES),
+    codes = np.vectorize(index.__getitem__, otypes=[np.int16])(labels)
+    extra = result.starts - len(START_NAMES)
+    start_names = [*START_NAMES, *(["free"] if extra else []), *(f"halton{s}" for s in range(1, extra))]
+    rules = result.invalid_rule
+    np.savez_compressed(path, classes=np.array(names), codes=codes, starts=np.array(start_names),
                         coexisting=result.coexisting, cycles=result.cycles.astype(np.int32),
                         gaps_mm=result.gaps_mm, frequencies_hz=result.frequencies_hz, gap_ratio=result.gap_ratio,
-                        frequency_ratio=result.frequency_ratio)
+                        frequency_ratio=result.frequency_ratio, valid=rules == "",
+                        invalid_rule=rules.astype(str))
 
 
 @dataclass(frozen=True)
@@ -378,6 +539,12 @@ class BasinsResult:
         max_abs_theta: Largest ``|theta|`` (rad) of each run (NaN where not run or chattering).
         max_force: Largest impact force (N) of each run (NaN where not run or chattering).
         validity: The summary's report of the valid domain, one point per initial condition run.
+        attractor_id: The attractor each initial condition ends on (module docstring), same shape as
+            ``labels``; -1 where not run or failed.
+        attractors: Per id, a dict: ``id``, ``class``, ``settled``, ``period`` (points of its orbit; 0 when not
+            settled), ``u``, ``v`` and ``theta_rad``, ``theta_dot_rad_s`` (its stroboscopic points; the last one
+            of its first initial condition when not settled), ``peak_force_n`` (the largest impact of the
+            classified window of its first initial condition), ``cells`` (initial conditions ending on it).
     """
 
     gap_mm: float
@@ -393,6 +560,8 @@ class BasinsResult:
     max_abs_theta: np.ndarray | None = None
     max_force: np.ndarray | None = None
     validity: dict | None = None
+    attractor_id: np.ndarray | None = None
+    attractors: list | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -413,21 +582,27 @@ def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, Sto
                ) -> tuple[list[str], list[int], list]:
     """One row of initial conditions (one rate, every angle) in one compiled call.
 
-    Returns ``(labels, cycles, measures)``; the measures (:func:`_measures`) are None where not run.
+    Returns ``(labels, cycles, measures, points, window_peaks)``; the measures (:func:`_measures`), the last
+    stroboscopic points ``(u, v)`` and the largest impact of the classified window are None where not run.
     """
     model, p, f, thetas, theta_dot, limit, rule = args
     run = np.flatnonzero(thetas <= limit)
     labels = [INSIDE] * len(thetas)
     cycles = [0] * len(thetas)
     measures: list = [None] * len(thetas)
+    points: list = [None] * len(thetas)
+    peaks: list = [None] * len(thetas)
     if len(run):
         res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
                         np.full(len(run), theta_dot), rule)
-        for j, label, c, m in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res), strict=True):
+        for j, label, c, m, pts, pk in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res),
+                                           res.points, res.window_peak.tolist(), strict=True):
             labels[j] = label
             cycles[j] = c
             measures[j] = m
-    return labels, cycles, measures
+            points[j] = pts
+            peaks[j] = pk
+    return labels, cycles, measures, points, peaks
 
 
 def default_basin_ranges(config: SimConfig) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -487,16 +662,47 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
     def take(index: int) -> np.ndarray:
         return np.array([nan if m is None or m[3] else m[index] for m in measures], dtype=float).reshape(shape)
 
-    return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates,
-                        np.array([r[0] for r in rows], dtype=object), time.perf_counter() - start, n,
-                        np.array([r[1] for r in rows], dtype=np.int64), where,
+    labels = np.array([r[0] for r in rows], dtype=object)
+    cycles = np.array([r[1] for r in rows], dtype=np.int64)
+    settled = (cycles.ravel() <= rule.max_cycles).tolist()
+    ids, attractors = _attractors(config, float(frequency_hz), labels.ravel().tolist(),
+                                  [pt for r in rows for pt in r[3]], [pk for r in rows for pk in r[4]], settled,
+                                  rule.tolerance)
+    return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates, labels,
+                        time.perf_counter() - start, n, cycles, where,
                         np.array(rules, dtype=object).reshape(shape), take(0), take(1),
-                        dom.report(Verdict.of(r) for r, m in zip(rules, measures, strict=True) if m is not None))
+                        dom.report(Verdict.of(r) for r, m in zip(rules, measures, strict=True) if m is not None),
+                        ids.reshape(shape), attractors)
+
+
+def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], points: list, peaks: list,
+                settled: list[bool], tolerance: float) -> tuple[np.ndarray, list[dict]]:
+    """Attractor ids of the basins' initial conditions and the list of attractors (module docstring)."""
+    rig = config.rig
+    keep = [None if pts is None or label == FAILED else label for label, pts in zip(labels, points, strict=True)]
+    orbits = [None if label is None or not done else orbit_points(pts[:, 0], pts[:, 1], label, tolerance)
+              for label, pts, done in zip(keep, points, settled, strict=True)]
+    ids, reps = cluster_orbits(keep, orbits, tolerance)
+    omega = 2.0 * math.pi * frequency_hz
+    out = []
+    for a, r in enumerate(reps):
+        orbit = orbits[r] if orbits[r] is not None else points[r][-1:]
+        u, v = orbit[:, 0], orbit[:, 1]
+        theta = np.arcsin(np.clip(u * rig.amplitude / rig.length, -1.0, 1.0))
+        theta_dot = v * rig.amplitude * omega / (rig.length * np.cos(theta))
+        out.append({"id": a, "class": labels[r], "settled": orbits[r] is not None,
+                    "period": 0 if orbits[r] is None else len(orbit),
+                    "u": u.tolist(), "v": v.tolist(), "theta_rad": theta.tolist(),
+                    "theta_dot_rad_s": theta_dot.tolist(),
+                    "peak_force_n": float(peaks[r]), "cells": int((ids == a).sum())})
+    return ids, out
 
 
 def basins_table(result: BasinsResult) -> list[dict]:
-    """CSV rows, one per initial condition; the valid domain's columns after the class."""
+    """CSV rows, one per initial condition; the attractor id after the class, then the valid domain's columns."""
     rules = result.invalid_rule
+    ids = result.attractor_id
     return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j],
+             **({} if ids is None else {"attractor_id": int(ids[i, j])}),
              **({} if rules is None else _validity_columns(result, (i, j), rules[i, j]))}
             for i, r in enumerate(result.theta_dot0) for j, th in enumerate(result.theta0)]

@@ -37,7 +37,7 @@ from rimd_sim.settings.config import SimConfig
 
 __all__ = [
     "CHAOTIC", "NO_IMPACT", "Orbit", "check_frequencies", "check_frequency", "classify", "class_label",
-    "constant_frequency", "steady_orbit",
+    "cluster_orbits", "constant_frequency", "orbit_points", "same_orbit", "steady_orbit",
 ]
 
 NO_IMPACT = "no impact"
@@ -217,3 +217,78 @@ def nondimensional(length: float, amplitude: float, frequency_hz: float, theta, 
 def classes_differ(labels: Sequence[str]) -> bool:
     """Whether a set of classes found from different initial conditions holds more than one class."""
     return len(set(labels)) > 1
+
+
+def orbit_points(u, v, label: str, tolerance: float = 1e-3, max_period: int | None = None) -> np.ndarray | None:
+    """The stroboscopic points of the periodic orbit at the end of ``(u, v)`` (one point per cycle, last last).
+
+    The orbit of a ``p/n`` class is its last ``n`` points; a ``no impact`` motion's is the last ``n`` for the
+    smallest ``n`` whose points repeat within ``tolerance`` over the points given (a damped one: 1). None for a
+    non-periodic motion (chaotic, an undamped quasi-periodic no-impact motion) or missing points (NaN).
+
+    Returns:
+        The points, shape ``(n, 2)``, or None.
+    """
+    pts = np.column_stack([np.asarray(u, dtype=float), np.asarray(v, dtype=float)])
+    if label == NO_IMPACT:
+        n_max = len(pts) // 2 if max_period is None else max_period
+        for n in range(1, n_max + 1):
+            d = pts[n:] - pts[:-n]
+            if len(d) and np.isfinite(d).all() and np.hypot(d[:, 0], d[:, 1]).max() <= tolerance:
+                return pts[-n:]
+        return None
+    p, _, n_text = label.partition("/")
+    if not (p.isdigit() and n_text.isdigit()):
+        return None
+    n = int(n_text)
+    if n > len(pts) or not np.isfinite(pts[-n:]).all():
+        return None
+    return pts[-n:]
+
+
+def same_orbit(a: np.ndarray, b: np.ndarray, tolerance: float = 1e-3) -> bool:
+    """Whether two periodic orbits' stroboscopic point sets are the same set within ``tolerance``.
+
+    Compared as sets (whatever cycle each starts at): the same number of points, and every point of each within
+    ``tolerance`` (non-dimensional distance) of a point of the other.
+    """
+    if a.shape != b.shape:
+        return False
+    d = np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
+    return bool((d.min(axis=1) <= tolerance).all() and (d.min(axis=0) <= tolerance).all())
+
+
+def cluster_orbits(labels: Sequence[str], orbits: Sequence[np.ndarray | None], tolerance: float = 1e-3
+                   ) -> tuple[np.ndarray, list[int]]:
+    """Attractor ids: trajectories ending on the same orbit share one, different orbits get different ones.
+
+    Two trajectories share an id when their classes are equal and their orbits (:func:`orbit_points`) are the
+    same set (:func:`same_orbit`) as the first orbit given that id. A trajectory without an orbit (non-periodic)
+    shares the id of its class's other non-periodic trajectories: those are told apart by class only. Ids are
+    numbered from 0 in order of first appearance; a trajectory whose label is None (not run) gets -1.
+
+    Args:
+        labels: The class of each trajectory (None: not run, id -1).
+        orbits: Its orbit points (or None), same length.
+        tolerance: Non-dimensional distance under which two points are the same (the classification's).
+
+    Returns:
+        ``(ids, representatives)``: the id per trajectory, and per id the index of its first trajectory.
+    """
+    ids = np.full(len(labels), -1, dtype=np.int64)
+    reps: list[int] = []
+    for i, (label, orbit) in enumerate(zip(labels, orbits, strict=True)):
+        if label is None:
+            continue
+        for a, r in enumerate(reps):
+            if labels[r] != label:
+                continue
+            other = orbits[r]
+            if (orbit is None and other is None) or (orbit is not None and other is not None
+                                                     and same_orbit(orbit, other, tolerance)):
+                ids[i] = a
+                break
+        else:
+            ids[i] = len(reps)
+            reps.append(i)
+    return ids, reps

@@ -12,6 +12,15 @@ steady impact force at each step. Three directions:
 At each point the model runs ``cycles`` excitation cycles (after the ramp) and the steady state is read
 over the last ``measure_cycles``: the largest peak force and the number of impacts per cycle.
 
+Impacts per cycle: the last ``measure_cycles`` whole motor cycles (stroboscopic point to stroboscopic point)
+that ended at least half a cycle before the point's end are classified as in
+:func:`rimd_sim.analysis.dynamics.steady.classify`; a periodic ``p/n`` motion reads exactly ``p / n``. A
+window of ``measure_cycles`` periods of time ending at the point's end, the only reading before, can miss
+the impact in progress at its end (its record closes with the contact) and, for a period that does not
+divide ``measure_cycles``, cannot hold a whole number of periods: a steady 1/1 read 0.98. Where the window
+is not periodic (chaotic, or not yet settled to the classification tolerance) the impacts per cycle are still
+that count over the time window.
+
 Every point is checked against the model's valid domain (:mod:`rimd_sim.model.validity`) over its whole run
 (the ramp and the transient included): the largest ``|theta|``, the largest contact force, the impacts per
 cycle and whether the chattering guard fired. A point outside it is marked (``valid``, ``invalid_rule``); a
@@ -29,7 +38,7 @@ from typing import Literal
 
 import numpy as np
 
-from rimd_sim.analysis.dynamics.steady import check_frequencies
+from rimd_sim.analysis.dynamics.steady import check_frequencies, classify, nondimensional
 from rimd_sim.analysis.executor import run_tasks, scheduler_address
 from rimd_sim.errors import ConfigError
 from rimd_sim.model.rig_model import ChatteringError, RigModel
@@ -118,6 +127,34 @@ def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[floa
     return max((i.peak_force for i in last), default=0.0), len(last) / measure_cycles
 
 
+def _steady_rate(out, t_end: float, f: float, measure_cycles: int, rig) -> float | None:
+    """``p / n`` when the last ``measure_cycles`` whole cycles of ``out`` are a periodic motion, else None.
+
+    The cycles are those whose stroboscopic points (start and end) lie in ``out`` and that ended at least half
+    a cycle before ``t_end``, so that every impact started in them has closed its record.
+    """
+    ends = [s for s in out.strobe if s.t <= t_end - 0.5 / f]
+    if len(ends) < measure_cycles + 1:
+        return None
+    window = ends[-measure_cycles - 1:-1]
+    first = window[0].cycle_index
+    if window[-1].cycle_index - first != measure_cycles - 1:
+        return None
+    counts = np.zeros(measure_cycles, dtype=np.int64)
+    for i in out.impacts:
+        if first <= i.cycle_index < first + measure_cycles:
+            counts[i.cycle_index - first] += 1
+    u, v = nondimensional(rig.length, rig.amplitude, f, [s.theta for s in window], [s.theta_dot for s in window])
+    _, period, impacts, _ = classify(u, v, counts)
+    return impacts / period if period > 0 else None
+
+
+def _rate(out, t_end: float, f: float, measure_cycles: int, rig, time_rate: float) -> float:
+    """Impacts per cycle of a point (module docstring): ``p / n`` of a periodic motion, else ``time_rate``."""
+    steady = _steady_rate(out, t_end, f, measure_cycles, rig)
+    return time_rate if steady is None else steady
+
+
 def _point(cfg: SimConfig, f: float, peak: float, rate: float, seconds: float, max_theta: float,
            max_force: float) -> SweepPoint:
     rig = cfg.rig
@@ -138,12 +175,13 @@ def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
     cfg = base.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f})
     duration = cycles / f
     try:
-        out = RigModel(cfg, channels=False, truth=False).advance(duration)
+        out = RigModel(cfg, channels=False, truth=False, strobe=True).advance(duration)
     except ChatteringError as error:
         return _chattering(cfg, f, math.nan if error.t is None else error.t)
     impacts = out.impacts
-    return _point(cfg, f, *_measure(impacts, duration, f, measure_cycles), duration, out.max_abs_theta,
-                  max((i.peak_force for i in impacts), default=0.0))
+    peak, rate = _measure(impacts, duration, f, measure_cycles)
+    return _point(cfg, f, peak, _rate(out, duration, f, measure_cycles, cfg.rig, rate), duration,
+                  out.max_abs_theta, max((i.peak_force for i in impacts), default=0.0))
 
 
 def _rest_chunk(jobs: list[tuple[SimConfig, float, int, int]]) -> list[SweepPoint]:
@@ -160,7 +198,7 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
 
     def start(f: float) -> RigModel:
         return RigModel(config.with_parameters({"motor.initial_frequency": f, "motor.initial_setpoint": f}),
-                        channels=False, truth=False)
+                        channels=False, truth=False, strobe=True)
 
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
     model: RigModel | None = start(order[0])
@@ -184,7 +222,8 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
             model = None
         else:
             t_end = float(model.time)
-            points.append(_point(cfg, f, *_measure(out.impacts, t_end, f, measure_cycles), t_end - float(t0),
+            peak, rate = _measure(out.impacts, t_end, f, measure_cycles)
+            points.append(_point(cfg, f, peak, _rate(out, t_end, f, measure_cycles, cfg.rig, rate), t_end - float(t0),
                                  out.max_abs_theta, max((i.peak_force for i in out.impacts), default=0.0)))
         if progress:
             progress(i + 1, len(order))

@@ -1,6 +1,7 @@
 """``rimd basins``: basins of attraction at one parameter point, a grid of initial (theta, theta').
 
-Writes ``DIR/basins.png``, ``DIR/basins.csv`` and ``DIR/summary.json`` (initial conditions per class).
+Writes ``DIR/basins.png`` (the attractors' stroboscopic points drawn over it), ``DIR/basins.csv`` (with each
+initial condition's attractor id) and ``DIR/summary.json`` (initial conditions per class, the attractors).
 """
 
 from __future__ import annotations
@@ -58,6 +59,11 @@ def main(args: argparse.Namespace) -> int:
         "frequency_ratio": args.frequency / rig.natural_frequency, "theta0_range_rad": list(t_range),
         "theta_dot0_range_rad_s": list(r_range), "size": args.size, "classes": result.class_counts(),
         "coexisting_attractors": len(set(result.class_counts()) - {"inside the stop"}) > 1,
+        "attractors": [{"id": a["id"], "class": a["class"], "settled": a["settled"], "period": a["period"],
+                        "cells": a["cells"],
+                        "theta_rad": a["theta_rad"][0], "theta_dot_rad_s": a["theta_dot_rad_s"][0],
+                        "u": a["u"][0], "v": a["v"][0], "peak_force_n": a["peak_force_n"]}
+                       for a in result.attractors or []],
         "wall_seconds": result.wall_seconds, "workers": result.workers, "validity": result.validity,
     }
     write_summary(args.out, summary)
@@ -65,7 +71,8 @@ def main(args: argparse.Namespace) -> int:
                 f"RIMD model, gap {args.gap_mm:g} mm, {args.frequency:g} Hz "
                 f"(Omega/omega_n = {args.frequency / rig.natural_frequency:.3g}): basins of attraction")
     classes = ", ".join(f"{k}: {v}" for k, v in result.class_counts().items())
-    print(f"{classes}; {result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}")
+    print(f"{classes}; {len(result.attractors or [])} attractor(s); "
+          f"{result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}")
     run = (result.labels != "inside the stop").ravel().tolist()
     rules = [] if result.invalid_rule is None else result.invalid_rule.ravel().tolist()
     sentence = domain(config).sentence((Verdict.of(r) for r, ran in zip(rules, run, strict=False) if ran),

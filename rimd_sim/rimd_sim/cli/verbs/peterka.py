@@ -1,9 +1,11 @@
 """``rimd peterka``: Peterka map, the class of the motion over gap/A0 x Omega/omega (paper Fig. 12 left).
 
 Each cell is classified ``p/n`` (p impacts in n cycles), ``no impact`` or ``chaotic/non-periodic`` from
-rest, from a kick and continuing from the neighbouring lower frequency; cells where these differ (coexisting
-attractors) are marked. Each trajectory stops when its motion is known, or at the cap. Writes
-``DIR/peterka.png``, ``DIR/peterka.csv``, ``DIR/peterka.npz`` (the same as arrays) and ``DIR/summary.json``.
+rest, from a kick and continuing from the neighbouring lower frequency, and from ``--starts`` more (the
+no-impact forced response, then points spread over the region of ``rimd basins``); cells where these
+differ (coexisting attractors, a lower bound at that resolution) are marked. Each trajectory stops when
+its motion is known, or at the cap. Writes ``DIR/peterka.png``, ``DIR/peterka.csv``, ``DIR/peterka.npz``
+(the same as arrays) and ``DIR/summary.json``.
 """
 
 from __future__ import annotations
@@ -23,6 +25,9 @@ from rimd_sim.cli.verbs._analysis_io import (
     write_summary,
 )
 
+#: ``rimd_sim.analysis.dynamics.peterka.DEFAULT_EXTRA_STARTS``, without importing the analysis to build the parser.
+DEFAULT_EXTRA_STARTS = 1
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd peterka``."""
@@ -34,6 +39,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gaps", type=count("--gaps"), default=31, help="gap values, default 31")
     parser.add_argument("--freqs", type=count("--freqs"), default=61, help="frequency values, default 61")
     add_map_arguments(parser, transient=120)
+    parser.add_argument("--starts", type=count("--starts", 0, 4096), default=DEFAULT_EXTRA_STARTS,
+                        help=f"extra starts per cell looking for coexisting attractors, default "
+                             f"{DEFAULT_EXTRA_STARTS} (the no-impact forced response; more: points spread over "
+                             f"the region of rimd basins); 0: the three-start map")
     add_accept_invalid_argument(parser)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the cap) and list the differing cells in "
@@ -62,13 +71,14 @@ def main(args: argparse.Namespace) -> int:
     gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3
     freqs = np.linspace(args.f_min, args.f_max, args.freqs)
     result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
-                     measure_cycles=args.measure_cycles, early_stop=not args.fixed_length,
+                     measure_cycles=args.measure_cycles, early_stop=not args.fixed_length, starts=args.starts,
                      workers=args.workers, scheduler=args.scheduler,
                      progress=progress_printer("peterka", "gap rows"))
     comparison = None
     if args.compare_fixed and not args.fixed_length:
         fixed = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
-                        measure_cycles=args.measure_cycles, early_stop=False, workers=args.workers,
+                        measure_cycles=args.measure_cycles, early_stop=False, starts=args.starts,
+                        workers=args.workers,
                         scheduler=args.scheduler, progress=progress_printer("peterka (fixed length)", "gap rows"))
         comparison = compare_maps(result, fixed, config, args.measure_cycles)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -78,7 +88,13 @@ def main(args: argparse.Namespace) -> int:
         "gaps_mm": [args.gap_min_mm, args.gap_max_mm, args.gaps],
         "frequencies_hz": [args.f_min, args.f_max, args.freqs],
         "cells": int(result.primary.size), "starts": list(START_NAMES), "classes_from_rest": result.class_counts(),
-        "coexisting_cells": int(result.coexisting.sum()), "transient_cycles": args.transient_cycles,
+        "coexisting_cells": int(result.coexisting.sum()),
+        "coexistence": {"starts_per_cell": result.starts, "extra_starts": args.starts, "lower_bound": True,
+                        "resolution": "rest, kick, continued"
+                        + (", the no-impact forced response" if args.starts else "")
+                        + (f" and {args.starts - 1} Halton points over the region of rimd basins"
+                           if args.starts > 1 else "")},
+        "transient_cycles": args.transient_cycles,
         "measure_cycles": args.measure_cycles, "early_stop": result.early_stop,
         "cycles_run": cycles_summary(result.cycles, result.cycles_per_start),
         "wall_seconds": result.wall_seconds, "workers": result.workers, "where": result.where,
