@@ -860,15 +860,13 @@ def continuation(config: SimConfig, start: float, end: float, *, parameter: str 
                                  max_period=settings.max_period)
         except ChatteringError as error:
             attractor = f"the chattering guard fired ({error})"
-            orbit = None
+            invalid_rules.add(CHATTERING)
         else:
             attractor = (f"{orbit.label}" + ("" if orbit.valid else
                                             f", outside the model's valid domain ({orbit.invalid_rule})"))
             invalid_rules.update(orbit.invalid_rule.split(";") if orbit.invalid_rule else ())
-        if orbit is None:
-            invalid_rules.add(CHATTERING)
-        elif orbit.label != CHAOTIC and (period is None or orbit.period in (0, period)):
-            starts.append((period or max(orbit.period, 1), orbit.final_state))
+            if orbit.label != CHAOTIC and (period is None or orbit.period in (0, period)):
+                starts.append((period or max(orbit.period, 1), orbit.final_state))
         if period in (None, 1):
             # The linear forced response, theta = Theta sin(Omega t): the non-impacting orbit of the linearised
             # pendulum (found this way also where no damping lets a transient die out).

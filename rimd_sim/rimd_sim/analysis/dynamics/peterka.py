@@ -395,14 +395,14 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
                         dtype=float).transpose(1, 0, 2)
 
     theta, force = take(0), take(1)
-    extra = {}
-    if starts:
-        extra = {"extra_labels": all_labels[named:], "extra_invalid_rules": all_rules[named:],
-                 "extra_max_abs_theta": theta[named:], "extra_max_force": force[named:]}
     result = PeterkaResult(np.array(gaps) * 1e3, np.array(freqs), np.array(gaps) / rig.amplitude,
                            np.array(freqs) / rig.natural_frequency, labels, time.perf_counter() - start, n,
                            transient_cycles + measure_cycles, cycles, early_stop, where, all_rules[:named],
-                           theta[:named], force[:named], **extra)
+                           theta[:named], force[:named],
+                           extra_labels=all_labels[named:] if starts else None,
+                           extra_invalid_rules=all_rules[named:] if starts else None,
+                           extra_max_abs_theta=theta[named:] if starts else None,
+                           extra_max_force=force[named:] if starts else None)
     return _with_validity(result, dom)
 
 
@@ -579,7 +579,7 @@ INSIDE = "inside the stop"
 
 
 def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, StopRule]
-               ) -> tuple[list[str], list[int], list]:
+               ) -> tuple[list[str], list[int], list, list, list]:
     """One row of initial conditions (one rate, every angle) in one compiled call.
 
     Returns ``(labels, cycles, measures, points, window_peaks)``; the measures (:func:`_measures`), the last
@@ -595,6 +595,7 @@ def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, Sto
     if len(run):
         res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
                         np.full(len(run), theta_dot), rule)
+        assert res.points is not None and res.window_peak is not None  # run_cells fills them
         for j, label, c, m, pts, pk in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res),
                                            res.points, res.window_peak.tolist(), strict=True):
             labels[j] = label
@@ -679,14 +680,16 @@ def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], point
                 settled: list[bool], tolerance: float) -> tuple[np.ndarray, list[dict]]:
     """Attractor ids of the basins' initial conditions and the list of attractors (module docstring)."""
     rig = config.rig
-    keep = [None if pts is None or label == FAILED else label for label, pts in zip(labels, points, strict=True)]
+    keep: list = [None if pts is None or label == FAILED else label
+                  for label, pts in zip(labels, points, strict=True)]
     orbits = [None if label is None or not done else orbit_points(pts[:, 0], pts[:, 1], label, tolerance)
               for label, pts, done in zip(keep, points, settled, strict=True)]
     ids, reps = cluster_orbits(keep, orbits, tolerance)
     omega = 2.0 * math.pi * frequency_hz
     out = []
     for a, r in enumerate(reps):
-        orbit = orbits[r] if orbits[r] is not None else points[r][-1:]
+        found = orbits[r]
+        orbit: np.ndarray = found if found is not None else points[r][-1:]
         u, v = orbit[:, 0], orbit[:, 1]
         theta = np.arcsin(np.clip(u * rig.amplitude / rig.length, -1.0, 1.0))
         theta_dot = v * rig.amplitude * omega / (rig.length * np.cos(theta))

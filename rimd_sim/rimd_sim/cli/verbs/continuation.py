@@ -155,11 +155,11 @@ def main(args: argparse.Namespace) -> int:
     for b in result.branches:
         print(f"branch {b.index}: period {b.period}, {len(b.points)} orbits, {args.parameter} "
               f"{b.points[0].parameter:.6g} -> {b.points[-1].parameter:.6g} ({b.end})")
-    for b in result.bifurcations:
-        to = f", switched to branch {b.new_branch}" if b.new_branch is not None else ""
-        print(f"{b.kind.replace('_', ' ')} at {args.parameter} {b.parameter:.6g}"
-              + (f" ({b.frequency_hz / rig.natural_frequency:.5g} omega_n)" if freq else "")
-              + f" on branch {b.branch} (period {b.period}){to}")
+    for bif in result.bifurcations:
+        to = f", switched to branch {bif.new_branch}" if bif.new_branch is not None else ""
+        print(f"{bif.kind.replace('_', ' ')} at {args.parameter} {bif.parameter:.6g}"
+              + (f" ({bif.frequency_hz / rig.natural_frequency:.5g} omega_n)" if freq else "")
+              + f" on branch {bif.branch} (period {bif.period}){to}")
     print(f"{result.evaluations} periods integrated in {wall:.1f} s; files in {args.out}")
     return validity_exit("continue", rules.sentence(verdicts, "orbits"), args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'branch.csv'}")
