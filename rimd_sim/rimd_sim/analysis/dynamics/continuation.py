@@ -63,7 +63,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from rimd_sim.analysis.dynamics.steady import CHAOTIC, check_frequency, constant_frequency, steady_orbit
-from rimd_sim.errors import AnalysisError, ConfigError
+from rimd_sim.errors import AnalysisError, ConfigError, IntegrationError
 from rimd_sim.model import kernel as k
 from rimd_sim.model.rig_model import ChatteringError, RigModel, model_for
 from rimd_sim.model.shooting import flow_points
@@ -231,16 +231,16 @@ class StartOutsideDomain(AnalysisError):
         invalid_rule: The rules it broke (:mod:`rimd_sim.model.validity`).
     """
 
-    def __init__(self, message: str, invalid_rule: str):
+    def __init__(self, message: str, invalid_rule: str = ""):
         super().__init__(message)
         self.invalid_rule = invalid_rule
 
 
-class _FlowFailed(Exception):
-    """A shooting run failed (the chattering guard, a non-finite state)."""
+class _FlowFailed(IntegrationError):
+    """A shooting run failed (the chattering guard, a non-finite state); the corrector takes it as no convergence."""
 
-    def __init__(self, status: int):
-        super().__init__(status)
+    def __init__(self, status: int = k.ST_OK):
+        super().__init__(f"a shooting run stopped with the driver's status {status}")
         self.status = status
 
 
