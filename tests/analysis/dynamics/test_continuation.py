@@ -248,6 +248,7 @@ def test_the_two_mass_model_is_continued_with_its_modes_in_the_fixed_point():
 # ---- the verb ---------------------------------------------------------------------------------------------
 
 
+@pytest.mark.process   # the brute-force diagram behind runs its up and down sweeps in two processes
 def test_rimd_continue_writes_the_branch_the_bifurcations_and_the_plot(tmp_path):
     out = tmp_path / "cont"
     status = cli.main(["continue", "--config", str(find_config_file("paper_model.yaml")), "--gap-mm", "0",
