@@ -266,8 +266,9 @@ def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: f
         for b in diagram:
             xs = [p.frequency_ratio for p in b.points for _ in p.u]
             ys = [float(u) for p in b.points for u in p.u]
-            ax.scatter(xs, ys, s=2, c="0.65" if b.direction == "up" else "0.8", linewidths=0,
-                       label=f"brute force, sweep {b.direction}", zorder=1)
+            # Large enough to show around a branch drawn over them (where they agree, they are under it).
+            ax.scatter(xs, ys, s=14 if b.direction == "up" else 6, c="0.6" if b.direction == "up" else "0.8",
+                       linewidths=0, label=f"brute force, sweep {b.direction}", zorder=1)
     colours = plt.get_cmap("tab10")
     seen_periods: set[int] = set()
     for br in result.branches:
