@@ -245,6 +245,22 @@ def test_the_two_mass_model_is_continued_with_its_modes_in_the_fixed_point():
     assert (lyap < 0) == point.stable
 
 
+def test_a_branch_in_the_gap_meets_the_frequency_branch_at_their_common_point():
+    """Continuation in another parameter (the gap, from its bound 0) at a fixed frequency: its first orbit is the
+    frequency branch's orbit at that frequency, and each orbit is a fixed point at its own gap."""
+    config = _config("rimd.yaml", 0.0)
+    by_gap = continuation(config, 0.0, 0.5e-3, parameter="gap", frequency_hz=3.75,
+                          settings=ContinuationSettings(switch=False))
+    branch = by_gap.branches[0]
+    assert by_gap.parameter == "gap" and branch.points[0].parameter == 0.0
+    assert branch.points[-1].parameter == pytest.approx(0.5e-3) and all(p.frequency_hz == 3.75 for p in branch.points)
+    x, _ = fixed_point(config, 3.75, branch.points[0].point)
+    assert np.allclose(x, branch.points[0].point, rtol=0, atol=1e-9)
+    mid = branch.points[len(branch.points) // 2]
+    tight = _config("rimd.yaml", mid.parameter * 1e3).with_parameters(SHOOTING_TOLERANCES)
+    assert np.allclose(_strobe(tight, 3.75, mid.point), mid.point, rtol=0, atol=1e-8)
+
+
 # ---- the verb ---------------------------------------------------------------------------------------------
 
 
