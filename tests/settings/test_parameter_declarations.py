@@ -155,3 +155,77 @@ def test_adding_a_parameter_is_one_edit(rclpy_context, tmp_path, monkeypatch):
     row = [line for line in gen_docs.parameter_table(table).splitlines() if line.startswith("| `ring_buffer`")]
     assert row == ["| `ring_buffer` | `2.5` | float | s | must be > 0 and <= 60 s | seconds kept in memory before "
                    "writing (read at start) |"]
+
+
+# ---- every rule in the documentation ---------------------------------------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[2]
+#: The page that documents each node's parameters (the generated tables of scripts/gen_docs.py).
+PAGES = {"simulator": "docs/configuration.md", "recorder": "docs/recording.md", "replay": "docs/recording.md",
+         "rerun": "docs/rerun.md"}
+
+
+def _refused_in_post_init(cls: type) -> set[str]:
+    """The parameters the ``__post_init__`` of ``cls`` and of its groups names: the rules between fields.
+
+    Every string constant of those methods' source that is a parameter's full name, or the tail of one after its
+    group's prefix (``"range_max"`` of ``channels.<name>.range_max``).
+    """
+    import ast
+    import inspect
+    import textwrap
+
+    names = parameters(cls)
+    found: set[str] = set()
+    seen: set[type] = set()
+
+    def visit(klass: type) -> None:
+        if klass in seen or not dataclasses.is_dataclass(klass):
+            return
+        seen.add(klass)
+        if "__post_init__" in vars(klass):
+            tree = ast.parse(textwrap.dedent(inspect.getsource(vars(klass)["__post_init__"])))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                    found.update(n for n in names if n == node.value or n.endswith("." + node.value))
+        for f in dataclasses.fields(klass):
+            default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+            for item in default if isinstance(default, tuple) else (default,):
+                if dataclasses.is_dataclass(item):
+                    visit(type(item))
+
+    visit(cls)
+    return found
+
+
+def test_every_rule_between_fields_is_declared_on_the_parameter_it_refuses():
+    """A refusal from a ``__post_init__`` names a parameter whose declaration says the rule (``relation``)."""
+    from rimd_sim.settings.config import SimConfig, SimulatorNodeSettings
+    from rimd_sim.settings.recording import RecorderSettings
+    from rimd_sim.viz.bridge_settings import BridgeSettings
+
+    checked = 0
+    for cls in (SimConfig, SimulatorNodeSettings, RecorderSettings, ReplaySettings, BridgeSettings):
+        refused = _refused_in_post_init(cls)
+        table = parameters(cls)
+        missing = sorted(name for name in refused if not table[name].relation)
+        assert not missing, f"{cls.__name__}: rules between fields not declared (relation=...): {missing}"
+        checked += len(refused)
+    # The rules of the rig that users meet: the gap's l/2, the spring's, the motor's ceiling, the channels'.
+    for name in ("gap", "pendulum_length", "structure.impactor_mass", "motor.initial_setpoint",
+                 "channels.impact_force.range_max", "channels.impact_force.highpass", "lockstep.consumers"):
+        assert name in _refused_in_post_init(SimConfig) | _refused_in_post_init(SimulatorNodeSettings), name
+    assert checked >= 10
+
+
+@pytest.mark.parametrize(("node", "name"), ALL, ids=[f"{n}:{k}" for n, k in ALL])
+def test_every_rule_of_every_parameter_is_in_its_documentation(node, name):
+    """The whole rule, the bounds, the choices, the extra rule and the relation, in the node's page."""
+    p = TABLES[node][name]
+    page = (ROOT / PAGES[node]).read_text(encoding="utf-8")
+    rule = " ".join(p.rule.split()).replace("|", "\\|")
+    if name.startswith("channels."):   # one row per field of every channel
+        assert rule in page, f"{PAGES[node]} lacks the rule of {name}: {rule!r}"
+    else:
+        rows = [line for line in page.splitlines() if line.startswith(f"| `{name}` |")]
+        assert rows and rule in rows[0], f"{PAGES[node]} lacks the rule of {name}: {rule!r}"

@@ -139,7 +139,10 @@ else:
 # ---- parameter vector ------------------------------------------------------------------------------
 P_L, P_M, P_A0, P_GL, P_WN, P_ZETA, P_GAP, P_LAW, P_K, P_C, P_N, P_E, P_VMIN = range(13)
 P_RTOL, P_ATOL, P_HMAX, P_EVTOL, P_HCONT0 = range(13, 18)
-N_PARAM = 18
+# The pivot's spring of a hammer whose length is set apart from its natural frequency, per unit m l^2:
+# k_t / (m l^2) = omega_n^2 - g / l (1/s^2); 0 for the gravity pendulum (no term at all then).
+P_KS = 18
+N_PARAM = 19
 
 # ---- float state -----------------------------------------------------------------------------------
 F_TA, F_TB, F_H, F_HFREE, F_HCONT = range(5)

@@ -29,6 +29,7 @@ from rimd_sim.model.kernel import (
     P_HCONT0,
     P_HMAX,
     P_K,
+    P_KS,
     P_L,
     P_LAW,
     P_M,
@@ -62,11 +63,14 @@ def theta_accel(t, th, om, mode, p, fs):
 
     ``theta'' = -(a_c / l) cos(theta) - (g / l) sin(theta) - 2 zeta w_n theta' - F / (m l)``, where
     ``a_c = -A0 Omega^2 sin(Omega t)`` at constant motor speed. The contact force pushes the hammer out
-    of the stop (the paper prints ``+F/(ml)``).
+    of the stop (the paper prints ``+F/(ml)``). A hammer whose length is set apart from its natural frequency
+    (``pendulum_length``) adds its pivot's spring, ``- k_t theta / (m l^2)`` with ``k_t / (m l^2) = w_n^2 - g / l``.
     """
     s, c = sincos(th)
     lg = p[P_L]
     acc = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * s - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if p[P_KS] != 0.0:   # the pivot's spring (no spring: not a term, bit-identical)
+        acc -= p[P_KS] * th
     force = 0.0
     if mode == CONTACT:
         force = law_force(lg * s - p[P_GAP], lg * om * c, p, fs[F_VIMP])
@@ -137,6 +141,8 @@ def sample(qty, mode, s, p, fs, w, alpha, sp, cp):
     # The inertial acceleration x'' = l (theta'' cos - theta'^2 sin) + a_c, theta'' from the cart's a_c.
     ac = p[P_A0] * (alpha * cp - w * w * sp)
     acc = -(ac / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if p[P_KS] != 0.0:   # the pivot's spring (no spring: not a term, bit-identical)
+        acc -= p[P_KS] * s[0]
     if mode == CONTACT:
         acc -= law_force(lg * sn - p[P_GAP], lg * om * c, p, fs[F_VIMP]) / (p[P_M] * lg)
     return lg * (acc * c - om * om * sn) + ac
@@ -155,6 +161,8 @@ def truth(mode, s, t, p, fs, xc, vc, ac):
     sn, c = sincos(th)
     lg = p[P_L]
     acc = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if p[P_KS] != 0.0:   # the pivot's spring (no spring: not a term, bit-identical)
+        acc -= p[P_KS] * th
     d = lg * sn - p[P_GAP]
     force = 0.0
     if mode == CONTACT:
@@ -177,6 +185,7 @@ def params(config) -> np.ndarray:
     p[P_A0] = rig.amplitude
     p[P_GL] = rig.gravity / length
     p[P_WN] = rig.omega_n
+    p[P_KS] = max(rig.omega_n ** 2 - rig.gravity / length, 0.0) if rig.pendulum_length > 0.0 else 0.0
     p[P_ZETA] = rig.damping_ratio
     p[P_GAP] = rig.gap
     p[P_LAW] = CONTACT_LAWS[c.model].code

@@ -51,6 +51,7 @@ from rimd_sim.model.kernel import (
     P_GAP,
     P_GL,
     P_HCONT0,
+    P_KS,
     P_L,
     P_M,
     P_WN,
@@ -175,6 +176,8 @@ def rates(t, th, om, u, up, sm, smp, mode, p, fs):
     lg = p[P_L]
     # The pendulum's terms, as rimd_sim.model.rigid.theta_accel writes them.
     acc = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if p[P_KS] != 0.0:   # the pivot's spring (no spring: not a term, bit-identical)
+        acc -= p[P_KS] * th
     if mode != CONTACT:
         return om, acc, 0.0, 0.0, 0.0, 0.0, 0.0
     force = law_force(lg * sn + p[P_R2] * u - sm - p[P_GAP], lg * om * c + p[P_R2] * up - smp, p, fs[F_VIMP])
@@ -277,6 +280,8 @@ def sample(qty, mode, s, p, fs, w, alpha, sp, cp):
                           fs[F_VIMP])
     ac = p[P_A0] * (alpha * cp - w * w * sp)  # the centre of mass's x'', as rimd_sim.model.rigid.sample writes it
     acc = -(ac / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if p[P_KS] != 0.0:   # the pivot's spring (no spring: not a term, bit-identical)
+        acc -= p[P_KS] * s[0]
     if mode == CONTACT:
         acc -= force / (p[P_M] * lg)
     return rear_accel(lg * (acc * c - om * om * sn) + ac, s[2], s[3], force, mode, p)
@@ -294,6 +299,8 @@ def truth(mode, s, t, p, fs, xc, vc, ac):
     sn, c = sincos(th)
     lg = p[P_L]
     xdd = -(cart_accel(fs, p, t) / lg) * c - p[P_GL] * sn - 2.0 * p[P_ZETA] * p[P_WN] * om
+    if p[P_KS] != 0.0:   # the pivot's spring (no spring: not a term, bit-identical)
+        xdd -= p[P_KS] * th
     delta = lg * sn + p[P_R2] * u - sm - p[P_GAP]
     force = 0.0
     if mode == CONTACT:

@@ -114,7 +114,9 @@ class StructureParams:
     model: str = param("rigid", "contact model: rigid (the paper's single-mass hammer) or two_mass (axial mode "
                                 "and sensor mount)", choices=STRUCTURE_MODELS)
     impactor_mass: float = param(0.06, "front (impact device) mass of the two-mass hammer, < mass", unit="kg",
-                                 ge=1e-3, le=1000)
+                                 ge=1e-3, le=1000,
+                                 relation="< mass when structure.model is two_mass and structure.axial_stiffness "
+                                          "is not 0")
     axial_stiffness: float = param(0.0, "axial stiffness of the hammer, 0 = rigid", unit="N/m", zero="rigid",
                                    ge=1e3, le=1e10)
     axial_damping_ratio: float = param(0.05, "damping ratio of the hammer's axial mode", ge=0, lt=1)
@@ -132,7 +134,8 @@ class RigParams:
     Table 1 (README); the rest are the paper's.
     """
 
-    gap: float = param(0.0, "gap between hammer at rest and force sensor", unit="m", ge=0, le=0.05)
+    gap: float = param(0.0, "gap between hammer at rest and force sensor", unit="m", ge=0, le=0.05,
+                       relation="< l/2, half the pendulum length")
     # At least 1 g: a lighter hammer (1e-9 kg) made the contact so stiff that the integrator hung.
     mass: float = param(0.15, "hammer mass m", unit="kg", ge=1e-3, le=1000)
     amplitude: float = param(1e-3, "cart displacement amplitude A0", unit="m", ge=0, le=0.05)
@@ -140,6 +143,15 @@ class RigParams:
                                      unit="Hz", gt=0, le=1000)
     damping_ratio: float = param(0.08, "structural damping ratio zeta", ge=0, le=2)
     gravity: float = param(9.81, "gravitational acceleration", unit="m/s^2", gt=0, le=100)
+    # A hammer on wires is a gravity pendulum, l = g / omega_n^2: 18-22 Hz designs (f_n near 10 Hz) would need a
+    # 2.5 mm pendulum. A longer pendulum with a torsional spring at its pivot keeps g real; the spring is not a
+    # parameter of its own but what the declared length and natural frequency leave to it (``spring_stiffness``).
+    pendulum_length: float = param(0.0, "pendulum length l apart from the natural frequency: a torsional spring at "
+                                        "the pivot supplies the rest of the restoring stiffness, k_t = m l^2 "
+                                        "(2 pi f_n)^2 - m g l >= 0; 0 = a gravity pendulum, l = g / (2 pi f_n)^2",
+                                   unit="m", zero="gravity pendulum", ge=1e-3, le=10,
+                                   relation="when not 0, >= g / (2 pi natural_frequency)^2 (a spring cannot have a "
+                                            "negative stiffness)")
     contact: ContactParams = group(ContactParams, "contact.")
     structure: StructureParams = group(StructureParams, "structure.")
 
@@ -149,13 +161,36 @@ class RigParams:
         if s.model == "two_mass" and s.axial_stiffness > 0.0 and s.impactor_mass >= self.mass:
             raise ConfigError("structure.impactor_mass", s.impactor_mass,
                               f"must be < mass = {self.mass:g} kg (the rest of the hammer is the rear mass)")
+        if self.pendulum_length > 0.0 and self.pendulum_length < self.gravity_length:
+            raise ConfigError("pendulum_length", self.pendulum_length,
+                              f"must be 0 (a gravity pendulum) or >= g / (2 pi natural_frequency)^2 = "
+                              f"{self.gravity_length:.6g} m: a shorter pendulum at natural_frequency = "
+                              f"{self.natural_frequency:g} Hz would need a spring of negative stiffness")
         if self.gap >= 0.5 * self.length:
             raise ConfigError("gap", self.gap, f"must be < half the pendulum length l/2 = {0.5 * self.length:.6g} m")
 
     @property
-    def length(self) -> float:
-        """Equivalent pendulum length ``l = g / (2 pi f_n)^2`` in m."""
+    def gravity_length(self) -> float:
+        """Length of the gravity pendulum of the natural frequency, ``g / (2 pi f_n)^2`` (m)."""
         return self.gravity / (2.0 * math.pi * self.natural_frequency) ** 2
+
+    @property
+    def length(self) -> float:
+        """Pendulum length ``l`` (m): ``pendulum_length``, or the gravity pendulum's ``g / (2 pi f_n)^2`` if 0."""
+        return self.length_at(self.natural_frequency)
+
+    def length_at(self, natural_frequency: float) -> float:
+        """The pendulum length (m) these parameters give at another natural frequency (identification's trials)."""
+        if self.pendulum_length > 0.0:
+            return self.pendulum_length
+        return self.gravity / (2.0 * math.pi * natural_frequency) ** 2
+
+    @property
+    def spring_stiffness(self) -> float:
+        """Torsional stiffness of the pivot's spring, ``k_t = m l^2 omega_n^2 - m g l`` (N m/rad); 0 without one."""
+        if self.pendulum_length <= 0.0:
+            return 0.0
+        return max(self.mass * self.length * (self.length * self.omega_n ** 2 - self.gravity), 0.0)
 
     @property
     def omega_n(self) -> float:
@@ -172,8 +207,10 @@ class MotorParams:
 
     max_frequency: float = param(12.0, "highest motor frequency accepted", unit="Hz", gt=0, le=1000)
     ramp_rate: float = param(2.0, "default ramp rate of the motor frequency", unit="Hz/s", gt=0, le=MAX_RAMP_RATE)
-    initial_frequency: float = param(0.0, "motor frequency at start, <= motor.max_frequency", unit="Hz", ge=0)
-    initial_setpoint: float = param(3.75, "motor setpoint at start, <= motor.max_frequency", unit="Hz", ge=0)
+    initial_frequency: float = param(0.0, "motor frequency at start", unit="Hz", ge=0,
+                                     relation="<= motor.max_frequency")
+    initial_setpoint: float = param(3.75, "motor setpoint at start", unit="Hz", ge=0,
+                                    relation="<= motor.max_frequency")
 
     def __post_init__(self) -> None:
         """Rules between the fields."""
@@ -210,11 +247,13 @@ class ChannelConfig:
     range_min: float = param(-1.0, "lower end of the measuring range (readings are clipped to it; the channel's "
                                    "unit)", ge=-MAX_SI_MAGNITUDE, le=MAX_SI_MAGNITUDE)
     range_max: float = param(1.0, "upper end of the measuring range (the channel's unit)", ge=-MAX_SI_MAGNITUDE,
-                             le=MAX_SI_MAGNITUDE)
+                             le=MAX_SI_MAGNITUDE, relation="> range_min")
     noise_std: float = param(0.0, "white noise standard deviation (the channel's unit)", ge=0, le=MAX_SI_MAGNITUDE)
     resolution: float = param(0.0, "quantisation step, 0 = none (the channel's unit)", ge=0, le=MAX_SI_MAGNITUDE)
-    bandwidth: float = param(0.0, "-3 dB low-pass frequency, 0 = none", unit="Hz", ge=0, le=1e6)
-    highpass: float = param(0.0, "-3 dB high-pass frequency, 0 = DC-coupled", unit="Hz", ge=0, le=1e6)
+    bandwidth: float = param(0.0, "-3 dB low-pass frequency, 0 = none", unit="Hz", ge=0, le=1e6,
+                             relation="> highpass when both are set")
+    highpass: float = param(0.0, "-3 dB high-pass frequency, 0 = DC-coupled", unit="Hz", ge=0, le=1e6,
+                            relation="< 0.45 x sample_rate when set")
     reliable: bool = param(True, "reliable QoS (else best effort); read at start")
     frame_id: str = param("", "sensor id in header.frame_id",
                           rule="a non-empty string without NUL characters (a ROS 2 string is a C string)",

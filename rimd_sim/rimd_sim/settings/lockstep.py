@@ -30,7 +30,8 @@ class LockstepSettings:
     consumers: tuple[str, ...] = param((), "names of the consumers waited for, before the first block and all "
                                            "along (the `consumer` of their /rig/progress reports)",
                                        rule="a list of distinct non-empty names without surrounding spaces",
-                                       check=_names, breaks=(("a", "a"), (" a",)), read_only=True)
+                                       check=_names, breaks=(("a", "a"), (" a",)), read_only=True,
+                                       relation="at least one when lockstep.enabled is true")
     window: float = param(1.0, "how far a consumer may lag behind the publisher (data time)", unit="s", gt=0,
                           le=3600, read_only=True)
     timeout: float = param(10.0, "seconds a consumer may hold the run without progress before lockstep.on_timeout "

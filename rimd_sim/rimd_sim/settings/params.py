@@ -14,7 +14,10 @@ rule, in one place. From that one declaration come
 Groups of parameters nest: a field declared with :func:`group` holds another settings class whose parameter
 names take a prefix (``contact.stiffness``); :func:`keyed` holds a tuple of one settings class per key, each
 with its own defaults (``channels.impact_force.sample_rate``). Rules that tie several fields together
-(``range_min < range_max``) are the class's ``__post_init__``, raising ``ConfigError`` too.
+(``range_min < range_max``) are the class's ``__post_init__``, raising ``ConfigError`` too; each such rule is
+declared in words on the parameter it refuses (``relation``), so that its rule, as the documentation shows it,
+is whole (``tests/settings/test_parameter_declarations.py`` finds the parameters a ``__post_init__`` refuses and
+checks that each declares its relation).
 
 Adding a parameter is one edit: a field with :func:`param` in the settings class of its node.
 """
@@ -60,6 +63,8 @@ class Param:
         read_only: Read at start only: refused at run time.
         breaks: Values that break :attr:`extra_rule` (for the generated bad-input tests; the bounds and choices
             give theirs by themselves).
+        relation: Words of a rule between this parameter and others, checked by the settings class's
+            ``__post_init__`` (not by :meth:`validate`, which sees one value): shown in :attr:`rule`.
         attr: Attribute path from the root settings object.
     """
 
@@ -78,6 +83,7 @@ class Param:
     read_only: bool = False
     breaks: tuple[Any, ...] = ()
     attr: tuple[str, ...] = ()
+    relation: str = ""
 
     @property
     def kind(self) -> str:
@@ -110,8 +116,10 @@ class Param:
             words.append("one of: " + ", ".join(self.choices))
         if self.extra_rule:
             words.append(self.extra_rule)
-        if not words:
-            words.append({"bool": "true or false", "int": "an integer", "float": "a number", "str": "a string",
+        if self.relation:
+            words.append(self.relation)
+        if not words or words == [self.relation]:
+            words.insert(0, {"bool": "true or false", "int": "an integer", "float": "a number", "str": "a string",
                           "str[]": "a list of strings"}[self.kind])
         return "must be " + "; ".join(words)
 
@@ -201,7 +209,7 @@ BAD_REGEX_LISTS = (("(",), ("[z-a]",), ("*",), ("ok", "?+"))
 def param(default: Any, description: str, *, unit: str = "", ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, zero: bool | str = False, choices: tuple[str, ...] = (),
           rule: str = "", check: Callable[[Any], bool | str | None] | None = None, read_only: bool = False,
-          breaks: tuple[Any, ...] = (), name: str | None = None) -> Any:
+          breaks: tuple[Any, ...] = (), name: str | None = None, relation: str = "") -> Any:
     """A dataclass field that is a parameter (see :class:`Param` for the arguments).
 
     ``name``: the parameter's name within its group when it is not the field's name (``truth.sample_rate``).
@@ -211,7 +219,7 @@ def param(default: Any, description: str, *, unit: str = "", ge: float | None = 
     if isinstance(default, list):
         default = tuple(default)
     decl = Param(name or "", default, description, unit, ge, gt, le, lt, zero, tuple(choices), rule, check,
-                 read_only, tuple(breaks))
+                 read_only, tuple(breaks), relation=relation)
     return dataclasses.field(default=default, metadata={_PARAM: decl})
 
 

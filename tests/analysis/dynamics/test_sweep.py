@@ -46,7 +46,11 @@ def test_rimd_sweep_refuses_bad_ranges(tmp_path, capsys):
     assert "--f-min 5 > --f-max 3" in capsys.readouterr().err
     assert cli.main(["sweep", "--f-max", "50", "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
-    assert "parameter 'frequencies'" in err and "<= 12.0 Hz" in err  # the motor's configured maximum
+    # The refusal names the parameter that sets the ceiling, and its value.
+    assert "parameter 'frequencies'" in err and "<= motor.max_frequency = 12 Hz" in err, err
+    for verb in (["bifurcation", "--f-max", "50"], ["peterka", "--f-max", "50", "--gap-max-mm", "0"]):
+        assert cli.main([*verb, "--out", str(tmp_path)]) == 1
+        assert "motor.max_frequency = 12 Hz" in capsys.readouterr().err, verb
 
 
 def test_coexisting_attractors_at_gap_2_4mm():

@@ -134,7 +134,7 @@ def check_frequency(config: SimConfig, frequency_hz: float) -> float:
         ConfigError: Unless finite, > 0 and <= the motor's maximum (``motor.max_frequency``).
     """
     if not (math.isfinite(frequency_hz) and 0 < frequency_hz <= config.motor.max_frequency):
-        raise ConfigError("frequency", frequency_hz, f"must be > 0 and <= {config.motor.max_frequency} Hz")
+        raise ConfigError("frequency", frequency_hz, f"must be > 0 and <= {_ceiling(config)}")
     return float(frequency_hz)
 
 
@@ -146,8 +146,14 @@ def check_frequencies(config: SimConfig, frequencies) -> list[float]:
     """
     freqs = [float(f) for f in frequencies]
     if not freqs or any(not (0 < f <= config.motor.max_frequency) for f in freqs):
-        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {config.motor.max_frequency} Hz")
+        raise ConfigError("frequencies", freqs, f"must be non-empty, each > 0 and <= {_ceiling(config)}")
     return freqs
+
+
+def _ceiling(config: SimConfig) -> str:
+    """The motor's maximum as a refusal names it: the parameter, its value, and how to raise it."""
+    return (f"motor.max_frequency = {config.motor.max_frequency:g} Hz (a parameter of the configuration: raise "
+            "it there to go higher)")
 
 
 def constant_frequency(config: SimConfig, frequency_hz: float, theta0: float = 0.0, theta_dot0: float = 0.0

@@ -372,7 +372,7 @@ def local_stages(data: rec.RecordedData, base: SimConfig, fixed: dict[str, float
             params["damping_ratio"] = max(zeta, 0.0)
     wn = 2 * math.pi * params.get("natural_frequency", rig.natural_frequency)
     zeta_ = params.get("damping_ratio", rig.damping_ratio)
-    length = rig.gravity / wn ** 2
+    length = rig.length_at(wn / (2 * math.pi))
 
     # 4. contact
     contact = None

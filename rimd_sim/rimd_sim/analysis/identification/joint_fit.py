@@ -327,7 +327,7 @@ class JointFit:
         """``cos(theta)`` at the gap, the mass, ``zeta w_n`` of the parameters."""
         rig = self.base.rig
         wn = 2 * math.pi * values.get("natural_frequency", rig.natural_frequency)
-        length = rig.gravity / wn ** 2
+        length = rig.length_at(wn / (2 * math.pi))
         gap = values.get("gap", rig.gap)
         cos_t = math.sqrt(max(1.0 - (gap / length) ** 2, 0.0))
         return cos_t, values.get("mass", rig.mass), values.get("damping_ratio", rig.damping_ratio) * wn

@@ -313,7 +313,7 @@ def pulse_model(metadata: dict[str, dict[str, str]]) -> SpringDashpotPulse | Non
     cos_theta, sigma_free = 1.0, 0.0
     try:
         wn = 2 * math.pi * float(params["natural_frequency"])
-        length = float(params.get("gravity", 9.81)) / wn ** 2
+        length = float(params.get("pendulum_length", 0.0)) or float(params.get("gravity", 9.81)) / wn ** 2
         cos_theta = math.sqrt(max(1.0 - (float(params["gap"]) / length) ** 2, 0.0))
         sigma_free = float(params["damping_ratio"]) * wn
     except (KeyError, ValueError, ZeroDivisionError):
