@@ -184,6 +184,25 @@ def test_a_spring_restored_hammer_runs_in_a_sweep_a_map_and_the_simulator():
     assert len(block.impacts) >= 15 and force.max() > 100.0
 
 
+def test_a_spring_restored_hammer_is_identified_from_its_recording(tmp_path):
+    """A 5 s recording of the design at 19 and 21 Hz (1/1 impacts, no free flight: f_n and zeta fixed)."""
+    from harness.ident_rigs import Schedule, write_core_recording
+    from rimd_sim.analysis.identification.identify import identify
+    from rimd_sim.settings.config import SimConfig
+
+    rig = {"pendulum_length": 0.023, "natural_frequency": 10.0, "mass": 1.0, "gap": 0.25e-3, "damping_ratio": 0.02,
+           "motor.max_frequency": 30.0}
+    path = tmp_path / "spring.mcap"
+    write_core_recording(path, rig, Schedule([19.0, 21.0], dwell=2.5, start=1.0, seed=3))
+    fixed = {"natural_frequency": 10.0, "damping_ratio": 0.02}
+    base = SimConfig().with_parameters({"pendulum_length": 0.023, "motor.max_frequency": 30.0, **fixed})
+    result = identify(path, base, fixed)
+    truth = {**rig, "amplitude": 1e-3, "contact.stiffness": 5.5e6, "contact.damping": 1.2e3}
+    assert set(result.estimates) >= {"mass", "contact.stiffness", "contact.damping", "gap"}
+    for name, estimate in result.estimates.items():
+        assert estimate.value == pytest.approx(truth[name], rel=0.01), name
+
+
 def test_identification_geometry_follows_the_declared_length():
     cfg = _spring_config()
     assert cfg.rig.length_at(12.0) == 0.023   # the length stays; the spring takes the change
