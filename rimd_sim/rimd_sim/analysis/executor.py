@@ -150,6 +150,9 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, task
         scheduler: Dask scheduler address (default: ``$RIMD_DASK_SCHEDULER``, else local).
         tasks: Number of tasks to come, to start no more local processes than tasks.
 
+    Yields:
+        The runner: its executor, its workers and where it runs.
+
     Raises:
         SchedulerError: Bad address, scheduler unreachable or without workers.
     """
@@ -170,6 +173,20 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, task
 
 def run_tasks(fn: Callable, jobs: Sequence, *, workers: int | None = None, scheduler: str | None = None,
               progress=None) -> tuple[list, int, str]:
-    """Run ``fn`` over ``jobs`` through the seam; returns ``(results in job order, workers, where)``."""
+    """Run ``fn`` over ``jobs`` through the seam (:func:`open_executor`).
+
+    Args:
+        fn: A picklable callable of one job (a top-level function).
+        jobs: The jobs.
+        workers: Local processes (default: all cores, at most one per job; 1 runs inline).
+        scheduler: Dask scheduler address (default: ``$RIMD_DASK_SCHEDULER``, else local).
+        progress: Optional callable ``progress(done, total)``, per finished task.
+
+    Returns:
+        ``(results in job order, workers, where)``: ``where`` is ``local`` or the scheduler's address.
+
+    Raises:
+        SchedulerError: Bad address, scheduler unreachable or without workers.
+    """
     with open_executor(workers, scheduler, tasks=len(jobs)) as runner:
         return runner.run(fn, jobs, progress), runner.workers, runner.where

@@ -235,7 +235,14 @@ class ChatteringError(IntegrationError):
 
 
 def model_for(config: SimConfig) -> PhysicsModel:
-    """The model ``config`` selects (``structure.model``)."""
+    """The model ``config`` selects (``structure.model``).
+
+    Args:
+        config: The configuration.
+
+    Returns:
+        Its entry of :data:`MODELS`.
+    """
     return MODELS[config.rig.structure.model]
 
 
@@ -408,6 +415,12 @@ class RigModel:
 
     def advance(self, t_stop: float | Fraction) -> ModelOutput:
         """Integrate to ``t_stop`` (s) and return what happened in ``[time, t_stop)``.
+
+        Args:
+            t_stop: Simulation time to reach (s).
+
+        Returns:
+            The channels, truth, impacts and stroboscopic points of ``[time, t_stop)``.
 
         Raises:
             CommandError: If ``t_stop`` is before the current time.

@@ -466,6 +466,9 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
         path: A ROS 2 parameter YAML file, or None for the default configuration file.
         overrides: Flat parameters applied on top of the file.
 
+    Returns:
+        The validated configuration.
+
     Raises:
         ConfigError: For the first refused value, naming key, value and rule.
     """

@@ -778,6 +778,9 @@ def fixed_point(config: SimConfig, frequency_hz: float, start, *, period: int = 
         period: Period (cycles).
         tolerance: Newton's scaled residual.
 
+    Returns:
+        ``(point, multipliers)``: the fixed point (unscaled) and its Floquet multipliers, largest modulus first.
+
     Raises:
         AnalysisError: When Newton's method does not converge from ``start``.
     """
@@ -793,7 +796,17 @@ def fixed_point(config: SimConfig, frequency_hz: float, start, *, period: int = 
 
 
 def monodromy(config: SimConfig, frequency_hz: float, point, *, period: int = 1) -> np.ndarray:
-    """The monodromy matrix ``dP^period/dx`` at ``point`` (unscaled), by the continuation's central differences."""
+    """The monodromy matrix ``dP^period/dx`` at ``point`` (unscaled), by the continuation's central differences.
+
+    Args:
+        config: Rig configuration (its tolerances are tightened to :data:`SHOOTING_TOLERANCES`).
+        frequency_hz: Motor frequency (Hz).
+        point: ``(theta, theta_dot, modes...)`` (modes default to rest), at motor phase 0.
+        period: Period (cycles).
+
+    Returns:
+        The square matrix, one row and column per component of the point.
+    """
     f = check_frequency(config, frequency_hz)
     c = _Continuer(config, FREQUENCY, f, f + 1.0, f, ContinuationSettings())
     problem = c.base.with_period(period)
@@ -828,6 +841,9 @@ def continuation(config: SimConfig, start: float, end: float, *, parameter: str 
             ``initial`` (or rest) after a transient.
         initial: A point near the orbit to start from, ``(theta, theta_dot[, modes...])``; default: the attractor's.
         settings: The continuation's settings.
+
+    Returns:
+        The branches followed and the bifurcations located on them.
 
     Raises:
         ConfigError: For a bad range, parameter or frequency.

@@ -121,6 +121,10 @@ def largest_lyapunov(config: SimConfig, frequency_hz: float, *, theta0: float = 
         d0: Separation of the companion trajectory (norm in the module docstring).
         seed: Seed of the initial direction.
 
+    Returns:
+        The exponent (1/s), its running estimate and the valid domain's verdict (NaN exponent where the chattering
+        guard fired).
+
     Raises:
         ConfigError: For a bad frequency, cycle count or ``d0``.
     """
@@ -168,6 +172,14 @@ def largest_lyapunov(config: SimConfig, frequency_hz: float, *, theta0: float = 
 def is_chaotic(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0, theta_dot0: float = 0.0,
                transient_cycles: int = 200, cycles: int = 300) -> tuple[bool, float, str]:
     """The chaos criterion (module docstring) at one point.
+
+    Args:
+        config: Rig configuration.
+        frequency_hz: Constant motor frequency (Hz).
+        theta0: Initial angle (rad).
+        theta_dot0: Initial rate (rad/s).
+        transient_cycles: Periods run before measuring.
+        cycles: Periods averaged (the exponent) and classified (at most 96).
 
     Returns:
         ``(chaotic, exponent, label)``: the verdict, the largest exponent (1/s) and the Poincare class.

@@ -355,6 +355,9 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
         scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
         progress: Optional callable ``progress(rows_done, rows)``.
 
+    Returns:
+        The classes per start and cell, the cycles run, the valid domain's verdicts and the costs.
+
     Raises:
         ConfigError: For a bad gap, frequency or cycle count.
         SchedulerError: For an unusable scheduler.
@@ -631,6 +634,9 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
         workers: Local processes (default: all cores).
         scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
         progress: Optional callable ``progress(rows_done, rows)``.
+
+    Returns:
+        The class and attractor of each initial condition, the attractors, the valid domain's verdicts.
 
     Raises:
         ConfigError: For a bad frequency, range, size or cycle count.

@@ -178,6 +178,9 @@ def steady_orbit(config: SimConfig, frequency_hz: float, *, theta0: float = 0.0,
         max_period: Longest period looked for (cycles).
         tolerance: Non-dimensional distance under which two stroboscopic points are the same.
 
+    Returns:
+        The measured window, its class and the valid domain's verdict.
+
     Raises:
         ConfigError: For a bad frequency or cycle count (and from the configuration).
         ChatteringError: When the integrator's chattering guard fires (the valid domain's ``chattering`` rule).

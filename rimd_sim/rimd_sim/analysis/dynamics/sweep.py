@@ -115,7 +115,16 @@ class SweepResult:
 
 
 def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, tolerance: float = 0.03) -> SweepPoint | None:
-    """Valid point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B)."""
+    """Valid point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B).
+
+    Args:
+        points: The sweep's points.
+        impacts_per_cycle: The band's impacts per cycle.
+        tolerance: Relative tolerance on ``impacts_per_cycle``.
+
+    Returns:
+        The point, or None when no valid point has that many impacts per cycle.
+    """
     sel = [p for p in points
            if p.valid and abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
     return max(sel, key=lambda p: p.peak_force_n, default=None)
@@ -248,8 +257,12 @@ def sweep(config: SimConfig, frequencies: np.ndarray | list[float], direction: D
             there as tasks, an ``up``/``down`` sweep as one task.
         progress: Optional callable ``progress(done, total)``.
 
+    Returns:
+        The points in frequency order, the bands A and B, the valid domain's report and the costs.
+
     Raises:
         ConfigError: For a bad direction, frequency or cycle count.
+        SchedulerError: For an unusable scheduler.
     """
     if direction not in ("up", "down", "rest"):
         raise ConfigError("direction", direction, "must be up, down or rest")

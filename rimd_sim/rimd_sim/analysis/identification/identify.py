@@ -433,6 +433,19 @@ def identify(path, base: SimConfig, fixed: dict[str, float], *, threshold: float
              settle: float = 2.0, resamples: int = 400, log: Callable[[str], None] | None = None) -> Identification:
     """Identify the free parameters of ``base`` from the recording at ``path`` (see the module doc).
 
+    Args:
+        path: The recording (MCAP file or rosbag2 directory).
+        base: The configuration the estimates start from and the fixed parameters are taken from.
+        fixed: Parameters held at these values (flat names, ``--fix``); the others of :data:`IDENTIFIABLE` are
+            estimated.
+        threshold: Impact detection threshold on the force (N).
+        settle: Seconds after each motor step before its steady state is read.
+        resamples: Draws of the cluster bootstrap.
+        log: Optional callable receiving each stage's line.
+
+    Returns:
+        The identified configuration, the estimates with their uncertainty, the verdict and the validation.
+
     Raises:
         IdentificationError: A channel a parameter needs is missing, no impact when contact parameters are
             asked for, no free flight for ``f_n`` and ``zeta``.

@@ -210,8 +210,15 @@ def read(data: rec.RecordedData, *, threshold: float = rec.DEFAULT_THRESHOLD, se
          pulse: SpringDashpotPulse | None = None, scan: bool = True) -> Reading:
     """Read ``data``: impacts, cross-check, steps, step table, excluded windows (see the module doc).
 
-    ``pulse``: the contact pulse the peaks are read with at the contact onset (None: the largest sample);
-    ``scan``: scan the channels for faults in the data (a second pass over the recording).
+    Args:
+        data: A loaded recording (:func:`rimd_sim.analysis.recordings.recorded.load`).
+        threshold: Impact detection threshold on the force (N).
+        settle: Seconds after each motor step before its steady state is read.
+        pulse: The contact pulse the peaks are read with at the contact onset (None: the largest sample).
+        scan: Scan the channels for faults in the data (a second pass over the recording).
+
+    Returns:
+        The impacts detected and matched, the steps and their table, the windows left out.
     """
     from rimd_sim.analysis.recordings.faultreport import fault_report
 

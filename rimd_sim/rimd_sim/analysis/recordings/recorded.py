@@ -214,6 +214,12 @@ def load(path: str | Path) -> RecordedData:
 
     The messages are decoded from the definitions the file carries (:mod:`rimd_sim.io.decode`): no ROS needed.
 
+    Args:
+        path: An MCAP file or a rosbag2 directory.
+
+    Returns:
+        The channels, events, motor states, faults and captures, with what was lost.
+
     Raises:
         rimd_sim.io.reader.RecordingError: The path does not exist or is not MCAP at all.
     """
