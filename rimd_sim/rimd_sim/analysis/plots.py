@@ -517,14 +517,24 @@ def plot_basins(result, path: Path, title: str = "", caption: str = "") -> Path:
     marks = []
     if getattr(result, "invalid_rule", None) is not None:
         marks = _mark_invalid_cells(ax, result.theta0, result.theta_dot0, result.invalid_rule)
+    # The grid's extent stays the view: an attractor far outside it (a pendulum that turns over) would shrink the
+    # basins to a point; such an attractor is named in the legend as off the grid.
+    hx, hy = _half_widths(result.theta0), _half_widths(result.theta_dot0)
+    x_lim = (float(result.theta0[0] - hx[0]), float(result.theta0[-1] + hx[-1]))
+    y_lim = (float(result.theta_dot0[0] - hy[0]), float(result.theta_dot0[-1] + hy[-1]))
     # Each attractor's stroboscopic points (theta, theta') in the axes' units, its id beside them.
     for a in getattr(result, "attractors", None) or []:
         th = np.asarray(a["theta_rad"])
         om = np.asarray(a["theta_dot_rad_s"])
+        inside = (th >= min(x_lim)) & (th <= max(x_lim)) & (om >= min(y_lim)) & (om <= max(y_lim))
+        off = "" if inside.all() else " (partly off the grid)" if inside.any() else " (off the grid)"
         line, = ax.plot(th, om, "o" if a["period"] else "s", ms=7, mfc="white", mec="black", mew=1.2, ls="",
-                        label=f"attractor {a['id']}: {a['class']}" + ("" if a["period"] else " (not settled)"))
-        ax.annotate(str(a["id"]), (th[0], om[0]), textcoords="offset points", xytext=(5, 5), fontsize=8)
+                        zorder=5, label=f"attractor {a['id']}: {a['class']}"
+                        + ("" if a["period"] else " (not settled)") + off)
+        ax.annotate(str(a["id"]), (th[0], om[0]), textcoords="offset points", xytext=(5, 5), fontsize=8, zorder=5)
         marks.append(line)
+    ax.set_xlim(*x_lim)
+    ax.set_ylim(*y_lim)
     ax.set_xlabel("initial theta (rad)")
     ax.set_ylabel("initial theta' (rad/s)")
     _class_legend(ax, palette, marks)
