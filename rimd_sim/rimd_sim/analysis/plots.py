@@ -6,7 +6,7 @@ import math
 import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -67,14 +67,14 @@ def _wrap(text: str, width: int) -> str:
 def _hz_axis(ax: Axes, natural_frequency_hz: float, label: str = "motor frequency (Hz)") -> None:
     """The motor frequency in Hz on top of an axis of Omega/omega_n (the same ticks' positions, other values)."""
     f = natural_frequency_hz
-    top = ax.secondary_xaxis("top", functions=(lambda r: r * f, lambda hz: hz / f))
+    top = ax.secondary_xaxis("top", functions=(lambda r: np.multiply(r, f), lambda hz: np.divide(hz, f)))
     top.set_xlabel(label)
 
 
 def _ratio_axis(ax: Axes, natural_frequency_hz: float) -> None:
     """Omega/omega_n on top of an axis in Hz."""
     f = natural_frequency_hz
-    top = ax.secondary_xaxis("top", functions=(lambda hz: hz / f, lambda r: r * f))
+    top = ax.secondary_xaxis("top", functions=(lambda hz: np.divide(hz, f), lambda r: np.multiply(r, f)))
     top.set_xlabel(f"Omega / omega_n (f_n = {f:g} Hz)")
 
 
@@ -301,7 +301,7 @@ _MARKER_COLOURS = {"no impact": "#9e9e9e", "inside the stop": "#bdbdbd"}
 
 #: How each sweep direction is drawn in :func:`plot_bifurcation`: up small filled dots over down larger rings, so
 #: that both show where they coincide.
-_SWEEP_MARKERS = {"up": {"s": 12, "linewidths": 0, "zorder": 3},
+_SWEEP_MARKERS: dict[str, dict[str, Any]] = {"up": {"s": 12, "linewidths": 0, "zorder": 3},
                   "down": {"s": 46, "linewidths": 1.0, "zorder": 2}}
 
 
