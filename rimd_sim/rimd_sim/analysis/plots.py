@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -24,17 +25,65 @@ if TYPE_CHECKING:
     from rimd_sim.analysis.recordings.recorded import Channel, Step
 
 
-def _save(fig: Figure, path: Path, title: str, ax: Axes | None = None, dpi: int = 120) -> Path:
-    """Title the figure (on ``ax``, else the whole figure), lay it out, write it and close it."""
-    if title:
+def _save(fig: Figure, path: Path, title: str, ax: Axes | None = None, dpi: int = 120, caption: str = "") -> Path:
+    """Title the figure (on ``ax``, else the whole figure), lay it out, write it and close it.
+
+    ``caption``: the configuration the figure shows (:func:`rimd_sim.analysis.captions.describe`), a line under
+    the title, both then over the whole figure. The PNG's metadata holds both (tEXt ``Title`` and
+    ``Description``), so a figure can be traced to its design without its directory
+    (``PIL.Image.open(path).text``).
+    """
+    if caption:
+        # Over the whole figure (a title over an axes narrowed by a legend outside it would overflow the figure),
+        # wrapped to its width (about 10 characters per inch at this size) between the caption's items.
+        fig.suptitle("\n".join(filter(None, [title, _wrap(caption, max(40, int(10 * fig.get_figwidth())))])),
+                     fontsize=10)
+    elif title:
         if ax is not None:
             ax.set_title(title)
         else:
             fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
+    metadata = {"Title": title, "Description": caption} if caption else {"Title": title}
+    fig.savefig(path, dpi=dpi, metadata=metadata)
     plt.close(fig)
     return path
+
+
+def _wrap(text: str, width: int) -> str:
+    """``text`` in lines of at most about ``width`` characters, broken only after a comma or a semicolon.
+
+    So that a parameter keeps its value and unit on its line (``damping_ratio 0.02``).
+    """
+    lines: list[str] = []
+    for item in re.split(r"(?<=[,;]) ", text):
+        if lines and len(lines[-1]) + 1 + len(item) <= width:
+            lines[-1] += " " + item
+        else:
+            lines.append(item)
+    return "\n".join(lines)
+
+
+def _hz_axis(ax: Axes, natural_frequency_hz: float, label: str = "motor frequency (Hz)") -> None:
+    """The motor frequency in Hz on top of an axis of Omega/omega_n (the same ticks' positions, other values)."""
+    f = natural_frequency_hz
+    top = ax.secondary_xaxis("top", functions=(lambda r: np.multiply(r, f), lambda hz: np.divide(hz, f)))
+    top.set_xlabel(label)
+
+
+def _ratio_axis(ax: Axes, natural_frequency_hz: float) -> None:
+    """Omega/omega_n on top of an axis in Hz."""
+    f = natural_frequency_hz
+    top = ax.secondary_xaxis("top", functions=(lambda hz: np.divide(hz, f), lambda r: np.multiply(r, f)))
+    top.set_xlabel(f"Omega / omega_n (f_n = {f:g} Hz)")
+
+
+def _natural_frequency(points) -> float | None:
+    """f_n from points that carry ``frequency_hz`` and ``frequency_ratio`` (None when none has a ratio)."""
+    for p in points:
+        if p.frequency_ratio > 0 and math.isfinite(p.frequency_hz / p.frequency_ratio):
+            return p.frequency_hz / p.frequency_ratio
+    return None
 
 
 def _force_over_impacts() -> tuple[Figure, Axes, Axes]:
@@ -44,9 +93,8 @@ def _force_over_impacts() -> tuple[Figure, Axes, Axes]:
     return fig, ax, ax2
 
 
-def _save_force_over_impacts(fig: Figure, ax: Axes, ax2: Axes, path: Path, title: str, *, force: str, frequency: str,
-                             legend: dict) -> Path:
-    """Label and save a :func:`_force_over_impacts` figure.
+def _label_force_over_impacts(ax: Axes, ax2: Axes, *, force: str, frequency: str, legend: dict) -> None:
+    """Label a :func:`_force_over_impacts` figure.
 
     ``force`` and ``frequency`` are the axis labels, ``legend`` the options of the force panel's legend.
     """
@@ -55,15 +103,23 @@ def _save_force_over_impacts(fig: Figure, ax: Axes, ax2: Axes, path: Path, title
     ax2.set_xlabel(frequency)
     for a in (ax, ax2):
         a.grid(alpha=0.3)
-    return _save(fig, path, title, ax)
 
 
-def mark_invalid(ax: Axes, x, y, rules, *, top: float | None = None, legend: bool = True) -> None:
+def _save_force_over_impacts(fig: Figure, ax: Axes, ax2: Axes, path: Path, title: str, *, force: str, frequency: str,
+                             legend: dict, caption: str = "") -> Path:
+    """Label (:func:`_label_force_over_impacts`) and save a :func:`_force_over_impacts` figure."""
+    _label_force_over_impacts(ax, ax2, force=force, frequency=frequency, legend=legend)
+    return _save(fig, path, title, ax, caption=caption)
+
+
+def mark_invalid(ax: Axes, x, y, rules, *, top: float | None = None, legend: bool = True, marker: str = "o",
+                 ms: float = 6) -> None:
     """Draw points outside the model's valid domain as hollow grey markers, the legend naming their rules.
 
     ``rules``: each point's ``invalid_rule`` field. A value that is not finite (no measure: the chattering guard
     stopped the run) is drawn at 0 with a cross. With ``top`` (the largest valid value), values above 1.2 x
     ``top`` are drawn at the top of the axis as triangles (off-scale), so the valid points keep their scale.
+    ``marker`` and ``ms``: the hollow marker of the points on scale and its size.
     """
     y = np.asarray(y, dtype=float)
     names = sorted({name for r in rules for name in r.split(";") if name})
@@ -73,7 +129,7 @@ def mark_invalid(ax: Axes, x, y, rules, *, top: float | None = None, legend: boo
     on = finite if limit is None else finite & (y <= limit)
     x = np.asarray(x, dtype=float)
     if on.any():
-        ax.plot(x[on], y[on], "o", mfc="none", mec="0.5", ms=6, label=label)
+        ax.plot(x[on], y[on], marker, mfc="none", mec="0.5", ms=ms, label=label)
         label = None
     off = finite & ~on
     if off.any() and limit is not None:
@@ -85,17 +141,20 @@ def mark_invalid(ax: Axes, x, y, rules, *, top: float | None = None, legend: boo
         ax.plot(x[~finite], np.zeros((~finite).sum()), "x", color="0.5", ms=7, label=label)
 
 
-def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
-    """Non-dimensional peak force F_i/mg versus Omega/omega (the paper's Figs 6 and 8).
+#: The paper's bands: the motion of each (impacts per cycle) and the marker of its peak in :func:`plot_sweep`.
+BANDS = (("A", "1 impact per cycle", "*"), ("B", "1 impact per 2 cycles", "D"))
 
-    One line per sweep; the lower panel gives impacts per cycle (1: band A, 0.5: band B).
-    """
+
+def sweep_figure(results: list[SweepResult]) -> tuple[Figure, Axes, Axes]:
+    """The figure of :func:`plot_sweep`, labelled, not saved (for a caller that adds to it, or a test)."""
     fig, ax, ax2 = _force_over_impacts()
+    f_n = None
     for res in results:
         x = [p.frequency_ratio for p in res.points]
+        f_n = f_n or _natural_frequency(res.points)
         # Points outside the model's valid domain break the line and are drawn apart (hollow grey markers).
-        ax.plot(x, [p.force_ratio if p.valid else math.nan for p in res.points], "-o", ms=3,
-                label=f"gap {res.gap_mm:g} mm, {res.direction}")
+        line, = ax.plot(x, [p.force_ratio if p.valid else math.nan for p in res.points], "-o", ms=3,
+                        label=f"gap {res.gap_mm:g} mm, {res.direction}")
         ax2.plot(x, [p.impacts_per_cycle if p.valid else math.nan for p in res.points], "-o", ms=3)
         invalid = [p for p in res.points if not p.valid]
         if invalid:
@@ -105,13 +164,34 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "") -> Path:
                          top=max((p.force_ratio for p in res.points if p.valid), default=None))
             mark_invalid(ax2, xs, [p.impacts_per_cycle for p in invalid], rules, legend=False,
                          top=max((p.impacts_per_cycle for p in res.points if p.valid), default=None))
-        for band, name in ((res.band_a, "A"), (res.band_b, "B")):
-            if band is not None:
-                ax.annotate(f"{name}: {band.frequency_hz:g} Hz, {band.peak_force_n:.0f} N",
-                            (band.frequency_ratio, band.force_ratio), textcoords="offset points", xytext=(5, 5),
-                            fontsize=8)
-    return _save_force_over_impacts(fig, ax, ax2, path, title, force="F_i / mg", frequency="Omega / omega_n",
-                                    legend={"fontsize": 8, "loc": "upper left"})
+        # A band only where the data has it (no motion of its kind: no mark, no words); its peak marked, named
+        # in the legend, its letter beside the mark towards the inside of the axes (never on the frame).
+        lo, hi = min(x, default=0.0), max(x, default=1.0)
+        for (name, motion, marker), band in zip(BANDS, (res.band_a, res.band_b), strict=True):
+            if band is None:
+                continue
+            ax.plot([band.frequency_ratio], [band.force_ratio], marker, ms=11, mfc="none", mec=line.get_color(),
+                    mew=1.5, zorder=4, label=f"band {name} ({motion}): {band.frequency_hz:g} Hz, "
+                                             f"{band.peak_force_n:.0f} N")
+            right = hi > lo and (band.frequency_ratio - lo) / (hi - lo) > 0.8
+            ax.annotate(name, (band.frequency_ratio, band.force_ratio), textcoords="offset points",
+                        xytext=(-9 if right else 9, -9), ha="right" if right else "left", va="top", fontsize=9,
+                        fontweight="bold", color=line.get_color(), clip_on=True)
+    _label_force_over_impacts(ax, ax2, force="F_i / mg", frequency="Omega / omega_n",
+                              legend={"fontsize": 8, "loc": "best"})
+    if f_n:
+        _hz_axis(ax, f_n)
+    return fig, ax, ax2
+
+
+def plot_sweep(results: list[SweepResult], path: Path, title: str = "", caption: str = "") -> Path:
+    """Non-dimensional peak force F_i/mg versus Omega/omega (the paper's Figs 6 and 8), the motor frequency on top.
+
+    One line per sweep; the lower panel gives impacts per cycle (1: band A, 0.5: band B); each band's peak is
+    marked and named where the sweep has one. ``caption``: the configuration (:func:`_save`).
+    """
+    fig, ax, _ = sweep_figure(results)
+    return _save(fig, path, title, ax, caption=caption)
 
 
 # ---- nonlinear analyses: bifurcation, phase plane + Poincare map, Peterka map, basins ----------
@@ -216,16 +296,34 @@ def _class_legend(ax, palette, extra=()):
               title="impacts / cycles", title_fontsize=8)
 
 
-def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
-    """Stroboscopic ``l sin(theta) / A0`` versus Omega/omega_n, up and down sweeps (the paper's Fig. 11)."""
-    fig, ax = plt.subplots(figsize=(9, 5))
-    style = {"up": ("tab:blue", 1.6), "down": ("tab:red", 0.8)}
+#: Colours of the classes too light for a marker on white (drawn darker in :func:`plot_bifurcation`).
+_MARKER_COLOURS = {"no impact": "#9e9e9e", "inside the stop": "#bdbdbd"}
+
+#: How each sweep direction is drawn in :func:`plot_bifurcation`: up small filled dots over down larger rings, so
+#: that both show where they coincide.
+_SWEEP_MARKERS: dict[str, dict[str, Any]] = {"up": {"s": 12, "linewidths": 0, "zorder": 3},
+                  "down": {"s": 46, "linewidths": 1.0, "zorder": 2}}
+
+
+def bifurcation_figure(branches) -> tuple[Figure, Axes]:
+    """The figure of :func:`plot_bifurcation`, labelled, not saved (for a caller that adds to it, or a test)."""
+    from matplotlib.lines import Line2D
+
+    fig, ax = plt.subplots(figsize=(10, 5.5))
+    palette = class_palette([p.label for b in branches for p in b.points if p.valid])
+    colours = {c: _MARKER_COLOURS.get(c, col) for c, col in palette.items()}
     marked = False   # the legend names the invalid points once
+    f_n = None
     for b in branches:
-        colour, size = style.get(b.direction, ("k", 1.0))
+        f_n = f_n or _natural_frequency(b.points)
         xs = [p.frequency_ratio for p in b.points if p.valid for _ in p.u]
         ys = [float(u) for p in b.points if p.valid for u in p.u]
-        ax.scatter(xs, ys, s=size, c=colour, label=f"sweep {b.direction}", linewidths=0, alpha=0.8)
+        cs = [colours[p.label] for p in b.points if p.valid for _ in p.u]
+        style = _SWEEP_MARKERS.get(b.direction, _SWEEP_MARKERS["up"])
+        if b.direction == "down":
+            ax.scatter(xs, ys, facecolors="none", edgecolors=cs, **style)
+        else:
+            ax.scatter(xs, ys, c=cs, **style)
         invalid = [p for p in b.points if not p.valid]
         if invalid:
             # Hollow grey markers: the samples of the points outside the model's valid domain (none where the
@@ -234,13 +332,29 @@ def plot_bifurcation(branches, path: Path, title: str = "") -> Path:
             mark_invalid(ax, [p.frequency_ratio for p in invalid for _ in (p.u if len(p.u) else [0])],
                          [float(u) for p in invalid for u in (p.u if len(p.u) else [math.nan])],
                          [p.invalid_rule for p in invalid for _ in (p.u if len(p.u) else [0])],
-                         top=max(valid_u, default=None), legend=not marked)
+                         top=max(valid_u, default=None), legend=not marked, marker="s",
+                         ms=7 if b.direction == "down" else 3.5)
             marked = True
     ax.set_xlabel("Omega / omega_n")
     ax.set_ylabel("l sin(theta) / A0 (stroboscopic)")
     ax.grid(alpha=0.3)
-    ax.legend(markerscale=6, fontsize=8)
-    return _save(fig, path, title, ax)
+    if f_n:
+        _hz_axis(ax, f_n)
+    sweeps = [Line2D([], [], ls="", marker="o", ms=4.5, mfc="0.3", mec="0.3", label="sweep up (filled dots)"),
+              Line2D([], [], ls="", marker="o", ms=8, mfc="none", mec="0.3", label="sweep down (rings)")]
+    sweeps = [h for h, d in zip(sweeps, ("up", "down"), strict=True) if any(b.direction == d for b in branches)]
+    _class_legend(ax, colours, [*sweeps, *ax.get_legend_handles_labels()[0]])
+    return fig, ax
+
+
+def plot_bifurcation(branches, path: Path, title: str = "", caption: str = "") -> Path:
+    """Stroboscopic ``l sin(theta) / A0`` versus Omega/omega_n, up and down sweeps (the paper's Fig. 11).
+
+    Each sample is coloured by the class of its point's motion (:func:`class_palette`); the up sweep is drawn as
+    small filled dots over the down sweep's larger rings. The motor frequency in Hz on top.
+    """
+    fig, ax = bifurcation_figure(branches)
+    return _save(fig, path, title, ax, caption=caption)
 
 
 #: Marker and colour of each bifurcation kind in :func:`plot_continuation`.
@@ -250,7 +364,7 @@ _BIFURCATION_STYLE = {"period_doubling": ("v", "tab:red", "period doubling"), "f
 
 
 def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: float, length_m: float,
-                      amplitude_m: float, diagram=None) -> Path:
+                      amplitude_m: float, diagram=None, caption: str = "") -> Path:
     """Branches of periodic orbits (stable solid, unstable dashed) over the brute-force bifurcation diagram.
 
     Top: the stroboscopic ``l sin(theta) / A0`` of every orbit's ``n`` points against the parameter (for the
@@ -309,24 +423,23 @@ def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: f
     ax.set_ylabel("l sin(theta) / A0 (stroboscopic)")
     ax2.set_xlabel("Omega / omega_n" if freq else result.parameter)
     if freq:
-        top = ax.secondary_xaxis("top", functions=(lambda r: r * natural_frequency_hz,
-                                                   lambda f: f / natural_frequency_hz))
-        top.set_xlabel("motor frequency (Hz)")
+        _hz_axis(ax, natural_frequency_hz)
     for a in (ax, ax2):
         a.grid(alpha=0.3)
     ax.legend(fontsize=8, markerscale=1.0, loc="best", ncols=2)
-    return _save(fig, path, title, None)
+    return _save(fig, path, title, None, caption=caption)
 
 
-def plot_message(path: Path, title: str, message: str) -> Path:
+def plot_message(path: Path, title: str, message: str, caption: str = "") -> Path:
     """A figure that holds only ``message`` (a point without a result: the chattering guard stopped its run)."""
     fig, ax = plt.subplots(figsize=(8, 3))
     ax.axis("off")
     ax.text(0.5, 0.5, message, ha="center", va="center", fontsize=10, color="0.3", wrap=True)
-    return _save(fig, path, title, ax)
+    return _save(fig, path, title, ax, caption=caption)
 
 
-def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title: str = "", invalid: str = "") -> Path:
+def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title: str = "", invalid: str = "",
+                  caption: str = "") -> Path:
     """Displacements over time and the phase plane with the Poincare map (the paper's Figs 9 and 10).
 
     ``x_rimd``, ``x_cart`` in mm (inertial); ``u = l sin(theta) / A0``, ``v`` its rate over ``A0 Omega``.
@@ -351,11 +464,14 @@ def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title
     ax2.set_ylabel("l theta' cos(theta) / (A0 Omega)")
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=8, loc="upper left")
-    return _save(fig, path, title)
+    return _save(fig, path, title, caption=caption)
 
 
-def plot_peterka(result, path: Path, title: str = "") -> Path:
-    """Class of the motion from rest over gap/A0 x Omega/omega_n, coexisting attractors marked (Fig. 12 left)."""
+def plot_peterka(result, path: Path, title: str = "", caption: str = "") -> Path:
+    """Class of the motion from rest over gap/A0 x Omega/omega_n, coexisting attractors marked (Fig. 12 left).
+
+    The motor frequency in Hz on top.
+    """
     from matplotlib.lines import Line2D
 
     palette = class_palette(result.primary.ravel().tolist())
@@ -386,30 +502,43 @@ def plot_peterka(result, path: Path, title: str = "") -> Path:
         marks = [*marks, *_mark_invalid_cells(ax, result.frequency_ratio, result.gap_ratio, result.invalid_rule)]
     ax.set_xlabel("Omega / omega_n")
     ax.set_ylabel("gap / A0")
+    ratio, hz = np.asarray(result.frequency_ratio, float), np.asarray(result.frequencies_hz, float)
+    if ratio.size and ratio[0] > 0:
+        _hz_axis(ax, float(hz[0] / ratio[0]))
     _class_legend(ax, palette, marks)
-    return _save(fig, path, title, ax, dpi=map_dpi(result.primary.shape))
+    return _save(fig, path, title, ax, dpi=map_dpi(result.primary.shape), caption=caption)
 
 
-def plot_basins(result, path: Path, title: str = "") -> Path:
-    """Class of the steady motion per initial condition (theta0, theta_dot0)."""
+def plot_basins(result, path: Path, title: str = "", caption: str = "") -> Path:
+    """Class of the steady motion per initial condition (theta0, theta_dot0), in rad and rad/s, attractors drawn."""
     palette = class_palette(result.labels.ravel().tolist())
     fig, ax = plt.subplots(figsize=(9, 6))
-    _class_image(ax, result.theta0 * 1e3, result.theta_dot0, result.labels, palette)
+    _class_image(ax, result.theta0, result.theta_dot0, result.labels, palette)
     marks = []
     if getattr(result, "invalid_rule", None) is not None:
-        marks = _mark_invalid_cells(ax, result.theta0 * 1e3, result.theta_dot0, result.invalid_rule)
+        marks = _mark_invalid_cells(ax, result.theta0, result.theta_dot0, result.invalid_rule)
+    # The grid's extent stays the view: an attractor far outside it (a pendulum that turns over) would shrink the
+    # basins to a point; such an attractor is named in the legend as off the grid.
+    hx, hy = _half_widths(result.theta0), _half_widths(result.theta_dot0)
+    x_lim = (float(result.theta0[0] - hx[0]), float(result.theta0[-1] + hx[-1]))
+    y_lim = (float(result.theta_dot0[0] - hy[0]), float(result.theta_dot0[-1] + hy[-1]))
     # Each attractor's stroboscopic points (theta, theta') in the axes' units, its id beside them.
     for a in getattr(result, "attractors", None) or []:
-        th = np.asarray(a["theta_rad"]) * 1e3
+        th = np.asarray(a["theta_rad"])
         om = np.asarray(a["theta_dot_rad_s"])
+        inside = (th >= min(x_lim)) & (th <= max(x_lim)) & (om >= min(y_lim)) & (om <= max(y_lim))
+        off = "" if inside.all() else " (partly off the grid)" if inside.any() else " (off the grid)"
         line, = ax.plot(th, om, "o" if a["period"] else "s", ms=7, mfc="white", mec="black", mew=1.2, ls="",
-                        label=f"attractor {a['id']}: {a['class']}" + ("" if a["period"] else " (not settled)"))
-        ax.annotate(str(a["id"]), (th[0], om[0]), textcoords="offset points", xytext=(5, 5), fontsize=8)
+                        zorder=5, label=f"attractor {a['id']}: {a['class']}"
+                        + ("" if a["period"] else " (not settled)") + off)
+        ax.annotate(str(a["id"]), (th[0], om[0]), textcoords="offset points", xytext=(5, 5), fontsize=8, zorder=5)
         marks.append(line)
-    ax.set_xlabel("initial theta (mrad)")
+    ax.set_xlim(*x_lim)
+    ax.set_ylim(*y_lim)
+    ax.set_xlabel("initial theta (rad)")
     ax.set_ylabel("initial theta' (rad/s)")
     _class_legend(ax, palette, marks)
-    return _save(fig, path, title, ax, dpi=map_dpi(result.labels.shape))
+    return _save(fig, path, title, ax, dpi=map_dpi(result.labels.shape), caption=caption)
 
 
 # ---- recorded analyses (rimd analyze) ---------------------------------------------------------------------
@@ -434,11 +563,13 @@ def _draw_windows(ax: Axes, windows: Iterable[Window], topics: Iterable[str] | N
     return drawn
 
 
-def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
+def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "", caption: str = "",
+                        natural_frequency_hz: float | None = None) -> Path:
     """Steady peak force per dwell step versus motor frequency, from the events and from the force channel.
 
     Per source: the steady window's largest peak (the paper's F_i, filled marker) and the mean of its peaks with
-    error bars of one standard deviation (the spread per step); impacts per cycle below.
+    error bars of one standard deviation (the spread per step); impacts per cycle below. With
+    ``natural_frequency_hz`` (the recorded rig's), Omega/omega_n on top.
     """
     fig, ax, ax2 = _force_over_impacts()
     for label, marker, shift in (("events", "o", -0.01), ("channel", "s", 0.01)):
@@ -455,12 +586,16 @@ def plot_recorded_peaks(rows: list[dict], path: Path, title: str = "") -> Path:
         ax.errorbar(f + shift, mean, yerr=std, fmt="_", ms=10, capsize=4, lw=1.2,
                     label=f"mean +- 1 std of the steady peaks, {name}")
         ax2.plot(f + shift, [r[f"impacts_per_cycle_{label}"] for r in pts], marker, ms=6)
+    if natural_frequency_hz:
+        _ratio_axis(ax, natural_frequency_hz)
     return _save_force_over_impacts(fig, ax, ax2, path, title, force="steady peak force (N)",
-                                    frequency="motor frequency setpoint (Hz)", legend={"fontsize": 7, "loc": "best"})
+                                    frequency="motor frequency setpoint (Hz)", legend={"fontsize": 7, "loc": "best"},
+                                    caption=caption)
 
 
 def plot_recorded_impacts(events_t: np.ndarray, events_peak: np.ndarray, det_t: np.ndarray, det_peak: np.ndarray,
-                          steps: Iterable[Step], path: Path, title: str = "", windows: Iterable[Window] = ()) -> int:
+                          steps: Iterable[Step], path: Path, title: str = "", windows: Iterable[Window] = (),
+                          caption: str = "") -> int:
     """Peak force of every impact over time (events and force-channel detections), steps and left-out windows.
 
     Returns the number of windows drawn.
@@ -477,12 +612,12 @@ def plot_recorded_impacts(events_t: np.ndarray, events_peak: np.ndarray, det_t: 
     ax.set_ylabel("peak force (N)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
-    _save(fig, path, title, ax)
+    _save(fig, path, title, ax, caption=caption)
     return drawn
 
 
 def plot_recorded_channels(channels: dict[str, Channel], windows: Sequence[Window], path: Path, title: str = "",
-                           bins: int = 1500) -> int:
+                           bins: int = 1500, caption: str = "") -> int:
     """The recorded channels over time (envelope of each time bin: min to max), left-out windows shaded.
 
     ``channels``: label -> :class:`~rimd_sim.analysis.recordings.recorded.Channel` (its ``topic`` selects its windows).
@@ -507,11 +642,11 @@ def plot_recorded_channels(channels: dict[str, Channel], windows: Sequence[Windo
         if handles:
             ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time (s, simulation)")
-    _save(fig, path, title)
+    _save(fig, path, title, caption=caption)
     return drawn
 
 
-def plot_pulse_zoom(zoom: dict, path: Path, title: str = "") -> Path:
+def plot_pulse_zoom(zoom: dict, path: Path, title: str = "", caption: str = "") -> Path:
     """One typical impact: the force and acceleration samples around its onset (ms), the capture when recorded.
 
     ``zoom``: ``onset`` (s), ``force`` and ``acceleration`` as ``(t, values)`` of the 20 kHz channels (either may
@@ -538,10 +673,10 @@ def plot_pulse_zoom(zoom: dict, path: Path, title: str = "") -> Path:
     ax2.set_ylabel("acceleration (m/s^2)")
     ax2.set_xlabel("time from the contact onset (ms)")
     ax2.grid(alpha=0.3)
-    return _save(fig, path, title)
+    return _save(fig, path, title, caption=caption)
 
 
-def plot_acceleration_spectrum(spectra: list[dict], path: Path, title: str = "") -> Path:
+def plot_acceleration_spectrum(spectra: list[dict], path: Path, title: str = "", caption: str = "") -> Path:
     """Power spectral density of the hammer's acceleration, one panel per step (Welch), log-log.
 
     Each entry: ``label``, ``frequency`` (Hz), ``psd`` ((m/s^2)^2/Hz), ``motor_hz`` (its harmonics are marked:
@@ -566,10 +701,10 @@ def plot_acceleration_spectrum(spectra: list[dict], path: Path, title: str = "")
         ax.set_ylabel("PSD ((m/s^2)^2/Hz)", fontsize=8)
     if spectra:
         axes.flat[0].legend(fontsize=7, loc="lower left")
-    return _save(fig, path, title)
+    return _save(fig, path, title, caption=caption)
 
 
-def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") -> Path:
+def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "", caption: str = "") -> Path:
     """One panel per step: phase plane (relative displacement vs velocity, mm and mm/s) and Poincare points.
 
     Each panel dict: ``label``, ``x``, ``v`` (curve, m and m/s), ``px``, ``pv`` (Poincare points).
@@ -589,4 +724,4 @@ def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "") 
         ax.axis("off")
     if panels:
         axes.flat[0].legend(fontsize=7, loc="upper left")
-    return _save(fig, path, title, dpi=110)
+    return _save(fig, path, title, dpi=110, caption=caption)

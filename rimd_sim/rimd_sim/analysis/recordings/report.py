@@ -97,28 +97,33 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
     write_csv(out / "steps.csv", reading.rows)
     write_csv(out / "excluded_windows.csv", [w.as_dict() for w in reading.windows])
 
-    poincare_rows = _phase_planes(data, steps, out / "phase_planes.png")
+    caption, f_n = _recorded_design(data.recording.metadata)
+    poincare_rows = _phase_planes(data, steps, out / "phase_planes.png", caption)
     write_csv(out / "poincare.csv", poincare_rows)
     plots.plot_recorded_peaks(reading.rows, out / "peak_force_vs_frequency.png",
-                              f"steady peak force per step ({recording.name})")
+                              f"steady peak force per step ({recording.name})", caption=caption,
+                              natural_frequency_hz=f_n)
     drawn = plots.plot_recorded_impacts(events["time"], events["peak_force"], detected["peak_time"],
                                         detected["peak_force"], steps, out / "impacts.png",
                                         "impacts over time (steady windows grey, left-out windows coloured)",
-                                        reading.windows)
+                                        reading.windows, caption=caption)
     channels = {label: data.channels[t] for label, t in (("cart (m)", rec.CART_X), ("RIMD (m)", rec.RIMD_X),
                                                           ("acceleration (m/s^2)", rec.ACC), ("force (N)", rec.FORCE))
                 if t in data.channels}
     drawn_channels = plots.plot_recorded_channels(channels, reading.windows, out / "channels.png",
-                                                  "recorded channels (envelope), left-out windows shaded") \
+                                                  "recorded channels (envelope), left-out windows shaded",
+                                                  caption=caption) \
         if channels else 0
     zoom = pulse_zoom(reading)
     if zoom is not None:
         plots.plot_pulse_zoom(zoom, out / "pulse_zoom.png",
-                              f"a typical impact at {zoom['onset']:.4f} s (peak {zoom['peak']:.1f} N)")
+                              f"a typical impact at {zoom['onset']:.4f} s (peak {zoom['peak']:.1f} N)",
+                              caption=caption)
     spectra = acceleration_spectra(reading)
     if spectra:
         plots.plot_acceleration_spectrum(spectra, out / "acceleration_spectrum.png",
-                                         "hammer acceleration, steady window of each step (Welch)")
+                                         "hammer acceleration, steady window of each step (Welch)",
+                                         caption=caption)
         write_csv(out / "spectrum.csv", [{"step": sp["step"], "motor_hz": sp["motor_hz"], "frequency_hz": f,
                                           "psd_m2_s4_hz": p}
                                          for sp in spectra for f, p in zip(sp["frequency"], sp["psd"], strict=True)])
@@ -172,7 +177,24 @@ def threshold_warnings(reading: Reading) -> list[str]:
     return out
 
 
-def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path) -> list[dict]:
+def _recorded_design(metadata: dict[str, dict[str, str]]) -> tuple[str, float | None]:
+    """The caption of the recorded rig's design (:mod:`rimd_sim.analysis.captions`) and its f_n (Hz).
+
+    From the recording's ``rimd_rig_parameters`` metadata; ``("", None)`` without it.
+    """
+    from rimd_sim.analysis.captions import describe_parameters
+
+    params = metadata.get("rimd_rig_parameters") or {}
+    if not params:
+        return "", None
+    try:
+        f_n: float | None = float(params["natural_frequency"])
+    except (KeyError, ValueError):
+        f_n = None
+    return "recorded rig: " + describe_parameters(params), f_n if f_n and f_n > 0 else None
+
+
+def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path, caption: str = "") -> list[dict]:
     """Phase planes and Poincare maps over each step's steady window (figure at ``path``); the Poincare rows."""
     from rimd_sim.analysis import plots
 
@@ -200,7 +222,8 @@ def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path) -> 
             poincare_rows.append({"step": step.number if step else 0, "frequency_hz": step.setpoint if step else None,
                                   "time_s": tp, "x_rel_m": xp, "velocity_m_s": vp})
     plots.plot_recorded_phase_planes(panels, path,
-                                     "phase planes (RIMD relative to cart) and Poincare points, steady windows")
+                                     "phase planes (RIMD relative to cart) and Poincare points, steady windows",
+                                     caption=caption)
     return poincare_rows
 
 

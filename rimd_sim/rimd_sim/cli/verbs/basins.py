@@ -36,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Compute the basins and write their files."""
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.peterka import basins, basins_table, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
     from rimd_sim.model.validity import Verdict, domain
@@ -69,7 +70,8 @@ def main(args: argparse.Namespace) -> int:
     write_summary(args.out, summary)
     plot_basins(result, args.out / "basins.png",
                 f"RIMD model, gap {args.gap_mm:g} mm, {args.frequency:g} Hz "
-                f"(Omega/omega_n = {args.frequency / rig.natural_frequency:.3g}): basins of attraction")
+                f"(Omega/omega_n = {args.frequency / rig.natural_frequency:.3g}): basins of attraction",
+                caption=describe(config))
     classes = ", ".join(f"{k}: {v}" for k, v in result.class_counts().items())
     print(f"{classes}; {len(result.attractors or [])} attractor(s); "
           f"{result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}")

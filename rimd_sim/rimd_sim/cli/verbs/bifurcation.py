@@ -40,6 +40,7 @@ def main(args: argparse.Namespace) -> int:
     """Run the sweeps and write their files."""
     import numpy as np
 
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.bifurcation import bifurcation, branch_table
     from rimd_sim.analysis.plots import plot_bifurcation
     from rimd_sim.model.validity import domain
@@ -67,7 +68,8 @@ def main(args: argparse.Namespace) -> int:
     }
     write_summary(args.out, summary)
     plot_bifurcation(branches, args.out / "bifurcation.png",
-                     f"RIMD model, gap {args.gap_mm:g} mm: stroboscopic displacement, sweep {args.direction}")
+                     f"RIMD model, gap {args.gap_mm:g} mm: stroboscopic displacement, sweep {args.direction}",
+                     caption=describe(config))
     for b in branches:
         doubled = [r for r in summary["branches"][b.direction] if r["class"] == "2/2"]
         note = ("2/2 (period doubling) at " + ", ".join(f"{r['f_from_hz']:g}-{r['f_to_hz']:g} Hz" for r in doubled)

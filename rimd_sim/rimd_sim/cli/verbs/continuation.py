@@ -62,6 +62,7 @@ def main(args: argparse.Namespace) -> int:
     """Follow the branches and write the files."""
     import numpy as np
 
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.continuation import ContinuationSettings, StartOutsideDomain, continuation
     from rimd_sim.analysis.plots import plot_continuation
     from rimd_sim.model.validity import Verdict, domain
@@ -151,7 +152,8 @@ def main(args: argparse.Namespace) -> int:
              f"RIMD model: periodic orbits by continuation in {args.parameter} at {f_fixed:g} Hz"
              + ("" if args.parameter == "gap" else f", gap {args.gap_mm:g} mm"))
     plot_continuation(result, args.out / "continuation.png", title, natural_frequency_hz=rig.natural_frequency,
-                      length_m=rig.length, amplitude_m=rig.amplitude, diagram=diagram)
+                      length_m=rig.length, amplitude_m=rig.amplitude, diagram=diagram,
+                      caption=describe(config, omit=() if freq else (args.parameter,)))
     for b in result.branches:
         print(f"branch {b.index}: period {b.period}, {len(b.points)} orbits, {args.parameter} "
               f"{b.points[0].parameter:.6g} -> {b.points[-1].parameter:.6g} ({b.end})")
@@ -167,6 +169,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _outside(args: argparse.Namespace, config, error) -> int:
     """No branch: the motion at the start leaves the model's valid domain. The files say so."""
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.plots import plot_message
     from rimd_sim.model.validity import Verdict, domain
 
@@ -179,7 +182,7 @@ def _outside(args: argparse.Namespace, config, error) -> int:
                              "bifurcations": {}, "valid": False, "invalid_rule": error.invalid_rule,
                              "error": str(error), "validity": rules.report([verdict])})
     plot_message(args.out / "continuation.png", f"RIMD model, gap {args.gap_mm:g} mm: no branch",
-                 f"OUTSIDE THE MODEL'S VALID DOMAIN: {error.invalid_rule}\n{error}")
+                 f"OUTSIDE THE MODEL'S VALID DOMAIN: {error.invalid_rule}\n{error}", caption=describe(config))
     print(f"rimd continue: {error}", flush=True)
     return validity_exit("continue", rules.sentence([verdict], "starts"), args.accept_invalid,
                          f"invalid_rule in {args.out / 'summary.json'}")

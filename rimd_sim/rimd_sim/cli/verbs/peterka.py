@@ -53,6 +53,7 @@ def main(args: argparse.Namespace) -> int:
     """Compute the map and write its files."""
     import numpy as np
 
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.peterka import (
         START_NAMES,
         compare_maps,
@@ -103,7 +104,8 @@ def main(args: argparse.Namespace) -> int:
     if comparison is not None:
         summary["comparison"] = comparison
     write_summary(args.out, summary)
-    plot_peterka(result, args.out / "peterka.png", "RIMD model: Peterka map (class of the motion from rest)")
+    plot_peterka(result, args.out / "peterka.png", "RIMD model: Peterka map (class of the motion from rest)",
+                 caption=describe(config, omit=("gap",)))
     if comparison is not None:
         differ = [c for c in comparison["differing_cells"] if c["start"] == "rest"]
         print(f"early stop vs fixed length ({comparison['fixed_cycles']} cycles): "

@@ -45,6 +45,7 @@ def main(args: argparse.Namespace) -> int:
     """Simulate the point and write its files."""
     import numpy as np
 
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, CHAOTIC, largest_lyapunov
     from rimd_sim.analysis.dynamics.steady import classify, constant_frequency, nondimensional
     from rimd_sim.analysis.plots import plot_poincare
@@ -120,7 +121,7 @@ def main(args: argparse.Namespace) -> int:
                   f"RIMD model, gap {args.gap_mm:g} mm, Omega/omega_n = {f / rig.natural_frequency:.3g} "
                   f"({f:.4g} Hz): {label}, lambda_max = {lyap.exponent:.3g} 1/s"
                   + ("" if verdict.valid else f"\nOUTSIDE THE MODEL'S VALID DOMAIN: {verdict.invalid_rule}"),
-                  invalid=verdict.invalid_rule)
+                  invalid=verdict.invalid_rule, caption=describe(base))
     print(f"gap {args.gap_mm:g} mm, {f:.4g} Hz: {label}, largest Lyapunov exponent {lyap.exponent:.3g} 1/s "
           f"({'chaotic' if chaotic else 'not chaotic'}); files in {args.out}")
     return validity_exit("poincare", rules.sentence([verdict]), args.accept_invalid,
@@ -129,6 +130,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _chattering(args: argparse.Namespace, base, f: float, rules, error) -> int:
     """The point where the chattering guard stopped the run: its files say so, no Poincare map."""
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.plots import plot_message
     from rimd_sim.model.validity import PointMeasures
 
@@ -144,7 +146,7 @@ def _chattering(args: argparse.Namespace, base, f: float, rules, error) -> int:
         "cycles": args.cycles, "valid": False, "invalid_rule": verdict.invalid_rule,
         "chattering": str(error), "validity": rules.report([verdict])})
     plot_message(args.out / "poincare.png", f"RIMD model, gap {args.gap_mm:g} mm, {f:.4g} Hz",
-                 f"OUTSIDE THE MODEL'S VALID DOMAIN: {verdict.invalid_rule}\n{error}")
+                 f"OUTSIDE THE MODEL'S VALID DOMAIN: {verdict.invalid_rule}\n{error}", caption=describe(base))
     print(f"gap {args.gap_mm:g} mm, {f:.4g} Hz: the chattering guard stopped the run ({error}); files in {args.out}")
     return validity_exit("poincare", rules.sentence([verdict]), args.accept_invalid,
                          f"invalid_rule in {args.out / 'summary.json'}")

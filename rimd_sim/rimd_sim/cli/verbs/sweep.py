@@ -40,6 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
+    from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.sweep import points_table, sweep
     from rimd_sim.analysis.plots import plot_sweep
     from rimd_sim.model.validity import Verdict, domain
@@ -60,7 +61,8 @@ def main(args: argparse.Namespace) -> int:
         writer.writerows(rows)
     summary = result.summary()
     write_summary(args.out, summary)
-    plot_sweep([result], args.out / "sweep.png", f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}")
+    plot_sweep([result], args.out / "sweep.png", f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}",
+               caption=describe(config))
     def band(p) -> str:
         return "none" if p is None else f"{p.frequency_hz:g} Hz {p.peak_force_n:.1f} N"
 
