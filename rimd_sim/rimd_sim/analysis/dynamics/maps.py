@@ -50,7 +50,7 @@ from rimd_sim.model.rig_model import model_for
 from rimd_sim.model.validity import PointMeasures, Verdict, domain
 from rimd_sim.settings.config import PARAMETERS, SimConfig
 
-__all__ = ["FREQUENCY", "ParameterMap", "axis_unit", "mappable_parameters", "parameter_map"]
+__all__ = ["FREQUENCY", "ParameterMap", "axis_unit", "mappable_parameters", "parameter_map", "save_map_npz"]
 
 #: The axis name of the motor frequency (Hz): not a parameter of :class:`SimConfig` but of the protocol.
 FREQUENCY = "frequency"
@@ -307,3 +307,21 @@ def parameter_map(config: SimConfig, x: str, x_values, y: str, y_values, *, freq
     return ParameterMap(x, y, np.array(xs), np.array(ys), freqs, ratio, labels, peak, peak / weight, velocity, rate,
                         cycles, theta, force, rules, transient_cycles, measure_cycles, early_stop,
                         time.perf_counter() - start, n, where, report)
+
+
+def save_map_npz(result: ParameterMap, path) -> None:
+    """Write the map as arrays, NumPy ``.npz`` (rows along ``y``, columns along ``x``).
+
+    Arrays: ``x_name``, ``y_name``, ``x_values``, ``y_values``, ``classes`` (names) and ``codes`` (indices into
+    them), ``frequency_hz``, ``peak_force_n``, ``force_ratio``, ``impact_velocity_m_s``, ``impacts_per_cycle``,
+    ``cycles``, ``valid`` and ``invalid_rule``.
+    """
+    names = sorted(set(result.labels.ravel().tolist()))
+    index = {c: i for i, c in enumerate(names)}
+    codes = np.vectorize(index.__getitem__, otypes=[np.int16])(result.labels)
+    np.savez_compressed(path, x_name=np.array(result.x), y_name=np.array(result.y), x_values=result.x_values,
+                        y_values=result.y_values, classes=np.array(names), codes=codes,
+                        frequency_hz=result.frequency_hz, peak_force_n=result.peak_force,
+                        force_ratio=result.force_ratio, impact_velocity_m_s=result.impact_velocity,
+                        impacts_per_cycle=result.impacts_per_cycle, cycles=result.cycles.astype(np.int32),
+                        valid=result.valid, invalid_rule=result.invalid_rule.astype(str))
