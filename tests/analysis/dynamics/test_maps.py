@@ -51,8 +51,8 @@ def test_map_cells_are_the_sweep_points_of_their_parameters(paper):
 
 
 def test_a_frequency_gap_map_is_the_peterka_maps_rest_start(paper):
-    """x = frequency, y = gap: the classes, peak force and impact velocity of the Peterka map's ``rest`` start
-    (the same stop rule, the same compiled runs), with the no-impact cell at 0 N."""
+    """With frequency along x and gap along y: the classes, peak force and impact velocity of the Peterka map's
+    ``rest`` start (the same stop rule, the same compiled runs), with the no-impact cell at 0 N."""
     gaps, freqs = [0.0, 2.4e-3], [3.75, 5.25, 6.75]
     m = parameter_map(paper, "frequency", freqs, "gap", gaps, workers=1)
     p = peterka(paper, gaps, freqs, starts=0, workers=1)

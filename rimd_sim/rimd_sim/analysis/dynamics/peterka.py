@@ -534,13 +534,14 @@ def save_peterka_npz(result: PeterkaResult, path) -> None:
     extra = result.starts - len(START_NAMES)
     start_names = [*START_NAMES, *(["free"] if extra else []), *(f"halton{s}" for s in range(1, extra))]
     rules = result.invalid_rule
-    window = {} if result.peak_force is None or result.impact_velocity is None else {
-        "peak_force_n": result.peak_force, "impact_velocity_m_s": result.impact_velocity}
+    window: dict[str, np.ndarray] = {}
+    if result.peak_force is not None and result.impact_velocity is not None:
+        window = {"peak_force_n": result.peak_force, "impact_velocity_m_s": result.impact_velocity}
     np.savez_compressed(path, classes=np.array(names), codes=codes, starts=np.array(start_names),
                         coexisting=result.coexisting, cycles=result.cycles.astype(np.int32),
                         gaps_mm=result.gaps_mm, frequencies_hz=result.frequencies_hz, gap_ratio=result.gap_ratio,
                         frequency_ratio=result.frequency_ratio, valid=rules == "",
-                        invalid_rule=rules.astype(str), **window)
+                        invalid_rule=rules.astype(str), **window)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
