@@ -59,6 +59,7 @@ VERB_PAGES = {
     "continue": "docs/analyses.md",
     "peterka": "docs/analyses.md",
     "basins": "docs/analyses.md",
+    "map": "docs/analyses.md",
     "experiment": "docs/analyses.md",
     "analyze": "docs/analyses.md",
     "identify": "docs/identification.md",

@@ -193,3 +193,69 @@ def test_json_outputs_are_strict_json(tmp_path):
     (tmp_path / "python.json").write_text('{"a": NaN}')
     with pytest.raises(ValueError, match="NaN"):
         read_json(tmp_path / "python.json")
+
+
+def _finite_where_impacting(rows):
+    """Every row has a finite peak force and impact velocity, positive together (an impact) or both 0."""
+    assert rows
+    for r in rows:
+        force, velocity = float(r["peak_force_n"]), float(r["impact_velocity_m_s"])
+        assert np.isfinite(force) and np.isfinite(velocity), r
+        assert (force > 0) == (velocity > 0), r
+    return [r for r in rows if float(r["peak_force_n"]) > 0]
+
+
+def test_map_writes_its_files_with_force_and_impact_velocity(tmp_path, capsys):
+    """``rimd map`` over (natural_frequency, mass) at 3.75 Hz: map.csv with the parameters as columns and the
+    figures of every cell, map.npz, map.png, summary.json with the axes and their units."""
+    out = tmp_path / "m"
+    assert cli.main(["map", "--x", "natural_frequency", "--x-values", "1.7,2.0", "--y", "mass", "--y-range", "0.1",
+                     "0.2", "2", "--frequency", "3.75", "--workers", "1", "--out", str(out)]) == 0
+    summary = _files(out, "map.png", "map.csv", "summary.json")
+    rows = list(csv.DictReader(open(out / "map.csv")))
+    assert list(rows[0])[:9] == ["natural_frequency", "mass", "frequency_hz", "frequency_ratio", "class",
+                                 "peak_force_n", "force_ratio", "impact_velocity_m_s", "impacts_per_cycle"]
+    assert [(float(r["natural_frequency"]), float(r["mass"])) for r in rows] == [(1.7, 0.1), (2.0, 0.1), (1.7, 0.2),
+                                                                                (2.0, 0.2)]
+    assert len(_finite_where_impacting(rows)) == 4 and all(r["valid"] == "True" for r in rows)
+    assert summary["x"]["unit"] == "Hz" and summary["y"] == {"name": "mass", "unit": "kg", "values": [0.1, 0.2]}
+    assert summary["frequency_hz"] == 3.75 and summary["cells"] == 4
+    data = np.load(out / "map.npz")
+    assert data["peak_force_n"].shape == (2, 2) and str(data["x_name"]) == "natural_frequency"
+    assert "4 cells" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--x", "natural_frequency", "--x-values", "1.82,-1"], "parameter 'natural_frequency' = -1.0 refused: must be >"),
+    (["--x", "stiffness", "--x-values", "1"], "unknown parameter (known: frequency, gap, mass,"),
+    (["--x", "natural_frequency", "--x-range", "1", "2", "two"], "--x-range 1 2 two refused"),
+])
+def test_map_refuses_a_bad_axis_in_one_line(tmp_path, capsys, argv, message):
+    status = cli.main(["map", *argv, "--y", "mass", "--y-values", "0.15", "--frequency", "4",
+                       "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert status == 1 and message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_every_analysis_csv_has_the_peak_force_and_impact_velocity(tmp_path):
+    """The columns appended to sweep.csv (with motion_class), peterka.csv, basins.csv and bifurcation.csv, on
+    tiny grids: finite, and positive where the motion impacts."""
+    def rows(verb, *argv):
+        out = tmp_path / verb
+        assert cli.main([verb, *argv, "--out", str(out)]) == 0
+        return list(csv.DictReader(open(out / f"{verb}.csv")))
+
+    sweep = rows("sweep", "--f-min", "3.75", "--f-max", "4.0", "--cycles", "60", "--measure-cycles", "20",
+                 "--workers", "1")
+    assert [r["motion_class"] for r in sweep] == ["1/1", "1/1"] and len(_finite_where_impacting(sweep)) == 2
+    peterka = rows("peterka", "--gap-min-mm", "2.4", "--gap-max-mm", "2.4", "--gaps", "1", "--f-min", "3.75",
+                   "--f-max", "5.25", "--freqs", "2", "--starts", "0", "--workers", "1")
+    assert len(_finite_where_impacting(peterka)) >= 1
+    basins = rows("basins", "--size", "3", "--transient-cycles", "60", "--measure-cycles", "24", "--workers", "1")
+    run = [r for r in basins if r["class"] != "inside the stop"]
+    assert len(_finite_where_impacting(run)) >= 1
+    assert all(r["peak_force_n"] == "nan" for r in basins if r["class"] == "inside the stop")
+    bifurcation = rows("bifurcation", "--direction", "up", "--f-min", "3.75", "--f-max", "3.85", "--f-step", "0.1",
+                       "--transient-cycles", "30", "--sample-cycles", "12")
+    assert len(_finite_where_impacting(bifurcation)) == len(bifurcation) == 24

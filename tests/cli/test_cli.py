@@ -13,8 +13,8 @@ from rimd_sim import cli
 
 #: The verbs of the interface (docs/interface.md, Commands), in the order of ``rimd --help``.
 INTERFACE_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "sweep", "bifurcation", "continue",
-                   "peterka", "poincare", "basins", "pulse", "faults", "motor", "perturb", "inject", "pause", "resume",
-                   "reset", "clear-faults", "status", "rerun", "replay", "crop", "node", "info", "warmup")
+                   "peterka", "map", "poincare", "basins", "pulse", "faults", "motor", "perturb", "inject", "pause",
+                   "resume", "reset", "clear-faults", "status", "rerun", "replay", "crop", "node", "info", "warmup")
 #: Verbs listed without a module, and what their refusal says is missing: none left.
 NOT_IMPLEMENTED: dict[str, str] = {}
 
@@ -177,7 +177,9 @@ OUTPUTS = {"out", "output_dir", "save"}
 #: ``--no-record``: here it is refused for lacking it, before anything starts.)
 UNTYPED_INPUTS = {("experiment", "for_identification")}
 #: What else a verb needs to get as far as reading the file (a required option, or a file the verb reads first).
-NEEDS = {"pulse": ["--velocity", "0.5"], "crop": ["--out", "{tmp}/cropped"]}
+NEEDS = {"pulse": ["--velocity", "0.5"], "crop": ["--out", "{tmp}/cropped"],
+         "map": ["--x", "natural_frequency", "--x-values", "1.82", "--y", "mass", "--y-values", "0.15",
+                 "--frequency", "4"]}
 #: Files a verb hands to a node it starts, which refuses them (one line, exit 1: tested through the console
 #: script below); the plan only checks that the recording is there.
 READ_BY_A_NODE = {("replay", "recording"): ("not MCAP", "bad YAML", "YAML text")}
@@ -229,8 +231,8 @@ def test_every_verb_refuses_a_bad_file_in_one_line_with_status_1(tmp_path, capsy
     bad = _bad_files(tmp_path)
     inputs = list(_file_inputs())
     assert {v for v, *_ in inputs} >= {"rig", "experiment", "analyze", "identify", "fit-table", "sweep",
-                                       "bifurcation", "peterka", "poincare", "basins", "pulse", "faults", "rerun",
-                                       "replay", "crop"}, inputs
+                                       "bifurcation", "peterka", "map", "poincare", "basins", "pulse", "faults",
+                                       "rerun", "replay", "crop"}, inputs
     cases = 0
     for verb, dest, option, _ in inputs:
         for what, path in bad.items():

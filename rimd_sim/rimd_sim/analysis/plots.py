@@ -725,3 +725,37 @@ def plot_recorded_phase_planes(panels: list[dict], path: Path, title: str = "", 
     if panels:
         axes.flat[0].legend(fontsize=7, loc="upper left")
     return _save(fig, path, title, dpi=110, caption=caption)
+
+
+# ---- maps over two parameters (rimd map) ------------------------------------------------------------------
+
+
+def _axis_label(name: str, unit: str) -> str:
+    """``natural_frequency (Hz)``; the motor frequency as ``motor frequency (Hz)``."""
+    words = "motor frequency" if name == "frequency" else name
+    return f"{words} ({unit})" if unit else words
+
+
+def plot_map(result, path: Path, title: str = "", caption: str = "") -> Path:
+    """Two panels over (x, y): the class of the motion from rest (as :func:`plot_peterka` draws it), and the peak force.
+
+    ``result``: a :class:`~rimd_sim.analysis.dynamics.maps.ParameterMap`. Cells outside the model's valid domain
+    are hatched on both panels; a failed cell has no force (blank).
+    """
+    x, y = np.asarray(result.x_values, dtype=float), np.asarray(result.y_values, dtype=float)
+    xlabel, ylabel = _axis_label(result.x, result.x_unit), _axis_label(result.y, result.y_unit)
+    palette = class_palette(result.labels.ravel().tolist())
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(15, 6))
+    _class_image(ax, x, y, result.labels, palette)
+    marks = _mark_invalid_cells(ax, x, y, result.invalid_rule)
+    _class_legend(ax, palette, marks)
+    ax.set_title("class of the motion from rest", fontsize=10)
+    force = np.ma.masked_invalid(np.asarray(result.peak_force, dtype=float))
+    mesh = ax2.pcolormesh(x, y, force, cmap="viridis", shading="nearest")
+    fig.colorbar(mesh, ax=ax2, label="peak impact force (N), steady window")
+    _mark_invalid_cells(ax2, x, y, result.invalid_rule)
+    ax2.set_title("peak impact force from rest (0: no impact)", fontsize=10)
+    for a in (ax, ax2):
+        a.set_xlabel(xlabel)
+        a.set_ylabel(ylabel)
+    return _save(fig, path, title, dpi=map_dpi(result.labels.shape), caption=caption)

@@ -170,6 +170,8 @@ VERBS: tuple[Verb, ...] = (
          "fold, Neimark-Sacker, grazing", "rimd_sim.cli.verbs.continuation"),
     Verb("peterka", "Peterka diagram: impact regimes (p impacts / n cycles) in the (frequency, gap) plane",
          "rimd_sim.cli.verbs.peterka"),
+    Verb("map", "steady motion, peak force and impact velocity over any two parameters (mass x natural frequency, ...)",
+         "rimd_sim.cli.verbs.map"),
     Verb("poincare", "phase plane, Poincare map and largest Lyapunov exponent of the simulated motion",
          "rimd_sim.cli.verbs.poincare"),
     Verb("basins", "basins of attraction of coexisting motions over initial (theta, theta')",

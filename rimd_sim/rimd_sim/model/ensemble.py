@@ -48,7 +48,11 @@ the driver's status (``ST_OK``, or the failure: ``ST_ZENO`` is the chattering gu
 comparison per impact record: the integration is untouched, so every other output is the same. And, to tell
 attractors of one class apart (``rimd basins``' attractor ids), the last ``max_period`` stroboscopic points
 ``(u, v)`` of the classified window (NaN for a failed cell, or before cycle 0) and the largest peak force of
-the impacts started in that window.
+the impacts started in that window. And, for the maps that report it (``rimd map``), the largest impact velocity
+of the impacts started in that window: the record's ``R_VELOCITY``, the penetration rate ``delta_dot`` at
+contact onset (``open_record`` in :mod:`rimd_sim.model.kernel`), positive when the hammer approaches the stop, so
+the approach speed (m/s); 0 without impact, NaN for a failed cell. Read from the same records as the peak, it
+costs one comparison more per record.
 
 A cell starts with the model's own modes at rest (a continuation too: it goes on from the
 previous cell's ``(theta, theta_dot)``, as ``steady_orbit`` from an orbit's ``final_state``).
@@ -133,6 +137,7 @@ class EnsembleResult:
     status: np.ndarray | None = None          # the driver's status: k.ST_OK, k.ST_ZENO (chattering), ...
     points: np.ndarray | None = None          # (cells, max_period, 2): the window's last (u, v) points
     window_peak: np.ndarray | None = None     # N, the largest impact started in the classified window, 0 without
+    window_velocity: np.ndarray | None = None  # m/s, the largest impact velocity of that window, 0 without
 
     def measures(self) -> list[PointMeasures]:
         """Per cell, what the model's valid domain checks (:meth:`~rimd_sim.model.validity.ValidityDomain.check`).
@@ -230,6 +235,16 @@ def _window_out(u, v, peaks, lo, hi, pts):
 
 
 @_jit
+def _window_max(values, lo, hi):
+    """The largest of ``values`` over cycles ``lo .. hi - 1``, at least 0."""
+    top = 0.0
+    for i in range(lo, hi):
+        if values[i] > top:
+            top = values[i]
+    return top
+
+
+@_jit
 def _rate(counts, lo, hi):
     """Impacts per cycle over cycles ``lo .. hi - 1``."""
     total = 0
@@ -283,11 +298,12 @@ def _loop(name: str) -> types.ModuleType:
 
     @compiled
     def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
-                ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out, peaks, pts):
+                ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out, peaks, vels,
+                pts):
         """One trajectory.
 
         Returns ``(period, impacts, kind, cycles, theta, theta_dot, steps, max_abs_theta, peak_force,
-        impacts_per_cycle, status, window_peak)``; the window's last points in ``pts``.
+        impacts_per_cycle, status, window_peak, window_velocity)``; the window's last points in ``pts``.
         """
         min_cycles = int(rule[0])
         cap = int(rule[1])
@@ -307,6 +323,7 @@ def _loop(name: str) -> types.ModuleType:
         for i in range(cap + 2):
             counts[i] = 0
             peaks[i] = 0.0
+            vels[i] = 0.0
         # Point of cycle c: state at c / f (emitted once the integration passes it). Impacts of cycle c are final
         # once the integration has passed (c + 1.5) / f (a contact lasts milliseconds), as in steady_orbit.
         c_done = 0  # cycles 0 .. c_done - 1 have their point and impact count final
@@ -331,6 +348,8 @@ def _loop(name: str) -> types.ModuleType:
                     counts[cyc] += 1
                     if imp_out[j, k.R_PEAK] > peaks[cyc]:
                         peaks[cyc] = imp_out[j, k.R_PEAK]
+                    if imp_out[j, k.R_VELOCITY] > vels[cyc]:
+                        vels[cyc] = imp_out[j, k.R_VELOCITY]
                 if imp_out[j, k.R_PEAK] > peak:
                     peak = imp_out[j, k.R_PEAK]
             if status == k.ST_STROBE_FULL or status == k.ST_IMPACTS_FULL:
@@ -340,7 +359,7 @@ def _loop(name: str) -> types.ModuleType:
                     pts[j, 0] = math.nan
                     pts[j, 1] = math.nan
                 return (0, 0, KIND_FAILED, c_done, th_s[max(c_done - 1, 0)], om_s[max(c_done - 1, 0)],
-                        ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status, math.nan)
+                        ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status, math.nan, math.nan)
             c_done += 1
             if early and min_cycles <= c_done <= cap:
                 n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
@@ -349,14 +368,15 @@ def _loop(name: str) -> types.ModuleType:
                     period, imp, kind = _classify_window(u, v, counts, lo, c_done, max_period, tol)
                     w_peak = _window_out(u, v, peaks, lo, c_done, pts)
                     return (period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP], fs[k.F_THMAX],
-                            peak, _rate(counts, lo, c_done), status, w_peak)
+                            peak, _rate(counts, lo, c_done), status, w_peak, _window_max(vels, lo, c_done))
             if c_done > cap:
                 # The fixed-length window of RigModel-based runs (transient cap - measure cycles, then measure
                 # cycles): points and impacts of cycles cap - measure + 1 .. cap.
                 period, imp, kind = _classify_window(u, v, counts, cap - measure + 1, cap + 1, max_period, tol)
                 w_peak = _window_out(u, v, peaks, cap - measure + 1, cap + 1, pts)
                 return (period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP], fs[k.F_THMAX], peak,
-                        _rate(counts, cap - measure + 1, cap + 1), status, w_peak)
+                        _rate(counts, cap - measure + 1, cap + 1), status, w_peak,
+                        _window_max(vels, cap - measure + 1, cap + 1))
 
     @compiled
     def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f,
@@ -375,6 +395,7 @@ def _loop(name: str) -> types.ModuleType:
         om_s = np.zeros(cap + 2)
         counts = np.zeros(cap + 2, dtype=np.int64)
         peaks = np.zeros(cap + 2)
+        vels = np.zeros(cap + 2)
         imp_out = np.empty((256, k.N_RECORD))
         st_out = np.empty((8, n_strobe))
         ch_rate = np.zeros(0)
@@ -395,10 +416,11 @@ def _loop(name: str) -> types.ModuleType:
             if chain[i] and i > 0:
                 th0 = prev_th
                 om0 = prev_om
-            period, imp, kind, cycles, th_end, om_end, steps, th_max, peak, rate, status, w_peak = loop.run_one(
+            (period, imp, kind, cycles, th_end, om_end, steps, th_max, peak, rate, status, w_peak,
+             w_vel) = loop.run_one(
                 params[gap_index[i]], freqs[i], th0, om0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts,
                 imp_out, st_out, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base,
-                tr_out, peaks, out_pts[i])
+                tr_out, peaks, vels, out_pts[i])
             out_i[i, 0] = period
             out_i[i, 1] = imp
             out_i[i, 2] = kind
@@ -411,6 +433,7 @@ def _loop(name: str) -> types.ModuleType:
             out_f[i, 3] = peak
             out_f[i, 4] = rate
             out_f[i, 5] = w_peak
+            out_f[i, 6] = w_vel
             if kind == KIND_FAILED:
                 # A continuation goes on from the fallback state after a failure (the pool path: the final state
                 # from rest at the same frequency).
@@ -451,7 +474,7 @@ def run_cells(model: str, params: np.ndarray, gap_index, freqs, theta0, theta_do
         chain = np.zeros(n, dtype=np.bool_)
     fb_th, fb_om = (theta0, theta_dot0) if fallback is None else fallback
     out_i = np.zeros((n, 6), dtype=np.int64)
-    out_f = np.zeros((n, 6))
+    out_f = np.zeros((n, 7))
     out_pts = np.zeros((n, max(1, rule.max_period), 2))
     _loop(model).run_cells(np.ascontiguousarray(params, dtype=np.float64),
                            np.ascontiguousarray(gap_index, dtype=np.int64), freqs,
@@ -461,4 +484,4 @@ def run_cells(model: str, params: np.ndarray, gap_index, freqs, theta0, theta_do
                            np.ascontiguousarray(fb_th, dtype=np.float64), np.ascontiguousarray(fb_om, dtype=np.float64),
                            rule.vector(), out_i, out_f, out_pts)
     return EnsembleResult(out_i[:, 0], out_i[:, 1], out_i[:, 2], out_i[:, 3], out_f[:, :2], out_i[:, 4],
-                          out_f[:, 2], out_f[:, 3], out_f[:, 4], out_i[:, 5], out_pts, out_f[:, 5])
+                          out_f[:, 2], out_f[:, 3], out_f[:, 4], out_i[:, 5], out_pts, out_f[:, 5], out_f[:, 6])

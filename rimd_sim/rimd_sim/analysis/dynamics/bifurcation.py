@@ -4,7 +4,9 @@ The paper's Fig. 11. A sweep is one continuous run: at each frequency the motor 
 ``ramp_rate``) and the motion continues from the previous state, so the up and down sweeps can end on
 different attractors (hysteresis, coexisting motions). After ``transient_cycles`` at the new frequency the
 state is sampled once per cycle (motor phase a multiple of 2 pi) over ``sample_cycles`` cycles, and the
-samples are classified (:func:`rimd_sim.analysis.dynamics.steady.classify`).
+samples are classified (:func:`rimd_sim.analysis.dynamics.steady.classify`). The impacts started in the
+sampled cycles (those the classification counts) give the point's steady peak force and impact velocity (the
+approach speed at contact onset).
 
 Both directions are independent runs: ``both`` runs them in two processes, one per core.
 
@@ -46,6 +48,9 @@ class BifurcationPoint:
         max_force_n: Largest peak force over the same (N).
         valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
         invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
+        peak_force_n: Largest peak force of the impacts started in the sampled cycles (N); 0 without impact,
+            NaN where the chattering guard fired.
+        impact_velocity_m_s: Largest impact velocity of the same impacts (m/s); 0 without impact.
     """
 
     frequency_hz: float
@@ -57,6 +62,8 @@ class BifurcationPoint:
     max_force_n: float = math.nan
     valid: bool = True
     invalid_rule: str = ""
+    peak_force_n: float = math.nan
+    impact_velocity_m_s: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -116,8 +123,8 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
             continue
         spans.append(out)
         strobe = [s for s in out.strobe if c0 < s.cycle_index <= c0 + sample_cycles]
-        counts = np.bincount([i.cycle_index - c0 - 1 for i in out.impacts
-                              if c0 < i.cycle_index <= c0 + sample_cycles], minlength=sample_cycles)[:sample_cycles]
+        sampled = [i for i in out.impacts if c0 < i.cycle_index <= c0 + sample_cycles]
+        counts = np.bincount([i.cycle_index - c0 - 1 for i in sampled], minlength=sample_cycles)[:sample_cycles]
         u, v = nondimensional(rig.length, rig.amplitude, f, [s.theta for s in strobe], [s.theta_dot for s in strobe])
         n = min(len(u), len(counts))
         label = classify(u[:n], v[:n], counts[:n])[0]
@@ -126,7 +133,9 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
         max_force = max((imp.peak_force for o in spans for imp in o.impacts), default=0.0)
         verdict = rules.check(PointMeasures(max_theta, max_force, rate))
         points.append(BifurcationPoint(f, f / rig.natural_frequency, u, label, rate, max_theta, max_force,
-                                       verdict.valid, verdict.invalid_rule))
+                                       verdict.valid, verdict.invalid_rule,
+                                       max((i.peak_force for i in sampled), default=0.0),
+                                       max((i.impact_velocity for i in sampled), default=0.0)))
     points.sort(key=lambda p: p.frequency_hz)
     if model is not None:
         simulated += float(model.time)
@@ -170,7 +179,7 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
 
 
 def branch_table(branches: list[BifurcationBranch]) -> list[dict]:
-    """CSV rows: one per stroboscopic sample."""
+    """CSV rows: one per stroboscopic sample; the point's steady peak force and impact velocity on each of its rows."""
     rows = []
     for b in branches:
         for p in b.points:
@@ -178,10 +187,12 @@ def branch_table(branches: list[BifurcationBranch]) -> list[dict]:
                 rows.append({"direction": b.direction, "frequency_hz": p.frequency_hz,
                              "frequency_ratio": p.frequency_ratio, "sample": k, "displacement_ratio": float(u),
                              "class": p.label, "impacts_per_cycle": p.impacts_per_cycle, "valid": p.valid,
-                             "invalid_rule": p.invalid_rule})
+                             "invalid_rule": p.invalid_rule, "peak_force_n": p.peak_force_n,
+                             "impact_velocity_m_s": p.impact_velocity_m_s})
             if not len(p.u):   # no sample (the chattering guard fired): the point still has its row
                 rows.append({"direction": b.direction, "frequency_hz": p.frequency_hz,
                              "frequency_ratio": p.frequency_ratio, "sample": "", "displacement_ratio": "",
                              "class": p.label, "impacts_per_cycle": p.impacts_per_cycle, "valid": p.valid,
-                             "invalid_rule": p.invalid_rule})
+                             "invalid_rule": p.invalid_rule, "peak_force_n": p.peak_force_n,
+                             "impact_velocity_m_s": p.impact_velocity_m_s})
     return rows

@@ -120,6 +120,9 @@ class PeterkaResult:
         extra_invalid_rules: The valid domain's rules per extra start, same shape.
         extra_max_abs_theta: Largest ``|theta|`` per extra start, same shape.
         extra_max_force: Largest impact force per extra start, same shape.
+        peak_force: Largest impact force (N) of the classified window of the ``rest`` start, per cell (rows,
+            columns): the steady force of the cell's motion from rest; 0 without impact, NaN where it failed.
+        impact_velocity: Largest impact velocity (m/s, the approach speed at contact onset) of the same window.
     """
 
     gaps_mm: np.ndarray
@@ -141,6 +144,8 @@ class PeterkaResult:
     extra_invalid_rules: np.ndarray | None = None
     extra_max_abs_theta: np.ndarray | None = None
     extra_max_force: np.ndarray | None = None
+    peak_force: np.ndarray | None = None
+    impact_velocity: np.ndarray | None = None
 
     @property
     def starts(self) -> int:
@@ -246,8 +251,9 @@ def _row_ensemble(args):
     A third call runs the extra starts, when any (``args[6]``: ``(theta0, theta_dot0)`` arrays of shape
     ``(starts, frequencies)``).
 
-    Returns ``(labels, cycles, measures)``: per start, the class, the cycles run and the valid domain's measures
-    (:func:`_measures`) of each frequency; the extra starts after the three named ones.
+    Returns ``(labels, cycles, measures, window)``: per start, the class, the cycles run and the valid domain's
+    measures (:func:`_measures`) of each frequency, the extra starts after the three named ones; and per
+    frequency, the ``rest`` start's ``(peak force, impact velocity)`` of its classified window.
     """
     model, p, kick, freqs, rule, continued_rule = args[:6]
     extra = args[6] if len(args) > 6 else None
@@ -263,7 +269,8 @@ def _row_ensemble(args):
     measures = _measures(both)
     out = ([labels[:nf], labels[nf:], cont.labels()],
            [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()],
-           [measures[:nf], measures[nf:], _measures(cont)])
+           [measures[:nf], measures[nf:], _measures(cont)],
+           _window(both, nf))
     if extra is not None and extra[0].size:
         th0, om0 = extra
         ns = th0.shape[0]
@@ -275,6 +282,12 @@ def _row_ensemble(args):
             out[1].append(cycles[s * nf:(s + 1) * nf])
             out[2].append(measures[s * nf:(s + 1) * nf])
     return out
+
+
+def _window(res, n: int) -> list[tuple[float, float]]:
+    """The first ``n`` cells' ``(window_peak, window_velocity)`` of an ensemble result (plain floats, for a task)."""
+    assert res.window_peak is not None and res.window_velocity is not None  # run_cells fills them
+    return list(zip(res.window_peak[:n].tolist(), res.window_velocity[:n].tolist(), strict=True))
 
 
 def _halton(index: int, base: int) -> float:
@@ -398,6 +411,7 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
                         dtype=float).transpose(1, 0, 2)
 
     theta, force = take(0), take(1)
+    window = np.array([r[3] for r in rows], dtype=float)   # row, frequency, (peak, velocity)
     result = PeterkaResult(np.array(gaps) * 1e3, np.array(freqs), np.array(gaps) / rig.amplitude,
                            np.array(freqs) / rig.natural_frequency, labels, time.perf_counter() - start, n,
                            transient_cycles + measure_cycles, cycles, early_stop, where, all_rules[:named],
@@ -405,7 +419,8 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
                            extra_labels=all_labels[named:] if starts else None,
                            extra_invalid_rules=all_rules[named:] if starts else None,
                            extra_max_abs_theta=theta[named:] if starts else None,
-                           extra_max_force=force[named:] if starts else None)
+                           extra_max_force=force[named:] if starts else None,
+                           peak_force=window[..., 0], impact_velocity=window[..., 1])
     return _with_validity(result, dom)
 
 
@@ -417,6 +432,9 @@ def _with_validity(result, dom: ValidityDomain):
 
 def peterka_table(result: PeterkaResult) -> list[dict]:
     """CSV rows, one per cell; the valid domain's columns after the classes (max over the starts).
+
+    Then the ``rest`` start's steady peak force and impact velocity (its classified window): ``peak_force_n``,
+    ``impact_velocity_m_s``.
 
     ``coexisting`` and ``classes_found`` are over every start (``starts``: the three named ones and the extra
     ones), a lower bound (module docstring).
@@ -433,6 +451,9 @@ def peterka_table(result: PeterkaResult) -> list[dict]:
             row["classes_found"] = found[i, j]
             row["starts"] = result.starts
             row.update(_validity_columns(_AllStarts(result), (slice(None), i, j), cell_rules[i, j]))
+            if result.peak_force is not None and result.impact_velocity is not None:
+                row["peak_force_n"] = float(result.peak_force[i, j])
+                row["impact_velocity_m_s"] = float(result.impact_velocity[i, j])
             rows.append(row)
     return rows
 
@@ -506,7 +527,8 @@ def save_peterka_npz(result: PeterkaResult, path) -> None:
     then the extra ones), ``starts`` (their names: ``rest``, ``kick``, ``continued``, ``free``, ``halton1``,
     ...), ``coexisting`` (over every start, a lower bound), ``cycles`` (the named starts), ``gaps_mm``,
     ``frequencies_hz``, ``gap_ratio``, ``frequency_ratio``, ``valid`` and ``invalid_rule`` (per cell, the
-    model's valid domain over every start).
+    model's valid domain over every start), ``peak_force_n`` and ``impact_velocity_m_s`` (per cell, the classified
+    window of the ``rest`` start).
     """
     labels = result.all_labels
     names = sorted(set(labels.ravel().tolist()))
@@ -515,11 +537,14 @@ def save_peterka_npz(result: PeterkaResult, path) -> None:
     extra = result.starts - len(START_NAMES)
     start_names = [*START_NAMES, *(["free"] if extra else []), *(f"halton{s}" for s in range(1, extra))]
     rules = result.invalid_rule
+    window: dict[str, np.ndarray] = {}
+    if result.peak_force is not None and result.impact_velocity is not None:
+        window = {"peak_force_n": result.peak_force, "impact_velocity_m_s": result.impact_velocity}
     np.savez_compressed(path, classes=np.array(names), codes=codes, starts=np.array(start_names),
                         coexisting=result.coexisting, cycles=result.cycles.astype(np.int32),
                         gaps_mm=result.gaps_mm, frequencies_hz=result.frequencies_hz, gap_ratio=result.gap_ratio,
                         frequency_ratio=result.frequency_ratio, valid=rules == "",
-                        invalid_rule=rules.astype(str))
+                        invalid_rule=rules.astype(str), **window)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -548,6 +573,9 @@ class BasinsResult:
             settled), ``u``, ``v`` and ``theta_rad``, ``theta_dot_rad_s`` (its stroboscopic points; the last one
             of its first initial condition when not settled), ``peak_force_n`` (the largest impact of the
             classified window of its first initial condition), ``cells`` (initial conditions ending on it).
+        peak_force: Largest impact force (N) of each initial condition's classified window, same shape as
+            ``labels`` (0 without impact; NaN where not run or failed).
+        impact_velocity: Largest impact velocity (m/s, the approach speed at contact onset) of the same window.
     """
 
     gap_mm: float
@@ -565,6 +593,8 @@ class BasinsResult:
     validity: dict | None = None
     attractor_id: np.ndarray | None = None
     attractors: list | None = None
+    peak_force: np.ndarray | None = None
+    impact_velocity: np.ndarray | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -582,11 +612,12 @@ INSIDE = "inside the stop"
 
 
 def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, StopRule]
-               ) -> tuple[list[str], list[int], list, list, list]:
+               ) -> tuple[list[str], list[int], list, list, list, list]:
     """One row of initial conditions (one rate, every angle) in one compiled call.
 
-    Returns ``(labels, cycles, measures, points, window_peaks)``; the measures (:func:`_measures`), the last
-    stroboscopic points ``(u, v)`` and the largest impact of the classified window are None where not run.
+    Returns ``(labels, cycles, measures, points, window_peaks, window_velocities)``; the measures
+    (:func:`_measures`), the last stroboscopic points ``(u, v)``, the largest impact force and impact velocity of
+    the classified window are None where not run.
     """
     model, p, f, thetas, theta_dot, limit, rule = args
     run = np.flatnonzero(thetas <= limit)
@@ -595,18 +626,22 @@ def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, Sto
     measures: list = [None] * len(thetas)
     points: list = [None] * len(thetas)
     peaks: list = [None] * len(thetas)
+    vels: list = [None] * len(thetas)
     if len(run):
         res = run_cells(model, p[None, :], np.zeros(len(run), dtype=np.int64), np.full(len(run), f), thetas[run],
                         np.full(len(run), theta_dot), rule)
         assert res.points is not None and res.window_peak is not None  # run_cells fills them
-        for j, label, c, m, pts, pk in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res),
-                                           res.points, res.window_peak.tolist(), strict=True):
+        assert res.window_velocity is not None
+        for j, label, c, m, pts, pk, vel in zip(run.tolist(), res.labels(), res.cycles.tolist(), _measures(res),
+                                                res.points, res.window_peak.tolist(), res.window_velocity.tolist(),
+                                                strict=True):
             labels[j] = label
             cycles[j] = c
             measures[j] = m
             points[j] = pts
             peaks[j] = pk
-    return labels, cycles, measures, points, peaks
+            vels[j] = vel
+    return labels, cycles, measures, points, peaks, vels
 
 
 def default_basin_ranges(config: SimConfig) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -675,11 +710,13 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
     ids, attractors = _attractors(config, float(frequency_hz), labels.ravel().tolist(),
                                   [pt for r in rows for pt in r[3]], [pk for r in rows for pk in r[4]], settled,
                                   rule.tolerance)
+    window = np.array([[nan if x is None else x for x in r[k]] for r in rows for k in (4, 5)],
+                      dtype=float).reshape(len(rows), 2, len(thetas))
     return BasinsResult(config.rig.gap * 1e3, float(frequency_hz), thetas, rates, labels,
                         time.perf_counter() - start, n, cycles, where,
                         np.array(rules, dtype=object).reshape(shape), take(0), take(1),
                         dom.report(Verdict.of(r) for r, m in zip(rules, measures, strict=True) if m is not None),
-                        ids.reshape(shape), attractors)
+                        ids.reshape(shape), attractors, window[:, 0], window[:, 1])
 
 
 def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], points: list, peaks: list,
@@ -708,10 +745,22 @@ def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], point
 
 
 def basins_table(result: BasinsResult) -> list[dict]:
-    """CSV rows, one per initial condition; the attractor id after the class, then the valid domain's columns."""
+    """CSV rows, one per initial condition; the attractor id after the class, then the valid domain's columns.
+
+    Then the peak force and impact velocity of its classified window (``peak_force_n``, ``impact_velocity_m_s``;
+    NaN where not run).
+    """
     rules = result.invalid_rule
     ids = result.attractor_id
+    force, velocity = result.peak_force, result.impact_velocity
+
+    def window(i: int, j: int) -> dict:
+        if force is None or velocity is None:
+            return {}
+        return {"peak_force_n": float(force[i, j]), "impact_velocity_m_s": float(velocity[i, j])}
+
     return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j],
              **({} if ids is None else {"attractor_id": int(ids[i, j])}),
-             **({} if rules is None else _validity_columns(result, (i, j), rules[i, j]))}
+             **({} if rules is None else _validity_columns(result, (i, j), rules[i, j])),
+             **window(i, j)}
             for i, r in enumerate(result.theta_dot0) for j, th in enumerate(result.theta0)]

@@ -10,7 +10,8 @@ steady impact force at each step. Three directions:
   attractors show (the paper's Fig. 12 right). Sequential by nature.
 
 At each point the model runs ``cycles`` excitation cycles (after the ramp) and the steady state is read
-over the last ``measure_cycles``: the largest peak force and the number of impacts per cycle.
+over the last ``measure_cycles``: the largest peak force, the largest impact velocity (the approach speed at
+contact onset, ``Impact.impact_velocity``) and the number of impacts per cycle; and the class of the motion.
 
 Impacts per cycle: the last ``measure_cycles`` whole motor cycles (stroboscopic point to stroboscopic point)
 that ended at least half a cycle before the point's end are classified as in
@@ -19,7 +20,9 @@ window of ``measure_cycles`` periods of time ending at the point's end, the only
 the impact in progress at its end (its record closes with the contact) and, for a period that does not
 divide ``measure_cycles``, cannot hold a whole number of periods: a steady 1/1 read 0.98. Where the window
 is not periodic (chaotic, or not yet settled to the classification tolerance) the impacts per cycle are still
-that count over the time window.
+that count over the time window. The class (``motion_class``: ``p/n``, ``no impact``, ``chaotic/non-periodic``)
+is that classification's label; ``integration failed`` where the chattering guard stopped the run, and empty
+where the run holds fewer than ``measure_cycles`` whole cycles before its last half cycle.
 
 Every point is checked against the model's valid domain (:mod:`rimd_sim.model.validity`) over its whole run
 (the ramp and the transient included): the largest ``|theta|``, the largest contact force, the impacts per
@@ -65,6 +68,9 @@ class SweepPoint:
         max_force_n: Largest peak force over the point's whole run (N), the transient included.
         valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
         invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
+        motion_class: The class of the measured cycles (module docstring).
+        impact_velocity_m_s: Largest impact velocity over the measured cycles (m/s, the approach speed at
+            contact onset); 0 without impact.
     """
 
     frequency_hz: float
@@ -77,6 +83,8 @@ class SweepPoint:
     max_force_n: float = math.nan
     valid: bool = True
     invalid_rule: str = ""
+    motion_class: str = ""
+    impact_velocity_m_s: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -130,53 +138,67 @@ def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, toleranc
     return max(sel, key=lambda p: p.peak_force_n, default=None)
 
 
-def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[float, float]:
+def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[float, float, float]:
+    """Largest peak force, impacts per cycle and largest impact velocity of the impacts of the last cycles."""
     t_from = t_end - measure_cycles / f
     last = [i for i in impacts if i.t_start >= t_from]
-    return max((i.peak_force for i in last), default=0.0), len(last) / measure_cycles
+    return (max((i.peak_force for i in last), default=0.0), len(last) / measure_cycles,
+            max((i.impact_velocity for i in last), default=0.0))
 
 
-def _steady_rate(out, t_end: float, f: float, measure_cycles: int, rig) -> float | None:
-    """``p / n`` when the last ``measure_cycles`` whole cycles of ``out`` are a periodic motion, else None.
+def _steady(out, t_end: float, f: float, measure_cycles: int, rig) -> tuple[str, float | None]:
+    """The class of the last ``measure_cycles`` whole cycles of ``out`` and, when periodic, ``p / n`` (else None).
 
     The cycles are those whose stroboscopic points (start and end) lie in ``out`` and that ended at least half
-    a cycle before ``t_end``, so that every impact started in them has closed its record.
+    a cycle before ``t_end``, so that every impact started in them has closed its record. ``("", None)`` when
+    ``out`` holds fewer such cycles.
     """
     ends = [s for s in out.strobe if s.t <= t_end - 0.5 / f]
     if len(ends) < measure_cycles + 1:
-        return None
+        return "", None
     window = ends[-measure_cycles - 1:-1]
     first = window[0].cycle_index
     if window[-1].cycle_index - first != measure_cycles - 1:
-        return None
+        return "", None
     counts = np.zeros(measure_cycles, dtype=np.int64)
     for i in out.impacts:
         if first <= i.cycle_index < first + measure_cycles:
             counts[i.cycle_index - first] += 1
     u, v = nondimensional(rig.length, rig.amplitude, f, [s.theta for s in window], [s.theta_dot for s in window])
-    _, period, impacts, _ = classify(u, v, counts)
-    return impacts / period if period > 0 else None
+    label, period, impacts, _ = classify(u, v, counts)
+    return label, (impacts / period if period > 0 else None)
 
 
-def _rate(out, t_end: float, f: float, measure_cycles: int, rig, time_rate: float) -> float:
-    """Impacts per cycle of a point (module docstring): ``p / n`` of a periodic motion, else ``time_rate``."""
-    steady = _steady_rate(out, t_end, f, measure_cycles, rig)
-    return time_rate if steady is None else steady
+def _read(out, t_end: float, f: float, measure_cycles: int, rig) -> tuple[float, float, str, float]:
+    """What a point reads of its measured cycles (module docstring).
+
+    Returns ``(peak force, impacts per cycle, class, impact velocity)``; the impacts per cycle are ``p / n`` of a
+    periodic motion, else the count over the time window.
+    """
+    peak, time_rate, velocity = _measure(out.impacts, t_end, f, measure_cycles)
+    label, steady = _steady(out, t_end, f, measure_cycles, rig)
+    return peak, time_rate if steady is None else steady, label, velocity
 
 
-def _point(cfg: SimConfig, f: float, peak: float, rate: float, seconds: float, max_theta: float,
+def _point(cfg: SimConfig, f: float, read: tuple[float, float, str, float], seconds: float, max_theta: float,
            max_force: float) -> SweepPoint:
     rig = cfg.rig
+    peak, rate, label, velocity = read
     verdict = domain(cfg).check(PointMeasures(max_theta, max_force, rate))
     return SweepPoint(f, f / rig.natural_frequency, peak, peak / (rig.mass * rig.gravity), rate, seconds,
-                      max_theta, max_force, verdict.valid, verdict.invalid_rule)
+                      max_theta, max_force, verdict.valid, verdict.invalid_rule, label, velocity)
+
+
+#: The class of a point whose run the chattering guard stopped (the maps' label of a failed trajectory).
+FAILED = "integration failed"
 
 
 def _chattering(cfg: SimConfig, f: float, seconds: float) -> SweepPoint:
     """A point where the chattering guard stopped the run: no measures."""
     nan = math.nan
     verdict = domain(cfg).check(PointMeasures(chattering=True))
-    return SweepPoint(f, f / cfg.rig.natural_frequency, nan, nan, nan, seconds, nan, nan, False, verdict.invalid_rule)
+    return SweepPoint(f, f / cfg.rig.natural_frequency, nan, nan, nan, seconds, nan, nan, False, verdict.invalid_rule,
+                      FAILED, nan)
 
 
 def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
@@ -187,10 +209,8 @@ def _from_rest(args: tuple[SimConfig, float, int, int]) -> SweepPoint:
         out = RigModel(cfg, channels=False, truth=False, strobe=True).advance(duration)
     except ChatteringError as error:
         return _chattering(cfg, f, math.nan if error.t is None else error.t)
-    impacts = out.impacts
-    peak, rate = _measure(impacts, duration, f, measure_cycles)
-    return _point(cfg, f, peak, _rate(out, duration, f, measure_cycles, cfg.rig, rate), duration,
-                  out.max_abs_theta, max((i.peak_force for i in impacts), default=0.0))
+    return _point(cfg, f, _read(out, duration, f, measure_cycles, cfg.rig), duration, out.max_abs_theta,
+                  max((i.peak_force for i in out.impacts), default=0.0))
 
 
 def _rest_chunk(jobs: list[tuple[SimConfig, float, int, int]]) -> list[SweepPoint]:
@@ -231,8 +251,7 @@ def _continuous(job: tuple[SimConfig, list[float], int, int, float], progress=No
             model = None
         else:
             t_end = float(model.time)
-            peak, rate = _measure(out.impacts, t_end, f, measure_cycles)
-            points.append(_point(cfg, f, peak, _rate(out, t_end, f, measure_cycles, cfg.rig, rate), t_end - float(t0),
+            points.append(_point(cfg, f, _read(out, t_end, f, measure_cycles, cfg.rig), t_end - float(t0),
                                  out.max_abs_theta, max((i.peak_force for i in out.impacts), default=0.0)))
         if progress:
             progress(i + 1, len(order))

@@ -16,21 +16,50 @@ from typing import Any, TextIO
 from rimd_sim.analysis.outputs import jsonable, write_csv, write_json, write_summary  # noqa: F401 - re-exported
 from rimd_sim.cli import CommandError
 
+#: ``gap`` of :func:`add_model_arguments`: the gap is the configuration's unless ``--gap-mm`` is given.
+CONFIG_GAP = "config"
 
-def add_model_arguments(parser, out: str, *, gap: float | None = None, f_range: tuple[float, float] | None = None,
-                        f_step: float | None = None, gap_note: str = "") -> None:
+
+def add_model_arguments(parser, out: str, *, gap: float | str | None = None,
+                        f_range: tuple[float, float] | None = None, f_step: float | None = None,
+                        gap_note: str = "") -> None:
     """The options every simulation verb shares, each defined once.
 
-    ``--gap-mm`` (when ``gap`` is given), ``--f-min``/``--f-max`` (``f_range``), ``--f-step``, ``--config`` and
-    ``--out`` (default ``out``).
+    ``--gap-mm`` (when ``gap`` is given: :data:`CONFIG_GAP`, the configuration's gap, or a verb's own default in
+    mm, a paper figure's), ``--f-min``/``--f-max`` (``f_range``), ``--f-step``, ``--config`` and ``--out``
+    (default ``out``). Read the configuration with :func:`load_model_config`.
     """
     from rimd_sim.cli import gap_mm
 
     if gap is not None:
-        parser.add_argument("--gap-mm", type=gap_mm(), default=gap, help=f"gap (mm), default {gap:g}{gap_note}")
+        default = ("the configuration's (0 in config/rimd.yaml)" if gap == CONFIG_GAP
+                   else f"{gap:g}, whatever the configuration's")
+        parser.add_argument("--gap-mm", type=gap_mm(), default=None, help=f"gap (mm), default {default}{gap_note}")
+        parser.set_defaults(verb_gap_mm=gap)
     add_frequency_grid(parser, f_range, f_step)
     parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
     parser.add_argument("--out", type=Path, default=Path(out), help="output directory")
+
+
+def load_model_config(args):  # SimConfig
+    """The verb's configuration: ``--config`` with the gap of ``--gap-mm`` (or the verb's default gap).
+
+    Sets ``args.gap_mm`` to the gap used (mm), for the verb's titles and files.
+    """
+    from rimd_sim.settings.config import load_config
+
+    given = getattr(args, "gap_mm", None)
+    verb_default = getattr(args, "verb_gap_mm", None)
+    config = load_config(args.config)
+    if given is None and verb_default not in (None, CONFIG_GAP):
+        if args.config is not None and config.rig.gap != verb_default * 1e-3:
+            print(f"note: gap {verb_default:g} mm, this verb's default, instead of the configuration's "
+                  f"{config.rig.gap * 1e3:g} mm (give --gap-mm to choose)", file=sys.stderr)
+        given = verb_default
+    if given is not None:
+        config = config.with_parameters({"gap": given * 1e-3})
+    args.gap_mm = config.rig.gap * 1e3
+    return config
 
 
 def add_frequency_grid(parser, f_range: tuple[float, float] | None, f_step: float | None, *,

@@ -13,6 +13,7 @@ from rimd_sim.cli.verbs._analysis_io import (
     add_accept_invalid_argument,
     add_map_arguments,
     add_model_arguments,
+    load_model_config,
     progress_printer,
     validity_exit,
     write_csv,
@@ -40,9 +41,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.peterka import basins, basins_table, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
     from rimd_sim.model.validity import Verdict, domain
-    from rimd_sim.settings.config import load_config
 
-    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    config = load_model_config(args)
     (t_lo, t_hi), (r_lo, r_hi) = default_basin_ranges(config)
     t_range = (t_lo if args.theta_min is None else args.theta_min,
                t_hi if args.theta_max is None else args.theta_max)

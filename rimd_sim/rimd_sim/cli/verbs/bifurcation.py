@@ -11,11 +11,13 @@ import sys
 
 from rimd_sim.cli import CommandError, count, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
+    CONFIG_GAP,
     add_accept_invalid_argument,
     add_model_arguments,
     add_scheduler_argument,
     check_range,
     class_runs,
+    load_model_config,
     validity_exit,
     write_csv,
     write_summary,
@@ -24,7 +26,7 @@ from rimd_sim.cli.verbs._analysis_io import (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd bifurcation``."""
-    add_model_arguments(parser, "out/bifurcation", gap=0.0, f_range=(2.0, 9.5), f_step=0.05)
+    add_model_arguments(parser, "out/bifurcation", gap=CONFIG_GAP, f_range=(2.0, 9.5), f_step=0.05)
     parser.add_argument("--direction", default="both", help="up, down or both (default; one process each)")
     parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=100,
                         help="cycles before sampling, default 100")
@@ -44,12 +46,11 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.bifurcation import bifurcation, branch_table
     from rimd_sim.analysis.plots import plot_bifurcation
     from rimd_sim.model.validity import domain
-    from rimd_sim.settings.config import load_config
 
     if args.direction not in ("up", "down", "both"):
         raise CommandError(f"--direction {args.direction!r} refused: must be up, down or both")
     check_range("f", args.f_min, args.f_max)
-    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    config = load_model_config(args)
     freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
     print(f"rimd bifurcation: {len(freqs)} frequencies, sweep {args.direction}...", file=sys.stderr, flush=True)
     branches, wall, workers = bifurcation(config, freqs, args.direction, transient_cycles=args.transient_cycles,

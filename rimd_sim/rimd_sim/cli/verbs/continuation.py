@@ -16,8 +16,10 @@ import time
 
 from rimd_sim.cli import CommandError, count, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
+    CONFIG_GAP,
     add_accept_invalid_argument,
     add_model_arguments,
+    load_model_config,
     validity_exit,
     write_csv,
     write_summary,
@@ -26,7 +28,7 @@ from rimd_sim.cli.verbs._analysis_io import (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd continue``."""
-    add_model_arguments(parser, "out/continuation", gap=0.0)
+    add_model_arguments(parser, "out/continuation", gap=CONFIG_GAP)
     parser.add_argument("--f-start", type=positive_float("--f-start", "Hz"), default=3.0,
                         help="motor frequency where the branch starts (Hz), default 3")
     parser.add_argument("--f-end", type=positive_float("--f-end", "Hz"), default=6.0,
@@ -66,9 +68,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.continuation import ContinuationSettings, StartOutsideDomain, continuation
     from rimd_sim.analysis.plots import plot_continuation
     from rimd_sim.model.validity import Verdict, domain
-    from rimd_sim.settings.config import load_config
 
-    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    config = load_model_config(args)
     freq = args.parameter == "frequency"
     if freq:
         start, end, f_fixed = args.f_start, args.f_end, None

@@ -15,6 +15,7 @@ from rimd_sim.cli.verbs._analysis_io import (
     add_accept_invalid_argument,
     add_model_arguments,
     check_positive,
+    load_model_config,
     validity_exit,
     write_csv,
     write_summary,
@@ -51,11 +52,10 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.plots import plot_poincare
     from rimd_sim.model.rig_model import TRUTH_FIELDS, ChatteringError, RigModel
     from rimd_sim.model.validity import PointMeasures, domain
-    from rimd_sim.settings.config import load_config
 
     if args.frequency is not None and args.ratio is not None:
         raise CommandError("give --frequency or --ratio, not both")
-    base = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    base = load_model_config(args)
     rig = base.rig
     f = args.frequency if args.frequency is not None else (args.ratio or 1.5) * rig.natural_frequency
     check_positive("--frequency", f)

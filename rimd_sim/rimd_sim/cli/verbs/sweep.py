@@ -12,20 +12,21 @@ import numpy as np
 
 from rimd_sim.cli import CommandError, count
 from rimd_sim.cli.verbs._analysis_io import (
+    CONFIG_GAP,
     add_accept_invalid_argument,
     add_model_arguments,
     add_scheduler_argument,
     check_range,
+    load_model_config,
     progress_printer,
     validity_exit,
     write_summary,
 )
-from rimd_sim.settings.config import load_config
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd sweep``."""
-    add_model_arguments(parser, "out/sweep", gap=0.0, f_range=(2.0, 9.5), f_step=0.25)
+    add_model_arguments(parser, "out/sweep", gap=CONFIG_GAP, f_range=(2.0, 9.5), f_step=0.25)
     parser.add_argument("--direction", choices=("up", "down", "rest"), default="rest",
                         help="rest: each frequency from rest (Table 1); up/down: continue from the previous state")
     parser.add_argument("--cycles", type=count("--cycles", 2), default=150,
@@ -48,7 +49,7 @@ def main(args: argparse.Namespace) -> int:
     check_range("f", args.f_min, args.f_max)
     if args.measure_cycles >= args.cycles:
         raise CommandError(f"--measure-cycles {args.measure_cycles} >= --cycles {args.cycles}: no transient left")
-    config = load_config(args.config, {"gap": args.gap_mm * 1e-3})
+    config = load_model_config(args)
     freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
     with progress_printer("sweep", "frequencies") as progress:
         result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
