@@ -30,9 +30,7 @@ from rimd_sim.analysis.dynamics.continuation import (
 )
 from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, LyapunovResult, is_chaotic, largest_lyapunov
 
-# Reserved: ``from rimd_sim.analysis.dynamics.maps import parameter_map`` (a module still to come) goes here, in
-# sorted order; then add ``parameter_map`` to __all__ under "maps over the parameters" and document it in
-# docs/api.md. Not before the module exists.
+from rimd_sim.analysis.dynamics.maps import ParameterMap, mappable_parameters, parameter_map
 from rimd_sim.analysis.dynamics.peterka import (
     START_NAMES,
     BasinsResult,
@@ -78,7 +76,8 @@ __all__ = [
     # continuation
     "Bifurcation", "Branch", "BranchPoint", "ContinuationResult", "ContinuationSettings", "StartOutsideDomain",
     "continuation", "fixed_point", "monodromy",
-    # maps over the parameters: "parameter_map" goes here (see the reserved spot above)
+    # maps over the parameters
+    "ParameterMap", "mappable_parameters", "parameter_map",
     # reading a recording
     "Channel", "Reading", "RecordedData", "load_recording", "read_recording",
     # identification

@@ -259,3 +259,31 @@ def test_every_analysis_csv_has_the_peak_force_and_impact_velocity(tmp_path):
     bifurcation = rows("bifurcation", "--direction", "up", "--f-min", "3.75", "--f-max", "3.85", "--f-step", "0.1",
                        "--transient-cycles", "30", "--sample-cycles", "12")
     assert len(_finite_where_impacting(bifurcation)) == len(bifurcation) == 24
+
+
+def test_the_gap_is_the_configurations_unless_given_and_a_paper_default_says_so(tmp_path, capsys):
+    """``--config`` with a gap: sweep uses it; ``--gap-mm`` replaces it; basins keeps 2.4 mm and says so."""
+    from rimd_sim.settings.config import find_config_file
+
+    yaml = tmp_path / "design.yaml"
+    yaml.write_text(find_config_file().read_text().replace("    gap: 0.0 ", "    gap: 0.0005 ", 1))
+    assert cli.main(["sweep", "--config", str(yaml), "--f-min", "3", "--f-max", "3", "--cycles", "30",
+                     "--measure-cycles", "10", "--workers", "1", "--out", str(tmp_path / "a")]) == 0
+    assert read_json(tmp_path / "a" / "summary.json")["gap_mm"] == pytest.approx(0.5)
+    assert cli.main(["sweep", "--config", str(yaml), "--gap-mm", "1", "--f-min", "3", "--f-max", "3", "--cycles",
+                     "30", "--measure-cycles", "10", "--workers", "1", "--out", str(tmp_path / "b")]) == 0
+    assert read_json(tmp_path / "b" / "summary.json")["gap_mm"] == pytest.approx(1.0)
+    capsys.readouterr()
+    assert cli.main(["basins", "--config", str(yaml), "--frequency", "4", "--size", "2", "--transient-cycles",
+                     "30", "--measure-cycles", "12", "--workers", "1", "--out", str(tmp_path / "c")]) == 0
+    assert "gap 2.4 mm, this verb's default, instead of the configuration's 0.5 mm" in capsys.readouterr().err
+    assert read_json(tmp_path / "c" / "summary.json")["gap_mm"] == pytest.approx(2.4)
+
+
+def test_a_short_pendulums_default_basin_region_is_one_basins_accepts():
+    from rimd_sim.analysis.dynamics.peterka import MAX_BASIN_ANGLE, default_basin_ranges
+    from rimd_sim.settings.config import load_config
+
+    short = load_config(None, {"natural_frequency": 10.5, "gap": 0.25e-3})   # l = 2.25 mm, 3 A0 / l > 1.5
+    (lo, hi), (rlo, rhi) = default_basin_ranges(short)
+    assert lo == -MAX_BASIN_ANGLE and hi > 0 and rhi == pytest.approx(MAX_BASIN_ANGLE * short.rig.omega_n)

@@ -93,6 +93,8 @@ START_NAMES = ("rest", "kick", "continued")
 #: Extra starts per Peterka cell by default: the no-impact forced response (module docstring).
 DEFAULT_EXTRA_STARTS = 1
 FAILED = "integration failed"
+#: Largest initial angle (rad) of a basins grid: short of the horizontal, where the model's domain ends.
+MAX_BASIN_ANGLE = 1.5
 
 
 @dataclass(frozen=True)
@@ -645,9 +647,13 @@ def _basin_row(args: tuple[str, np.ndarray, float, np.ndarray, float, float, Sto
 
 
 def default_basin_ranges(config: SimConfig) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Initial angles from ``-3 (gap + A0) / l`` to the stop, rates within ``+-3 omega_n (gap + A0) / l``."""
+    """Initial angles from ``-3 (gap + A0) / l`` to the stop, rates within ``+-3 omega_n (gap + A0) / l``.
+
+    The angles no wider than the +-1.5 rad :func:`basins` accepts (a short pendulum, 3 A0 / l > 1.5, had a default
+    region the function refused); the rates then as wide as the angles, ``+-omega_n`` times the span.
+    """
     rig = config.rig
-    span = 3.0 * (rig.gap + rig.amplitude) / rig.length
+    span = min(3.0 * (rig.gap + rig.amplitude) / rig.length, MAX_BASIN_ANGLE)
     return (-span, math.asin(min(1.0, rig.gap / rig.length))), (-span * rig.omega_n, span * rig.omega_n)
 
 
@@ -681,8 +687,8 @@ def basins(config: SimConfig, frequency_hz: float, theta_range: tuple[float, flo
     for name, (lo, hi) in (("theta_range", theta_range), ("theta_dot_range", theta_dot_range)):
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ConfigError(name, (lo, hi), "must be finite with min < max")
-    if abs(theta_range[0]) > 1.5 or abs(theta_range[1]) > 1.5:
-        raise ConfigError("theta_range", theta_range, "must stay within +-1.5 rad")
+    if abs(theta_range[0]) > MAX_BASIN_ANGLE or abs(theta_range[1]) > MAX_BASIN_ANGLE:
+        raise ConfigError("theta_range", theta_range, f"must stay within +-{MAX_BASIN_ANGLE:g} rad")
     if min(size) < 2 or max(size) > 2000:
         raise ConfigError("size", size, "each must be in [2, 2000]")
     _check_cycles(transient_cycles, measure_cycles)
