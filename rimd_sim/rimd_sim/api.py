@@ -29,7 +29,6 @@ from rimd_sim.analysis.dynamics.continuation import (
     monodromy,
 )
 from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, LyapunovResult, is_chaotic, largest_lyapunov
-
 from rimd_sim.analysis.dynamics.maps import ParameterMap, mappable_parameters, parameter_map
 from rimd_sim.analysis.dynamics.peterka import (
     START_NAMES,
