@@ -3,7 +3,8 @@
 ``rimd rig`` checks a configuration's recorder section with :func:`check_recorder_parameters` before starting
 anything; the node declares :data:`PARAMETERS` and builds :class:`RecorderSettings` from its values. Part of the
 interface (docs/interface.md): ``output_dir``, ``topics``, ``max_duration``, ``max_size``, ``compression``,
-``start_paused``; the others are additions. Every parameter is read at start.
+``start_paused``; the others are additions. Every parameter is read at start; ``stop_at`` may also be set while
+the recorder runs (``rimd experiment`` sets it once it knows when its last step ends).
 """
 
 from __future__ import annotations
@@ -85,6 +86,11 @@ class RecorderSettings:
                           rule="empty or a ROS node name such as /rig/rimd_simulator",
                           check=lambda v: v == "" or _NODE_NAME.fullmatch(v) is not None,
                           breaks=("bad name", "/rig/", "1abc", "a//b"), read_only=True)
+    # Settable at run time: the end of an experiment is known once its first step is scheduled.
+    stop_at: int = param(0, "leave out every message whose header stamp is at or after this stamp (integer ns in "
+                            "the rig's time base; sample blocks that straddle it are cut to their samples before "
+                            "it); 0 = no stop. May be set while recording: refused when a topic is already "
+                            "written at or past it", unit="ns", ge=0)
 
 
 #: The recorder's parameters by name.
