@@ -40,12 +40,9 @@ from typing import Any
 from rimd_sim.io.bag import BagWriter, FileInfo, WriteFailure
 from rimd_sim.io.cdr import BLOCK_TYPES, block_span, cut_block, read_block, samples_before
 from rimd_sim.io.msgdefs import MessageDefinitionError
+from rimd_sim.settings.recording import STOP_METADATA
 
 __all__ = ["STOP_METADATA", "LossCounter", "RecordingSession", "StopRefused", "TopicLoss"]
-
-#: The MCAP metadata record that says where the recording was stopped (key ``stop_at_ns``: integer ns, the first
-#: stamp left out), written into the current and every later file when a stop stamp is set.
-STOP_METADATA = "rimd_stop"
 
 
 class StopRefused(ValueError):

@@ -17,13 +17,18 @@ from typing import Any
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 
-__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings",
-           "check_parameter", "check_recorder_parameters", "compile_patterns"]
+__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "STOP_METADATA", "RecorderConfigError",
+           "RecorderSettings", "check_parameter", "check_recorder_parameters", "compile_patterns"]
 
 #: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
 #: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.
 #: ``rimd experiment`` waits on it before stopping its recorder (a declared interface, not a convention).
 PROGRESS_STAMP_KEY = " last_stamp_ns"
+
+#: The MCAP metadata record that says where a recording stops (``stop_at``): key ``stop_at_ns``, integer ns, the
+#: first stamp left out. The recorder writes it into the current and every later file when ``stop_at`` is set;
+#: the analysis of a recording ends its last step there (docs/recording.md).
+STOP_METADATA = "rimd_stop"
 
 #: The MCAP chunk compressions the recorder writes (``recorder.compression``).
 COMPRESSIONS = ("zstd", "lz4", "none")
