@@ -325,9 +325,8 @@ class RecordingSession:
         type_name = self.types.get(topic)
         if stamp < stop and type_name in BLOCK_TYPES:
             try:
-                view = read_block(data, type_name, arrays=1)
-                size = view.samples.size if type_name.endswith("SampleBlock") else view.theta.size
-                keep = samples_before(stamp, float(view.sample_rate), size, stop)
+                _, size = block_span(data)
+                keep = samples_before(stamp, float(read_block(data, type_name, arrays=0).sample_rate), size, stop)
                 if keep < size:
                     data = cut_block(data, type_name, keep)
                     self.cut_blocks[topic] = self.cut_blocks.get(topic, 0) + 1
