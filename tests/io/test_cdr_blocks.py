@@ -7,6 +7,9 @@ Hypotheses:
 * ``read_block`` (the Rerun bridge reads the channel and truth blocks in place) reads from rclpy's bytes the
   header, ``first_index``, ``sample_rate`` and every ``float64[]`` field, bit for bit;
 * bytes cut short are refused with ValueError, never read past their end;
+* ``cut_block`` (the recorder cuts the block that straddles its ``stop_at``) gives the block rosbags serializes
+  from the same fields with every array cut, byte for byte in either byte order (rclpy reads it back as that
+  message), and ``samples_before`` counts the samples strictly before a stamp on the block's exact grid;
 * both byte orders: what rosbags (an independent serializer, the one that writes big-endian CDR) writes either
   way reads back field for field (span, arrays, stamp, restamp), and the encoder writes each order byte for
   byte as rosbags does.
@@ -27,8 +30,10 @@ from rimd_sim.io.cdr import (
     BLOCK_ARRAYS,
     SampleBlockEncoder,
     block_span,
+    cut_block,
     header_stamp,
     read_block,
+    samples_before,
     with_header_stamp,
 )
 
@@ -195,3 +200,40 @@ def test_progress_reports_encode_as_rclpy_serializes_them(consumer, instance, do
     # the length: the same layout.
     assert deserialize_message(ours, ConsumerProgress) == reference
     assert len(ours) == len(serialize_message(reference))
+
+
+@SETTINGS
+@given(frame=TEXT, first=st.integers(0, 2**64 - 1), size=st.integers(0, 12), keep=st.integers(-1, 14),
+       little=st.booleans(), rig_state=st.booleans(), sec=st.integers(0, 2**31 - 1))
+def test_a_cut_block_is_the_block_of_its_first_samples(frame, first, size, keep, little, rig_state, sec):
+    kind = "rimd_msgs/msg/RigState" if rig_state else "rimd_msgs/msg/SampleBlock"
+    names = BLOCK_ARRAYS[kind]
+    # samples 0, 1, ... scaled: the range ends -1 and 1 clip the first two (saturated_count 3 in the original)
+    arrays = {name: np.arange(size, dtype=np.float64) * (i + 1.5) - 1.0 for i, name in enumerate(names)}
+    data = bytes(STORE.serialize_cdr(_rosbags_block(kind, frame, first, 2000.0, arrays, sec, 7), kind,
+                                     little_endian=little))
+    cut = cut_block(data, kind, keep)
+    if keep >= size:
+        assert cut == data
+        return
+    n = max(keep, 0)
+    expected = _rosbags_block(kind, frame, first, 2000.0, {k: v[:n] for k, v in arrays.items()}, sec, 7)
+    if not rig_state:   # the kept samples at an end of the range [-1, 1]: -1.0 (sample 0) and 1.0 (sample 2)
+        expected.saturated_count = int(np.count_nonzero((arrays["samples"][:n] <= -1.0)
+                                                        | (arrays["samples"][:n] >= 1.0)))
+    assert cut == bytes(STORE.serialize_cdr(expected, kind, little_endian=little))
+    if little:
+        msg = deserialize_message(cut, RigState if rig_state else SampleBlock)
+        assert msg.first_index == first and msg.header.frame_id == frame
+        assert all(_same(getattr(msg, name), arrays[name][:n]) for name in names)
+
+
+def test_samples_before_counts_on_the_exact_grid():
+    # 20 kHz from stamp 1 s: sample n at 1 s + n * 50 us; a sample on the end is not before it
+    assert samples_before(10**9, 20000.0, 200, 10**9 + 50_000 * 120) == 120
+    assert samples_before(10**9, 20000.0, 200, 10**9 + 50_000 * 120 + 1) == 121
+    assert samples_before(10**9, 20000.0, 200, 10**9 + 1) == 1
+    assert samples_before(10**9, 20000.0, 200, 10**9) == 0
+    assert samples_before(10**9, 20000.0, 200, 2 * 10**9) == 200
+    assert samples_before(10**9, 3.0, 5, 10**9 + 666_666_667) == 3   # 2/3 s lies before ...667 ns, not on it
+    assert samples_before(10**9, 3.0, 5, 10**9 + 666_666_666) == 2

@@ -170,3 +170,61 @@ def test_the_writer_thread_runs_calls_after_the_messages_before_them(tmp_path):
     assert info is not None and info.message_count == 20 and info.finished
     s.close(timeout=10)
     assert written and written[-1][TOPIC] == 19
+
+
+def test_a_stop_stamp_cuts_every_topic_there_and_the_file_stays_standard(tmp_path):
+    """``stop_at`` (what ``rimd experiment`` sets to the end of its last step): messages stamped at or after it are
+    left out, the block that straddles it is cut to its samples strictly before it, a message without a stamp is
+    written; the lockstep progress still moves past it; independent readers read the file."""
+    import pytest
+
+    from harness.bags import read_with_mcap_ros2, read_with_rosbags
+    from rimd_msgs.msg import ImpactEvent
+    from rimd_sim.runtime.recorder import STOP_METADATA, StopRefused
+
+    s, log, written = session(tmp_path)
+    s.add_topic("/rig/impact/events", "rimd_msgs/msg/ImpactEvent", [qos_profile_dict(depth=100)])
+    ms = 1_000_000
+
+    def stamped_block(i: int) -> bytes:   # 100 samples at 2 kHz: block i covers [50 i, 50 i + 50) ms
+        msg = SampleBlock(first_index=100 * i, sample_rate=2000.0, unit="m", samples=[float(k) for k in range(100)])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(50 * ms * i, 10**9)
+        return serialize_message(msg)
+
+    def event(t_ns: int) -> bytes:
+        msg = ImpactEvent()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 10**9)
+        return serialize_message(msg)
+
+    s.put(TOPIC, stamped_block(0), 1, stamp=0)
+    s.process()
+    stop = 130 * ms                     # inside block 2: its samples 0..59 (100 .. 129.5 ms) are before it
+    s.set_stop_at(stop)
+    with pytest.raises(StopRefused, match=TOPIC):   # block 0 is written up to 0 ns: a stop at 0 cannot hold
+        s.set_stop_at(0)
+    assert s.stop_at == stop
+    for i in range(1, 5):
+        s.put(TOPIC, stamped_block(i), 1 + i, stamp=50 * ms * i)
+    s.put("/rig/impact/events", event(129 * ms), 10, stamp=129 * ms)
+    s.put("/rig/impact/events", event(stop), 11, stamp=stop)   # on the stop: after it
+    s.put("/rig/impact/events", event(5), 12, stamp=None)       # no stamp known: written
+    s.process()
+    assert written[-1] == {TOPIC: 200 * ms, "/rig/impact/events": stop}   # handled through, for the lockstep
+    s.close()
+    rec_dir = tmp_path / "rec"
+    (mcap_file,) = rec_dir.glob("*.mcap")
+    messages = read_with_mcap_ros2(mcap_file)
+    blocks = [m for topic, _, _, m in messages if topic == TOPIC]
+    assert [b.first_index for b in blocks] == [0, 100, 200]
+    assert [len(b.samples) for b in blocks] == [100, 100, 60]
+    assert list(blocks[-1].samples) == [float(k) for k in range(60)] and blocks[-1].unit == "m"
+    assert [m.header.stamp.nanosec for topic, _, _, m in messages if topic != TOPIC] == [129 * ms, 5]
+    counts, by_rosbags = read_with_rosbags(rec_dir)
+    assert counts == {TOPIC: 3, "/rig/impact/events": 2}
+    assert [raw for _, raw, _, _ in by_rosbags] == [raw for _, raw, _, _ in messages]
+    assert open_recording(rec_dir).metadata[STOP_METADATA]["stop_at_ns"] == str(stop)
+    assert s.after_stop == {TOPIC: 2, "/rig/impact/events": 1} and s.cut_blocks == {TOPIC: 1}
+    report = s.loss_report()[TOPIC]
+    assert (report.written, report.lost) == (3, 0)   # left out at the stop: not loss
+    assert any(f"stopped at stamp {stop} ns: 3 message(s) at or after it left out, 1 block(s) cut" in line
+               for line in s.summary())

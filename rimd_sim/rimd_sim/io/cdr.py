@@ -14,14 +14,17 @@ the leading fields. On them stand what the nodes need without deserialising: the
 
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Sequence
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
 
 __all__ = ["BLOCK_ARRAYS", "BLOCK_TYPES", "HEADER_FIRST_TYPES", "BlockView", "CdrReader", "CdrWriter",
-           "SampleBlockEncoder", "block_span", "header_stamp", "read_block", "with_header_stamp"]
+           "SampleBlockEncoder", "block_span", "cut_block", "header_stamp", "read_block", "samples_before",
+           "with_header_stamp"]
 
 #: Types whose blocks carry ``first_index`` and a sample count in this layout.
 BLOCK_TYPES = frozenset({"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"})
@@ -327,6 +330,59 @@ def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays
     header, first_index, sample_rate = _read_block_head(r)
     assert header is not None   # read: header=True
     return BlockView(header, first_index, sample_rate, {name: r.f64_array() for name in names})
+
+
+def samples_before(stamp_ns: int, sample_rate: float, count: int, end_ns: int) -> int:
+    """How many of a block's ``count`` samples lie strictly before ``end_ns``.
+
+    Sample ``n`` of a block is at ``stamp_ns + n / sample_rate`` (the block's grid, docs/interface.md), compared
+    exactly (integer nanoseconds against the rate as the exact binary fraction it is), so a sample on ``end_ns``
+    is not before it.
+    """
+    if end_ns <= stamp_ns or count <= 0:
+        return 0
+    if not (sample_rate > 0 and math.isfinite(sample_rate)):
+        return count   # no grid to cut on: the block is before the end by its stamp
+    kept = math.ceil(Fraction(end_ns - stamp_ns) * Fraction(sample_rate) / 1_000_000_000)
+    return max(0, min(count, kept))
+
+
+def cut_block(data: bytes, type_name: str, count: int) -> bytes:
+    """A serialized SampleBlock or RigState cut to its first ``count`` samples, every other field as it was.
+
+    The bytes up to the first array (the header, ``first_index``, ``sample_rate``) are kept as they are; each
+    array is cut to ``count`` (RigState's ``bool[] in_contact`` too); a SampleBlock keeps its unit and range, and
+    its ``saturated_count`` counts the kept samples at either end of the range (0 stays 0). ``count`` at or
+    beyond the block's length gives the bytes unchanged.
+
+    Raises:
+        ValueError: The bytes are too short for what the layout says, or not CDR.
+    """
+    r = CdrReader(data)
+    _read_block_head(r, header=False)
+    head = r.pos
+    if count >= r.array_length():
+        return bytes(data)
+    count = max(0, count)
+    arrays = [r.f64_array() for _ in BLOCK_ARRAYS[type_name]]
+    w = CdrWriter(r.order, at=head)
+    for values in arrays:
+        w.f64_array(values[:count])
+    if type_name == "rimd_msgs/msg/SampleBlock":
+        unit, low, high, saturated = r.string(), r.f64(), r.f64(), r.u32()
+        kept = arrays[0][:count]
+        w.string(unit).f64(low).f64(high).u32(int(np.count_nonzero((kept <= low) | (kept >= high)))
+                                             if saturated else 0)
+    else:   # RigState: bool[] in_contact, one byte per sample
+        n = r.u32()
+        flags = bytes(data[4 + r.pos:4 + r.pos + n])
+        if len(flags) != n:
+            raise ValueError(f"{n} bool values do not fit in {len(data)} bytes")
+        flags = flags[:count]
+        w.u32(len(flags))
+        w.parts.append(flags)
+        w.pos += len(flags)
+    return bytes(data[:4 + head]) + w.body()
 
 
 class SampleBlockEncoder:

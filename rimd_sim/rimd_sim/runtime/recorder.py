@@ -13,6 +13,12 @@ how far each topic is written. The recorder node feeds it and reports it.
   writing, never the session. It is logged once at ERROR naming the path and the system's reason, again every
   ``reminder`` seconds while it lasts, and when the writing resumes after :meth:`split` (the retry). What a
   full disk costs is counted per topic as *not written*.
+* A stop stamp (:meth:`set_stop_at`, the recorder's ``stop_at``): every message whose header stamp is at or after
+  it is left out (counted per topic as *after the stop*, not as loss), and a block (SampleBlock, RigState) that
+  straddles it is cut to its samples strictly before it (:func:`rimd_sim.io.cdr.cut_block`). The messages left
+  out still count as handled in ``on_written``: a rig in lockstep goes on, and a client waiting for a topic to
+  reach the stop sees it. A message without a stamp is written. ``rimd experiment`` sets it to the end of its
+  last step, so its recording ends there on every topic however late the recorder is stopped.
 * Everything the writer does happens in order: :meth:`run_on_writer` runs a function after the messages queued
   before it (``~/split``, ``~/stop``); :meth:`close` writes everything queued, finishes the file and returns.
 
@@ -32,10 +38,15 @@ from queue import Empty, SimpleQueue
 from typing import Any
 
 from rimd_sim.io.bag import BagWriter, FileInfo, WriteFailure
-from rimd_sim.io.cdr import BLOCK_TYPES, block_span
+from rimd_sim.io.cdr import BLOCK_TYPES, block_span, cut_block, read_block, samples_before
 from rimd_sim.io.msgdefs import MessageDefinitionError
+from rimd_sim.settings.recording import STOP_METADATA
 
-__all__ = ["LossCounter", "RecordingSession", "TopicLoss"]
+__all__ = ["STOP_METADATA", "LossCounter", "RecordingSession", "StopRefused", "TopicLoss"]
+
+
+class StopRefused(ValueError):
+    """A stop stamp that a topic has already been written past (the recording could not end there)."""
 
 #: Log levels of the session's lines.
 INFO, WARNING, ERROR = "info", "warning", "error"
@@ -129,6 +140,10 @@ class RecordingSession:
         self._retry_announced = False
         self._last_flush = clock()
         self._thread: threading.Thread | None = None
+        self.stop_at: int | None = None          # header stamp (ns): messages at or after it are left out
+        self.after_stop: dict[str, int] = {}     # per topic: messages left out at or after the stop stamp
+        self.cut_blocks: dict[str, int] = {}     # per topic: blocks cut at the stop stamp
+        self._written_through: dict[str, int] = {}   # per topic: the largest stamp written (writer thread)
 
     # -- feeding (any thread) ---------------------------------------------------------------------------------
     def add_topic(self, topic: str, type_name: str, offered: Sequence[Mapping[str, Any]]) -> None:
@@ -166,6 +181,26 @@ class RecordingSession:
         if isinstance(result[0], Exception):
             raise result[0]
         return result[0]
+
+    def set_stop_at(self, stamp_ns: int | None) -> None:
+        """Leave out every message stamped at or after ``stamp_ns`` from now on (None: none); applied in order.
+
+        Raises:
+            StopRefused: A topic has already been written at or past ``stamp_ns``.
+            TimeoutError: The writer did not get to it in time.
+        """
+        self.run_on_writer(lambda: self._apply_stop(stamp_ns))
+
+    def _apply_stop(self, stamp_ns: int | None) -> None:
+        if stamp_ns is not None:
+            past = sorted(t for t, s in self._written_through.items() if s >= stamp_ns)
+            if past:
+                raise StopRefused(f"stop_at {stamp_ns} ns refused: {', '.join(past)} already written at or past it")
+            self._safely(self.bag.add_metadata, STOP_METADATA, {
+                "stop_at_ns": str(stamp_ns),
+                "rule": "every message whose header stamp is at or after stop_at_ns left out; a block that "
+                        "straddles it cut to its samples before it"})
+        self.stop_at = stamp_ns
 
     def split(self) -> FileInfo | None:
         """Finish the current file (or clear a write error): the next message opens a new file."""
@@ -263,6 +298,12 @@ class RecordingSession:
 
     def _write(self, item: tuple, written: dict[str, int]) -> None:
         _, topic, data, log_time, publish_time, stamp = item
+        stop = self.stop_at
+        if stop is not None and stamp is not None:
+            data = self._before_stop(topic, data, stamp, stop)
+            if data is None:   # at or after the stop: handled, not written
+                written[topic] = max(stamp, written.get(topic, stamp))
+                return
         if self.types.get(topic) in BLOCK_TYPES:
             try:
                 first, count = block_span(data)
@@ -276,7 +317,25 @@ class RecordingSession:
         self._safely(self.bag.write, topic, data, log_time, publish_time, sequence)
         if stamp is not None:
             written[topic] = max(stamp, written.get(topic, stamp))
+            self._written_through[topic] = max(stamp, self._written_through.get(topic, stamp))
         self._flush_if_due()
+
+    def _before_stop(self, topic: str, data: bytes, stamp: int, stop: int) -> bytes | None:
+        """The message as written before the stop stamp: whole, a block cut at it, or None (left out, counted)."""
+        type_name = self.types.get(topic)
+        if stamp < stop and type_name in BLOCK_TYPES:
+            try:
+                _, size = block_span(data)
+                keep = samples_before(stamp, float(read_block(data, type_name, arrays=0).sample_rate), size, stop)
+                if keep < size:
+                    data = cut_block(data, type_name, keep)
+                    self.cut_blocks[topic] = self.cut_blocks.get(topic, 0) + 1
+            except (ValueError, IndexError):
+                pass   # bytes that do not read as a block: written as they came (the loss counter says so)
+        if stamp >= stop:
+            self.after_stop[topic] = self.after_stop.get(topic, 0) + 1
+            return None
+        return data
 
     def _flush_if_due(self) -> None:
         now = self._clock()
@@ -353,6 +412,10 @@ class RecordingSession:
                          "progress lost, the messages after it not written")
         if bag.metadata_error is not None:
             lines.append(f"  metadata.yaml not updated: {bag.metadata_error}")
+        if self.stop_at is not None:
+            left = sum(self.after_stop.values())
+            lines.append(f"  stopped at stamp {self.stop_at} ns: {left} message(s) at or after it left out, "
+                         f"{sum(self.cut_blocks.values())} block(s) cut there")
         cause = bag.failures[0].headline if bag.failures else "write error"
         for topic, r in self.loss_report().items():
             lines.append(f"  {topic}: {r.written} messages written; "

@@ -3,7 +3,8 @@
 ``rimd rig`` checks a configuration's recorder section with :func:`check_recorder_parameters` before starting
 anything; the node declares :data:`PARAMETERS` and builds :class:`RecorderSettings` from its values. Part of the
 interface (docs/interface.md): ``output_dir``, ``topics``, ``max_duration``, ``max_size``, ``compression``,
-``start_paused``; the others are additions. Every parameter is read at start.
+``start_paused``; the others are additions. Every parameter is read at start; ``stop_at`` may also be set while
+the recorder runs (``rimd experiment`` sets it once it knows when its last step ends).
 """
 
 from __future__ import annotations
@@ -16,13 +17,18 @@ from typing import Any
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 
-__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "RecorderConfigError", "RecorderSettings",
-           "check_parameter", "check_recorder_parameters", "compile_patterns"]
+__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "STOP_METADATA", "RecorderConfigError",
+           "RecorderSettings", "check_parameter", "check_recorder_parameters", "compile_patterns"]
 
 #: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
 #: ``"<topic>" + PROGRESS_STAMP_KEY`` is the header stamp (integer ns) of the last message of that topic written.
 #: ``rimd experiment`` waits on it before stopping its recorder (a declared interface, not a convention).
 PROGRESS_STAMP_KEY = " last_stamp_ns"
+
+#: The MCAP metadata record that says where a recording stops (``stop_at``): key ``stop_at_ns``, integer ns, the
+#: first stamp left out. The recorder writes it into the current and every later file when ``stop_at`` is set;
+#: the analysis of a recording ends its last step there (docs/recording.md).
+STOP_METADATA = "rimd_stop"
 
 #: The MCAP chunk compressions the recorder writes (``recorder.compression``).
 COMPRESSIONS = ("zstd", "lz4", "none")
@@ -85,6 +91,11 @@ class RecorderSettings:
                           rule="empty or a ROS node name such as /rig/rimd_simulator",
                           check=lambda v: v == "" or _NODE_NAME.fullmatch(v) is not None,
                           breaks=("bad name", "/rig/", "1abc", "a//b"), read_only=True)
+    # Settable at run time: the end of an experiment is known once its first step is scheduled.
+    stop_at: int = param(0, "leave out every message whose header stamp is at or after this stamp (integer ns in "
+                            "the rig's time base; sample blocks that straddle it are cut to their samples before "
+                            "it); 0 = no stop. May be set while recording: refused when a topic is already "
+                            "written at or past it", unit="ns", ge=0)
 
 
 #: The recorder's parameters by name.

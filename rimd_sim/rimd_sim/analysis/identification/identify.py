@@ -413,6 +413,8 @@ def local_stages(data: rec.RecordedData, base: SimConfig, fixed: dict[str, float
     end = rec.common_end(data)
     if end is not None:
         t_end = min(t_end, end)
+    if reading.stop is not None:   # a recording cut at the schedule's end: the fit reads it up to there
+        t_end = reading.stop
     segments = _segments(motor, float(t_first) + 0.01, t_end, onsets_all, lasers, windows, kicks, length)
     step = max(1, int(round(lasers.rate / FIT_RATE)))
     yk = np.isfinite(lasers.y_t) & lasers.keep

@@ -194,6 +194,7 @@ class Reading:
     rows: list[dict]
     windows: list[Window] = field(default_factory=list)
     faults: dict = field(default_factory=dict)
+    stop: float | None = None   # the schedule's end, when the recording names it and reaches it (rec.stop_time)
 
     def windows_text(self) -> str | None:
         """One line naming every window left out, or None."""
@@ -231,6 +232,8 @@ def read(data: rec.RecordedData, *, threshold: float = rec.DEFAULT_THRESHOLD, se
     faults = fault_report(data.recording, detected["peak_force_sample"], detected["peak_time"], data.origin_ns) \
         if scan and data.recording is not None else {}
     windows = excluded_windows(data, faults or None)
-    steps = rec.segment_steps(data.motor, settle, end=rec.common_end(data, detected, match["detected_match"]))
+    stop = rec.stop_time(data, detected, match["detected_match"])
+    steps = rec.segment_steps(data.motor, settle, end=rec.common_end(data, detected, match["detected_match"]),
+                              stop=stop)
     rows = step_rows(steps, events, detected, force, windows)
-    return Reading(data, threshold, settle, pulse, detected, match, steps, rows, windows, faults)
+    return Reading(data, threshold, settle, pulse, detected, match, steps, rows, windows, faults, stop)

@@ -55,6 +55,7 @@ from rimd_sim.analysis.recordings.contact_pulse import PulseSamples, SpringDashp
 from rimd_sim.io.decode import topic_decoder
 from rimd_sim.io.msgdefs import MessageDefinitionError
 from rimd_sim.io.reader import Recording, open_recording
+from rimd_sim.settings.recording import STOP_METADATA
 
 FORCE = "/rig/impact/force"
 EVENTS = "/rig/impact/events"
@@ -75,7 +76,7 @@ DEFAULT_THRESHOLD = 2.0
 
 __all__ = [
     "Channel", "RecordedData", "Step", "load", "pulse_model", "detect_impacts", "match_impacts",
-    "common_end", "segment_steps", "settled", "phase_plane", "poincare_times", "poincare_points",
+    "common_end", "stop_time", "segment_steps", "settled", "phase_plane", "poincare_times", "poincare_points",
 ]
 
 
@@ -520,14 +521,47 @@ def events_end(detected: dict[str, np.ndarray], detected_match: np.ndarray,
     return float(orphans.min()) if orphans.size else None
 
 
+def stop_time(data: RecordedData, detected: dict[str, np.ndarray] | None = None,
+              detected_match: np.ndarray | None = None) -> float | None:
+    """The recording's stop (s from the origin) when it names one and every analysed stream reaches it; else None.
+
+    A recording made by ``rimd experiment`` names the end of its last step (the recorder's ``stop_at``, metadata
+    record :data:`~rimd_sim.settings.recording.STOP_METADATA`): it holds every message stamped before it and
+    nothing after. The streams reach it when each sampled channel's last sample is its last period before it,
+    the motor states' last is within one of their periods of it, and the impact events do not end before it
+    (:func:`events_end`). A recording whose recorder was stopped before it caught up ends where its streams end
+    (:func:`common_end`), as any other.
+    """
+    record = data.recording.metadata.get(STOP_METADATA, {}) if data.recording is not None else {}
+    try:
+        stop = (int(record["stop_at_ns"]) - data.origin_ns) * 1e-9
+    except (KeyError, ValueError):
+        return None
+    for c in data.channels.values():
+        if c.time.size and c.time[-1] + 1.5 / c.rate < stop:
+            return None
+    t = data.motor.get("time", np.empty(0))
+    if t.size > 1 and t[-1] + 1.5 * float(np.median(np.diff(t))) < stop:
+        return None
+    if detected is not None and detected_match is not None:
+        end = events_end(detected, detected_match, data.events)
+        if end is not None and end < stop:
+            return None
+    return stop
+
+
 def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: float = 1e-6,
-                  end: float | None = None) -> list[Step]:
+                  end: float | None = None, stop: float | None = None) -> list[Step]:
     """Cut the motor states into steps of constant setpoint; discard the ramp plus ``settle`` seconds.
 
     ``end``: the time where the recording's streams stop together (:func:`common_end`); the last step ends
     there when it is earlier than its last motor state, and steps that start after it are dropped.
+    ``stop``: the end of the schedule (:func:`stop_time`), which the recording reaches: the last step ends
+    there (the motor states stop one period short of it), and ``end`` is not used.
     """
     t = motor.get("time", np.empty(0))
+    if stop is not None:
+        end = stop
     if end is not None:
         keep = t <= end
         motor = {k: v[keep] for k, v in motor.items()}
@@ -537,9 +571,10 @@ def segment_steps(motor: dict[str, np.ndarray], settle: float, tolerance_hz: flo
     sp, f = motor["frequency_setpoint"], motor["frequency"]
     cuts = np.flatnonzero(np.diff(sp) != 0) + 1
     bounds = [0, *cuts.tolist(), t.size]
+    last = t[-1] if stop is None else stop
     steps = []
     for n, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
-        end = t[b] if b < t.size else t[-1]
+        end = t[b] if b < t.size else last
         reached = np.flatnonzero(np.abs(f[a:b] - sp[a]) <= tolerance_hz)
         ramp_end = float(t[a + reached[0]]) if reached.size else None
         steady = None if ramp_end is None or ramp_end + settle >= end else ramp_end + settle

@@ -10,9 +10,12 @@ rig) the rig changes its setpoint at the same simulation time, and the same plan
 
 :class:`ExperimentRecorder` is the experiment's own recorder process (node ``rimd_experiment_recorder``, topics
 ``/rig/.*``): started before the first step (it joins a rig in lockstep by itself: name it among the rig's
-consumers), stopped once it has written every topic up to the end of the last step. How far it has written is
-read from its ``/diagnostics``, the declared key :data:`rimd_sim.settings.recording.PROGRESS_STAMP_KEY` (not a
-string convention shared by copy).
+consumers). Once the first step is scheduled, its ``stop_at`` is set to the end of the last step,
+``T0 + n * dwell``: every message stamped at or after it is left out and the sample blocks that straddle it are
+cut there, so the recording holds every sample strictly before the end and nothing after, on every topic, however
+late the recorder is stopped (docs/recording.md). It is stopped once it has handled every topic up to that end.
+How far it has handled each topic is read from its ``/diagnostics``, the declared key
+:data:`rimd_sim.settings.recording.PROGRESS_STAMP_KEY` (not a string convention shared by copy).
 """
 
 from __future__ import annotations
@@ -165,11 +168,27 @@ class ExperimentRecorder:
                                f"{self.tail()}")
         self._client.spin_until(lambda: False, 0.5)   # subscriptions matched with the publishers
 
-    def wait_until_written(self, end_ns: int, last_event_ns: int | None, timeout: float) -> bool:
-        """Wait until it has written every continuous topic up to ``end_ns`` (and the last event before it).
+    def set_stop_at(self, end_ns: int, timeout: float) -> str | None:
+        """Set its ``stop_at`` to ``end_ns`` (the end of the last step); None when done, else why not."""
+        from rclpy.parameter import Parameter
+        from rclpy.parameter_client import AsyncParameterClient
 
-        A recorder lagging behind a fast rig on a loaded machine holds each topic's backlog apart; stopped as
-        soon as the rig passes the end, it would cut the topics at different times.
+        params = AsyncParameterClient(self._client.node, RECORDER_NODE)
+        if not params.wait_for_services(timeout):
+            return f"its parameter services did not answer within {timeout:g} s"
+        future = params.set_parameters([Parameter("stop_at", Parameter.Type.INTEGER, end_ns)])
+        self._client.spin_until(future.done, timeout)
+        if not future.done() or future.result() is None:
+            return f"no answer to setting stop_at within {timeout:g} s"
+        result = future.result().results[0]
+        return None if result.successful else result.reason
+
+    def wait_until_written(self, end_ns: int, last_event_ns: int | None, timeout: float) -> bool:
+        """Wait until it has handled every continuous topic up to ``end_ns`` (and written the last event before it).
+
+        Handled: a message at or after ``end_ns`` has reached its writer (left out by its ``stop_at``), so every
+        message before it is written. A recorder lagging behind a fast rig on a loaded machine holds each topic's
+        backlog apart; stopped as soon as the rig passes the end, it would miss the end of some topics.
         """
         names = ("/rig/motor/state", "/rig/impact/force", "/rig/rimd/displacement", "/rig/cart/displacement",
                  "/rig/rimd/acceleration")
@@ -257,6 +276,14 @@ class ExperimentRun:
             first = self._request(freqs[0], start_ns, 0, n)
         times = [start_ns + k * dwell_ns for k in range(n)]
         self.steps.append(_record_step(freqs[0], first, times[0], dwell_ns))
+        end_ns = times[-1] + dwell_ns
+        if recorder is not None:   # the recording ends at the end of the last step, on every topic
+            refused = recorder.set_stop_at(end_ns, plan.timeout)
+            if refused is None:
+                self.log(f"the recording ends at t = {end_ns / 1e9:.9f} s (the end of the last step)")
+            else:
+                self.log(f"the recorder's stop_at could not be set to {end_ns} ns ({refused}): the recording goes "
+                         "on until the recorder stops; the analysis ends where every stream ends")
         self.log(f"{n} steps scheduled from t = {start_ns / 1e9:.9f} s, one every {plan.dwell:g} s")
         for k, f in enumerate(freqs):
             self._wait_for_stamp(times[k], k, n, f, show=False)   # step k in force
@@ -265,7 +292,6 @@ class ExperimentRun:
                 self.steps.append(_record_step(freqs[k + 1], response, times[k + 1], dwell_ns))
             self._wait_for_stamp(times[k] + dwell_ns, k, n, f, show=True, origin=times[k])
         if recorder is not None:   # everything up to the end of the last step has reached the recorder
-            end_ns = times[-1] + dwell_ns
             # The events: each topic arrives in order, so once an event at or after the end is heard, every
             # event before it was; a motion without impacts at the end gives none (bounded wait).
             self.client.spin_until(lambda: bool(self.event_stamps) and self.event_stamps[-1] >= end_ns,

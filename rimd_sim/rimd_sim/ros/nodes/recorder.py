@@ -18,6 +18,10 @@
   RigState) and queue overflows, reported in ``/diagnostics`` (1 Hz), the log, and the final summary.
 * On ``~/stop``, SIGINT and SIGTERM the current file is finished (summary, indexes, rosbag2 metadata) and
   ``metadata.yaml`` is written; a SIGKILL loses at most the chunk in progress.
+* ``stop_at`` (integer ns, settable while it runs): every message stamped at or after it is left out and a
+  sample block that straddles it is cut there (:meth:`rimd_sim.runtime.recorder.RecordingSession.set_stop_at`),
+  so the recording ends at that stamp on every topic however late the node is stopped; the files carry it in
+  the ``rimd_stop`` metadata record. ``rimd experiment`` sets it to the end of its last step.
 * Metadata in every file: the software version and recorder settings (``rimd_recording``) and the rig's
   parameters read from ``rig_node`` (``rimd_rig_parameters``) once that node answers.
 * Write errors (disk full, file size limit, quota, I/O error): the first one stops the writing, never the
@@ -59,7 +63,7 @@ from rimd_sim.io.bag import BagWriter
 from rimd_sim.io.cdr import HEADER_FIRST_TYPES, header_stamp
 from rimd_sim.ros.clients.progress import PROGRESS_TOPIC, ProgressReporter
 from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
-from rimd_sim.runtime.recorder import RecordingSession
+from rimd_sim.runtime.recorder import RecordingSession, StopRefused
 from rimd_sim.settings.params import build
 from rimd_sim.settings.recording import (
     PARAMETERS,
@@ -167,6 +171,9 @@ class RecorderNode(PollingNode):
         self.create_timer(p.discovery_period, self._discover)
         self.create_timer(1.0, self._publish_diagnostics)
         self._session.start()
+        if p.stop_at:
+            self._session.set_stop_at(p.stop_at)
+            self.get_logger().info(f"stop_at {p.stop_at} ns: messages stamped at or after it are left out")
         self.get_logger().info(f"recording {', '.join(p.topics)} into {self.output_dir}"
                                + (" (paused: call ~/resume to start)" if self._paused else ""))
 
@@ -322,11 +329,25 @@ class RecorderNode(PollingNode):
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:  # noqa: ANN001
+        stop = None
         for param in params:
+            if param.name == "stop_at":
+                try:
+                    stop = PARAMETERS["stop_at"].validate(param.value)
+                except RecorderConfigError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+                continue
             # use_sim_time too: switching it would change the recording's log time base in the middle of a file.
             if param.name in PARAMETERS or param.name == "use_sim_time":
                 return SetParametersResult(successful=False, reason=f"{param.name} is read at start only; "
                                            "restart the recorder to change it")
+        if stop is not None:
+            try:   # applied by the writer after every message queued before it
+                self._session.set_stop_at(stop or None)
+            except (StopRefused, TimeoutError) as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            self.get_logger().info(f"stop_at {stop} ns: messages stamped at or after it are left out" if stop
+                                   else "stop_at 0: no stop")
         return SetParametersResult(successful=True)
 
     # -- reporting --------------------------------------------------------------------------------------------
