@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from queue import Empty, SimpleQueue
 from typing import Any
 
+from rimd_sim.errors import CommandError
 from rimd_sim.io.bag import BagWriter, FileInfo, WriteFailure
 from rimd_sim.io.cdr import BLOCK_TYPES, block_span, cut_block, read_block, samples_before
 from rimd_sim.io.msgdefs import MessageDefinitionError
@@ -45,8 +46,9 @@ from rimd_sim.settings.recording import STOP_METADATA
 __all__ = ["STOP_METADATA", "LossCounter", "RecordingSession", "StopRefused", "TopicLoss"]
 
 
-class StopRefused(ValueError):
+class StopRefused(CommandError):
     """A stop stamp that a topic has already been written past (the recording could not end there)."""
+
 
 #: Log levels of the session's lines.
 INFO, WARNING, ERROR = "info", "warning", "error"
