@@ -207,8 +207,13 @@ def not_implemented_message(verb: Verb) -> str:
     return f"rimd {verb.name}: not implemented yet" + (f" ({verb.missing})" if verb.missing else "")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Build the argument parser of ``rimd`` with one sub-parser per verb."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """Build the argument parser of ``rimd`` with one sub-parser per verb.
+
+    ``only``: the verb about to run; the others get a sub-parser with their summary alone, without importing
+    their modules (each imports what its options need: a study point or ``rimd --help`` then pays for one verb,
+    not for all). ``None`` builds every verb's options (the docs generator, the tests).
+    """
     parser = argparse.ArgumentParser(
         prog="rimd",
         description="Digital twin of the RIMD vibro-impact test rig (ROS 2 Jazzy).",
@@ -224,6 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
             )
             sub.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
             sub.set_defaults(_main=_not_implemented_main(verb))
+        elif only is not None and verb.name != only:
+            subparsers.add_parser(verb.name, help=verb.summary, description=verb.summary)
         else:
             module = importlib.import_module(verb.module)
             sub = subparsers.add_parser(verb.name, help=verb.summary, description=verb.summary)
@@ -243,7 +250,9 @@ def _not_implemented_main(verb: Verb):
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``rimd`` with ``argv`` (default ``sys.argv[1:]``) and return the exit status."""
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # The verb is the first word that is not an option (``rimd`` itself takes only --help and --version).
+    parser = build_parser(next((a for a in argv if not a.startswith("-")), ""))
     args = parser.parse_args(argv)
     if args.verb is None:
         parser.print_help(sys.stderr)
