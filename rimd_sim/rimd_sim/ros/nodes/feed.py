@@ -58,8 +58,19 @@ class InProcessFeed:
         self._report = report
 
     def send(self, topic: str, data: bytes) -> None:
-        """Hand one serialized message to every in-process subscriber of ``topic`` (the pacing thread)."""
-        for sub in self._subs.get(topic, ()):
+        """Hand one serialized message to every in-process subscriber of ``topic`` (the pacing thread).
+
+        The bytes are those a DDS reader receives: the middleware pads a serialized message to a multiple of 4
+        bytes with zeros (a RigState, ending with its 10 ``in_contact`` flags, arrives 2 bytes longer than it was
+        written), and so does the hand-over, so that a recording holds the same bytes either way.
+        """
+        subs = self._subs.get(topic)
+        if not subs:
+            return
+        pad = -len(data) % 4
+        if pad:
+            data += b"\0" * pad
+        for sub in subs:
             sub.put(data)
 
     # -- the consumers' side ------------------------------------------------------------------------------------
