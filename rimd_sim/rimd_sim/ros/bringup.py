@@ -99,8 +99,9 @@ class RigPlan:
         """The processes to start: one per node when separate, else the composed rig's one.
 
         Composed: the simulator with the recorder and the bridge in its process (:mod:`rimd_sim.ros.nodes.composed`).
+        A simulator alone (no recorder, no bridge) runs as itself: there is nothing to compose.
         """
-        if self.separate or not any(n.name == "rimd_simulator" for n in self.nodes):
+        if self.separate or len(self.nodes) < 2 or not any(n.name == "rimd_simulator" for n in self.nodes):
             return self.nodes
         return (composed_process(self.nodes),)
 

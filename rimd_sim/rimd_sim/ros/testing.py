@@ -338,7 +338,7 @@ class RigHandle:
     def _described(self, process: str) -> str:
         """A process as an error names it: the node, or the composed rig and the nodes it runs."""
         plan = self.rig.plan
-        return process if plan.separate else f"{process} (the rig in one process: {', '.join(plan.names)})"
+        return process if process in plan.names else f"{process} (the rig in one process: {', '.join(plan.names)})"
 
     # -- rclpy in this process, on the rig's domain ------------------------------------------------------------
     def client(self) -> Any:
