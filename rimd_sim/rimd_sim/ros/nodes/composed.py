@@ -106,7 +106,7 @@ class ComposedRig:
     def _make(self, cls: type[RimdNode], overrides: dict[str, list[Parameter]], ros_args: list[str]) -> Any:
         """Build one node of the process, its refusals naming it."""
         try:
-            node = cls(feed=self.feed, parameter_overrides=overrides.get(cls.NODE_NAME, []))  # type: ignore[call-arg]
+            node = cls(feed=self.feed, parameter_overrides=overrides.get(cls.NODE_NAME, []))
         except cls.REFUSED as exc:
             raise PartRefused(f"{cls.NODE_NAME}: {cls.REFUSED_PREFIX}{exc}") from None
         problem = params_file_problem(node, ros_args)
