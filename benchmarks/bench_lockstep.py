@@ -59,7 +59,8 @@ def loss(recording: Path) -> dict[str, str]:
     return out
 
 
-def run(mode: str, seconds: float, warmup: float, base: Path, window: float | None = None) -> dict:
+def run(mode: str, seconds: float, warmup: float, base: Path, window: float | None = None,
+        separate: bool = False) -> dict:
     from rimd_sim.ros.bringup import Rig, plan_rig
     from rimd_sim.ros.clients.rig import RigClient
     from rimd_sim.ros.testing import lease_domain_id, ros_environment
@@ -70,7 +71,7 @@ def run(mode: str, seconds: float, warmup: float, base: Path, window: float | No
         plan = plan_rig(None, output_dir=run_dir / "recording", lockstep=mode == "lockstep", real_time_factor=0.0,
                         parameters={"rimd_rerun": {"sink": "save", "save_path": str(run_dir / "rig.rrd")},
                                     "rimd_simulator": sim},
-                        run_dir=run_dir)
+                        run_dir=run_dir, separate=separate)
         rig = Rig(plan, env=ros_environment(lease.domain_id, run_dir / "ros_log"), log_dir=run_dir / "logs")
         rig.start()
         try:
@@ -96,7 +97,8 @@ def run(mode: str, seconds: float, warmup: float, base: Path, window: float | No
         finally:
             status = rig.stop()
     wall = t1 - t0
-    return {"mode": mode, "speed": (s1 - s0) / 1e9 / wall, "wall_s": wall, "simulated_s": (s1 - s0) / 1e9,
+    return {"mode": mode, "layout": "separate" if separate else "composed", "speed": (s1 - s0) / 1e9 / wall,
+            "wall_s": wall, "simulated_s": (s1 - s0) / 1e9,
             "cpu_percent": {n: 100 * (c1[n] - c0[n]) / wall for n in pids}, "exit_status": status,
             "loss": loss(plan.recording_dir)}
 
@@ -123,16 +125,20 @@ def main() -> int:
         print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
         return 0
     with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
-        results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window) for mode in ("lockstep", "free")]
-    lock, free = results
+        # The composed rig (the default: recorder and bridge in the simulator's process) and separate processes,
+        # side by side.
+        results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window, separate)
+                   for separate in (False, True) for mode in ("lockstep", "free")]
+    lock, free = results[:2]
     for r in results:
         cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
-        print(f"{r['mode']:>9}: {r['speed']:6.1f}x real time ({r['simulated_s']:.1f} s simulated in "
+        cpu += f"; total {sum(r['cpu_percent'].values()):.0f} %"
+        print(f"{r['layout']:>9} {r['mode']:>9}: {r['speed']:6.1f}x real time ({r['simulated_s']:.1f} s simulated in "
               f"{r['wall_s']:.1f} s); CPU {cpu}; exit {r['exit_status']}")
         for topic, verdict in r["loss"].items():
             print(f"{'':>11}{topic}: {verdict}")
     ratio = lock["speed"] / free["speed"] if free["speed"] else float("nan")
-    print(f"lockstep / free: {ratio:.3f}")
+    print(f"composed lockstep / free: {ratio:.3f}")
     print(f"goal lockstep >= 20x real time: {'met' if lock['speed'] >= 20 else 'NOT met'} ({lock['speed']:.1f}x)")
     print(f"goal lockstep within 15 % of free running: {'met' if ratio >= 0.85 else 'NOT met'} ({ratio:.3f})")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)

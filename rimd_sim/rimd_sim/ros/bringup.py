@@ -87,11 +87,56 @@ class RigPlan:
     lockstep_consumers: tuple[str, ...] = ()
     lockstep_window: float = 0.0
     overrides_path: Path | None = None
+    separate: bool = True
 
     @property
     def names(self) -> list[str]:
         """The node names, in start order."""
         return [node.name for node in self.nodes]
+
+    @property
+    def processes(self) -> tuple[PlannedNode, ...]:
+        """The processes to start: one per node when separate, else the composed rig's one.
+
+        Composed: the simulator with the recorder and the bridge in its process (:mod:`rimd_sim.ros.nodes.composed`).
+        A simulator alone (no recorder, no bridge) runs as itself: there is nothing to compose.
+        """
+        if self.separate or len(self.nodes) < 2 or not any(n.name == "rimd_simulator" for n in self.nodes):
+            return self.nodes
+        return (composed_process(self.nodes),)
+
+    def process_of(self, node: str) -> str:
+        """The name of the process that runs ``node`` (its log is ``<process>.log``)."""
+        names = [p.name for p in self.processes]
+        return node if node in names or self.separate else names[0]
+
+
+#: The composed rig's process name (its log: ``rimd_composed.log``).
+COMPOSED = "rimd_composed"
+
+
+def composed_process(nodes: Sequence[PlannedNode]) -> PlannedNode:
+    """The composed rig running ``nodes`` (planned as separate processes): one process, the same parameters.
+
+    Each node's ``-p NAME:=VALUE`` becomes ``--param NODE:NAME:=VALUE`` (a ``-p`` would set it on every node of
+    the process); the parameter files are the simulator's (the same for every node). The simulator does not start
+    paused: its consumers are fed in the process from sample 0.
+    """
+    from rimd_sim.ros.nodes.registry import by_name
+
+    names = {n.name for n in nodes}
+    args = ["--record", str("rimd_recorder" in names).lower(), "--bridge", str("rimd_rerun" in names).lower()]
+    ros_args: list[str] = []
+    for node in nodes:
+        pairs = list(zip(node.args, node.args[1:], strict=False))
+        if node.name == "rimd_simulator":
+            ros_args = ["--ros-args", *(a for flag, value in pairs if flag == "--params-file"
+                                        for a in (flag, value))]
+        args += [a for flag, value in pairs if flag == "-p" and not (node.name == "rimd_simulator"
+                                                                     and value == "start_paused:=true")
+                 for a in ("--param", f"{node.name}:{value}")]
+    entry = by_name("composed")
+    return PlannedNode(COMPOSED, entry.name, (*args, *ros_args))
 
 
 #: The rig's nodes in start order (stopped in reverse): (name, entry, consumer, namespace), from the registry.
@@ -115,7 +160,7 @@ def _section(config_path: Path, doc: Any, name: str) -> dict | None:
 def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None = None, record: bool = True,
              rerun: bool = True, foxglove: bool = False, lockstep: bool = False, consumers: Sequence[str] = (),
              real_time_factor: float | None = None, parameters: Mapping[str, Mapping[str, Any]] | None = None,
-             run_dir: str | Path | None = None) -> RigPlan:
+             run_dir: str | Path | None = None, separate: bool = False) -> RigPlan:
     """Read and check the configuration; decide the processes and their arguments.
 
     Args:
@@ -130,6 +175,8 @@ def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None 
         parameters: More parameters per node name (``{"rimd_simulator": {"seed": 3}}``), written to an
             overrides file given after the configuration.
         run_dir: Where the overrides file goes (default: the recording directory, else the working directory).
+        separate: Each node in a process of its own; by default the recorder and the bridge run in the simulator's
+            process, fed without DDS (:attr:`RigPlan.processes`, docs/rig.md "The composed rig").
 
     Raises:
         ConfigError: The configuration (or an override) is refused; nothing was started. The message names
@@ -201,7 +248,7 @@ def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None 
             args += ["-p", "start_paused:=true"]
         nodes.append(PlannedNode(node.name, node.entry, tuple(args), node.consumer, node.namespace))
     return RigPlan(config_path, sim_config, tuple(nodes), recording_dir, foxglove_address, lockstep_consumers,
-                   sim_settings.lockstep.window, overrides_path)
+                   sim_settings.lockstep.window, overrides_path, separate)
 
 
 #: The replay's node name, as the bridge must name it (``foxglove.playback_node``).
@@ -351,8 +398,8 @@ class Rig:
         self.stop()
 
     def start(self) -> None:
-        """Start every process (consumers first, the simulator last)."""
-        for node in self.plan.nodes:
+        """Start every process (consumers first, the simulator last; or the composed rig's one)."""
+        for node in self.plan.processes:
             out: Any = None
             if self.log_dir is not None:
                 self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -369,7 +416,7 @@ class Rig:
         consumers may miss the first blocks) and False comes back. Nothing to do in lockstep, or without
         consumers (True).
         """
-        consumers = tuple(n.name for n in self.plan.nodes if n.consumer)
+        consumers = tuple(n.name for n in self.plan.processes if n.consumer)   # none composed: fed in the process
         if self.plan.lockstep_consumers or not consumers:
             return True
         domain = int(self.env["ROS_DOMAIN_ID"]) if self.env and self.env.get("ROS_DOMAIN_ID") else None

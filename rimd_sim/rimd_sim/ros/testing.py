@@ -307,13 +307,13 @@ class RigHandle:
         return self.rig.plan.names
 
     def log(self, node: str = "rimd_simulator") -> str:
-        """What a node has written so far."""
-        path = self.run_dir / "logs" / f"{node}.log"
+        """What a node has written so far (in the composed rig: the process's log, every node's lines)."""
+        path = self.run_dir / "logs" / f"{self.rig.plan.process_of(node)}.log"
         return path.read_text(errors="replace") if path.exists() else ""
 
     def log_tail(self, node: str, lines: int = LOG_TAIL_LINES) -> str:
         """The last ``lines`` lines of a node's log, headed by its name and path (for an error message)."""
-        path = self.run_dir / "logs" / f"{node}.log"
+        path = self.run_dir / "logs" / f"{self.rig.plan.process_of(node)}.log"
         tail = self.log(node).rstrip().splitlines()[-lines:]
         if not tail:
             return f"--- {node}: its log is empty ({path})"
@@ -330,10 +330,15 @@ class RigHandle:
             return
         gone = self.rig.exited()
         if gone:
-            what = "; ".join(f"node {name} {_how(status)}" for name, status in gone)
+            what = "; ".join(f"node {self._described(name)} {_how(status)}" for name, status in gone)
             tails = "\n".join(self.log_tail(name) for name, _ in gone)
             raise UnavailableError(f"rimd_rig: {what} {when} (ROS_DOMAIN_ID {self.domain_id}, run directory "
                                    f"{self.run_dir})\n{tails}")
+
+    def _described(self, process: str) -> str:
+        """A process as an error names it: the node, or the composed rig and the nodes it runs."""
+        plan = self.rig.plan
+        return process if process in plan.names else f"{process} (the rig in one process: {', '.join(plan.names)})"
 
     # -- rclpy in this process, on the rig's domain ------------------------------------------------------------
     def client(self) -> Any:
@@ -401,7 +406,7 @@ class RigHandle:
                 if not missing:
                     return now - started
                 if now - started >= timeout:
-                    tails = "\n".join(self.log_tail(name) for name in self.node_names)
+                    tails = "\n".join(self.log_tail(p.name) for p in self.rig.plan.processes)
                     raise UnavailableError(
                         f"rimd_rig: the rig was not ready within {timeout:g} s (ROS_DOMAIN_ID {self.domain_id}, run "
                         f"directory {self.run_dir}); still waiting for {missing}. A first run on an empty numba "
@@ -529,7 +534,7 @@ class RigFactory:
                  config: str | Path | None = None, record: bool = True, rerun: bool = False,
                  real_time_factor: float = 0.0, window: float | None = None, timeout: float | None = None,
                  on_timeout: str | None = None, env: Mapping[str, str] | None = None,
-                 ready_timeout: float | None = None) -> RigHandle:
+                 ready_timeout: float | None = None, separate: bool = False) -> RigHandle:
         """Bring up a rig in lockstep in a domain of its own; return it once it is ready.
 
         Args:
@@ -550,6 +555,9 @@ class RigFactory:
                 ``RigHandle.env``, the environment of your processes.
             ready_timeout: Seconds to wait for the rig to be ready (default: ``RIMD_READY_TIMEOUT``, the ini key
                 ``rimd_ready_timeout``, else :data:`DEFAULT_READY_TIMEOUT_S`).
+            separate: Each node in a process of its own (logs ``<node>.log``). By default the rig is composed:
+                the recorder and the bridge run in the simulator's process, fed without DDS (one log,
+                ``rimd_composed.log``; :meth:`RigHandle.log` finds a node's lines there), docs/rig.md.
 
         Raises:
             UnavailableError: A node exited while the rig came up, or the rig was not ready in time (the rig is
@@ -575,7 +583,8 @@ class RigFactory:
         try:
             plan = plan_rig(config, output_dir=run_dir / "recording" if record else None, record=record,
                             rerun=rerun, lockstep=True, consumers=consumers, real_time_factor=real_time_factor,
-                            parameters={"rimd_simulator": sim, "rimd_rerun": bridge}, run_dir=run_dir)
+                            parameters={"rimd_simulator": sim, "rimd_rerun": bridge}, run_dir=run_dir,
+                            separate=separate)
             handle_env = ros_environment(lease.domain_id, run_dir / "ros_log")
             rig = Rig(plan, env={**handle_env, **(env or {})}, log_dir=run_dir / "logs")
             rig.start()

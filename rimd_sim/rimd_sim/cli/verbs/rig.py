@@ -1,7 +1,9 @@
 """``rimd rig``: bring up the rig from a configuration file, like a launch file (library: rimd_sim.ros.bringup).
 
 The rig is the simulator, the recorder and the Rerun bridge (each when its config section has
-``enabled: true``), each a separate process. Open loop (default), the simulator starts paused and is resumed
+``enabled: true``), by default in one process: the recorder and the bridge are fed the simulator's messages in
+the process, DDS carries them only to the other processes (docs/rig.md, "The composed rig"); ``--separate``
+starts each node in a process of its own. Open loop (default), the simulator starts paused and is resumed
 once every consumer subscribes; with ``--lockstep`` it waits for its consumers by itself and never runs ahead
 of the slowest. Ctrl-C (or ``--duration``) stops the nodes in reverse order (simulator first, recorder last).
 """
@@ -37,6 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--consumer", action="append", default=[], metavar="NAME",
                         help="with --lockstep: one more consumer to wait for (the name your node reports progress "
                              "under; repeatable)")
+    parser.add_argument("--separate", action="store_true",
+                        help="each node in a process of its own (default: the recorder and the bridge run in the "
+                             "simulator's process, fed without DDS)")
     parser.add_argument("--real-time-factor", type=real_time_factor, default=None, metavar="F",
                         help="the simulator's real_time_factor (0 = as fast as possible; in lockstep: a speed cap)")
 
@@ -54,7 +59,7 @@ def main(args: argparse.Namespace) -> int:
         require_sdk("or run without --foxglove")
     plan = plan_rig(args.config, output_dir=args.output_dir, record=not args.no_record, rerun=not args.no_rerun,
                     foxglove=args.foxglove, lockstep=args.lockstep, consumers=args.consumer,
-                    real_time_factor=args.real_time_factor)
+                    real_time_factor=args.real_time_factor, separate=args.separate)
     rig = Rig(plan)
     config = plan.config
     assert config is not None   # plan_rig reads one (only a replay's plan has none)
@@ -63,7 +68,8 @@ def main(args: argparse.Namespace) -> int:
         if plan.foxglove_address:
             print(f"rimd rig: Foxglove: open {plan.foxglove_address} in Foxglove (Open connection > Foxglove "
                   f"WebSocket; layout: {paths.config_dir() / 'foxglove' / 'rig_layout.json'})", flush=True)
-        print(f"rimd rig: running {', '.join(plan.names)} with {plan.config_path} "
+        print(f"rimd rig: running {', '.join(plan.names)}"
+              + ("" if plan.separate or len(plan.names) < 2 else " in one process") + f" with {plan.config_path} "
               f"(gap {config.rig.gap * 1e3:g} mm, motor setpoint {config.motor.initial_setpoint:g} Hz, "
               f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}); topics under /rig. "
               + (f"Recording into {plan.recording_dir}. " if plan.recording_dir else "Not recording. ")

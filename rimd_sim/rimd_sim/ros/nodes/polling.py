@@ -7,6 +7,8 @@ message handling").
 
 from __future__ import annotations
 
+import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -14,7 +16,41 @@ from rclpy.node import Node
 
 from rimd_sim.ros.nodes.base import RimdNode
 
-__all__ = ["PolledSubscriptions", "PollingNode"]
+__all__ = ["LocalSubscription", "PolledSubscriptions", "PollingNode"]
+
+
+class LocalSubscription:
+    """A topic handed over in the same process (the composed rig), polled like a raw subscription.
+
+    The publisher :meth:`put` s the serialized bytes (:class:`rimd_sim.ros.nodes.feed.InProcessFeed`), the
+    consumer's :class:`PolledSubscriptions` takes them from its timer.
+
+    Keep-last like the DDS subscription it replaces: ``depth`` messages wait at most, the oldest go first. The
+    message info has the ``source_timestamp`` (wall time of the hand-over, ns) that a DDS take gives.
+    """
+
+    def __init__(self, topic: str, depth: int) -> None:
+        self.topic_name = topic
+        self._queue: deque[tuple[bytes, dict]] = deque(maxlen=depth)
+
+    def put(self, data: bytes) -> None:
+        """Hand one serialized message over (any thread; a deque's append is atomic)."""
+        self._queue.append((data, {"source_timestamp": time.time_ns()}))
+
+    def get_publisher_count(self) -> int:
+        """Always matched: the publisher is in this process."""
+        return 1
+
+    def take(self, handler: Callable[[bytes, dict], None], limit: int = 100_000) -> int:
+        """Hand up to ``limit`` waiting messages to ``handler``; return how many."""
+        queue = self._queue
+        for n in range(limit):
+            try:
+                data, info = queue.popleft()
+            except IndexError:
+                return n
+            handler(data, info)
+        return limit
 
 
 class PolledSubscriptions:
@@ -43,6 +79,11 @@ class PolledSubscriptions:
         self._subs.append((sub, handler))
         return sub
 
+    def attach(self, sub: LocalSubscription, handler: Callable[[bytes, dict], None]) -> LocalSubscription:
+        """Poll an in-process topic like the raw subscriptions: its messages go to ``handler(data, info)``."""
+        self._subs.append((sub, handler))
+        return sub
+
     def visible(self, subscriptions: Iterable[Any]) -> list[Any]:
         """The subscriptions an executor should take: all but the polled ones."""
         return [s for s in subscriptions if id(s) not in self._hidden]
@@ -50,6 +91,8 @@ class PolledSubscriptions:
     @staticmethod
     def take(sub: Any, handler: Callable[[bytes, dict], None], limit: int = 100_000) -> int:
         """Hand up to ``limit`` messages waiting in ``sub`` to ``handler``; return how many."""
+        if isinstance(sub, LocalSubscription):
+            return sub.take(handler, limit)
         handle = sub.handle
         for n in range(limit):
             try:

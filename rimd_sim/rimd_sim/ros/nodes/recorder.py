@@ -62,6 +62,7 @@ from rimd_sim import __version__
 from rimd_sim.io.bag import BagWriter
 from rimd_sim.io.cdr import HEADER_FIRST_TYPES, header_stamp
 from rimd_sim.ros.clients.progress import PROGRESS_TOPIC, ProgressReporter
+from rimd_sim.ros.nodes.feed import DirectProgress, InProcessFeed
 from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
 from rimd_sim.runtime.recorder import RecordingSession, StopRefused
 from rimd_sim.settings.params import build
@@ -85,6 +86,8 @@ NODE_NAME = "rimd_recorder"
 POLL_PERIOD_S = 0.01
 #: The writer thread sleeps this long after the first message of a batch, then writes all that came (s).
 WRITER_BATCH_S = 0.01
+#: History of each subscription (messages): what may wait between two takes.
+SUBSCRIPTION_DEPTH = 10000
 #: While the writing is stopped by a write error, the log reminds of it this often (s).
 FAILURE_REMINDER_S = 30.0
 
@@ -118,7 +121,14 @@ class RecorderNode(PollingNode):
     REFUSED = (RecorderConfigError,)
     REFUSED_PREFIX = "configuration refused: "
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, feed: InProcessFeed | None = None, **kwargs: Any) -> None:
+        """Declare, check the output directory, start the session.
+
+        Args:
+            feed: In the composed rig (:mod:`rimd_sim.ros.nodes.composed`): the simulator's topics come from it,
+                in this process (the others by discovery as usual), and the lockstep progress goes to it.
+            kwargs: As rclpy's ``Node`` takes them.
+        """
         super().__init__(**kwargs)
         self._p: RecorderSettings = build(RecorderSettings, self.declare(PARAMETERS))  # ConfigError: refused
         p = self._p
@@ -158,7 +168,11 @@ class RecorderNode(PollingNode):
         self._written_stamp: dict[str, int] = {}   # and written (writer thread)
         self._skipped_paused = 0
         self._unknown: dict[str, str] = {}
-        self._progress = ProgressReporter(self, self.get_name(), ready=self._lockstep_ready)
+        self._progress: ProgressReporter | DirectProgress = (
+            ProgressReporter(self, self.get_name(), ready=self._lockstep_ready) if feed is None
+            else feed.progress(self.get_name()))
+        if feed is not None:
+            self._take_from(feed)
 
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         for name, handler in (("start", self._on_start), ("stop", self._on_stop), ("split", self._on_split),
@@ -204,7 +218,7 @@ class RecorderNode(PollingNode):
             offered = [qos_to_dict(p.qos_profile) for p in publishers]
             reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
             latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
-            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SUBSCRIPTION_DEPTH,
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self._session.add_topic(topic, type_name, offered)
@@ -214,6 +228,20 @@ class RecorderNode(PollingNode):
             self.get_logger().info(f"recording {topic} ({type_name}, "
                                    f"{'reliable' if reliable else 'best effort'})")
         self._fetch_rig_parameters()
+
+    def _take_from(self, feed: InProcessFeed) -> None:
+        """Record the wanted topics of the simulator in this process from ``feed`` (discovery leaves them alone)."""
+        assert self._polled is not None   # made in __init__
+        for topic, fed in sorted(feed.topics.items()):
+            if not self._wanted(topic):
+                continue
+            self._session.add_topic(topic, fed.type_name, [qos_to_dict(q) for q in fed.offered])
+            handler = self._make_handler(topic, fed.type_name)
+            self._subs[topic] = sub = self._polled.attach(feed.subscribe(topic, SUBSCRIPTION_DEPTH), handler)
+            self._progress.add_subscription(sub)
+            reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in fed.offered)
+            self.get_logger().info(f"recording {topic} ({fed.type_name}, "
+                                   f"{'reliable' if reliable else 'best effort'}, in this process)")
 
     def _lockstep_ready(self) -> bool:
         """Whether it subscribes to every topic it records of each lockstep publisher (those on /rig/progress).

@@ -45,6 +45,8 @@ NODES: tuple[NodeEntry, ...] = (
               "records the rig's topics into MCAP files", namespace="/", rig=1, consumer=True),
     NodeEntry("replay", "rimd_replay", "rimd_sim.ros.nodes.replay:main",
               "publishes a recording again, paced like the rig"),
+    NodeEntry("composed", "rimd_composed", "rimd_sim.ros.nodes.composed:main",
+              "the rig in one process: the simulator with the recorder and the bridge fed in the process"),
     NodeEntry("rerun", "rimd_rerun", "rimd_sim.ros.nodes.rerun_bridge:main",
               "streams the rig's topics to Rerun and, if asked, to Foxglove", namespace="/rig", rig=2),
 )

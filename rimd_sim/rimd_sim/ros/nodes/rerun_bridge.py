@@ -24,6 +24,7 @@ from rimd_msgs.msg import ImpactEvent, RigState, SampleBlock
 from rimd_sim.errors import ConfigError
 from rimd_sim.io.cdr import header_stamp, read_block
 from rimd_sim.ros.clients.progress import ProgressReporter
+from rimd_sim.ros.nodes.feed import DirectProgress, InProcessFeed
 from rimd_sim.ros.nodes.polling import PolledSubscriptions, PollingNode
 from rimd_sim.settings.params import build, to_flat
 from rimd_sim.viz.bridge_settings import PARAMETERS, BridgeSettings
@@ -47,8 +48,14 @@ class RerunBridgeNode(PollingNode):
     REFUSED = (SinkError, FoxgloveError, ConfigError)
     REFUSED_STATUS = 1
 
-    def __init__(self, **kwargs: Any) -> None:
-        """Declare parameters, open the sink (SinkError: refused, see REFUSED), subscribe."""
+    def __init__(self, feed: InProcessFeed | None = None, **kwargs: Any) -> None:
+        """Declare parameters, open the sink (SinkError: refused, see REFUSED), subscribe.
+
+        Args:
+            feed: In the composed rig (:mod:`rimd_sim.ros.nodes.composed`): the rig topics come from it, in this
+                process, and the lockstep progress goes to it.
+            kwargs: As rclpy's ``Node`` takes them.
+        """
         super().__init__(**kwargs)
         settings = build(BridgeSettings, self.declare(PARAMETERS))   # ConfigError: refused
         p = to_flat(settings)
@@ -98,16 +105,26 @@ class RerunBridgeNode(PollingNode):
         # The impact events (a few per second) are an ordinary subscription.
         # Lockstep (docs/rig.md): once these subscriptions have matched, the bridge joins a rig or replay in
         # lockstep under its node name and reports how far it has taken each topic.
-        self._progress = ProgressReporter(self, self.get_name())
-        subs = [self._polled.create(SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
-                for ch in CHANNELS]
-        subs.append(self._polled.create(RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE)))
-        if self.foxglove is not None:
-            subs.append(self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._raw_events_handler(), events_qos,
-                                                 raw=True))
+        self._progress: ProgressReporter | DirectProgress = (
+            ProgressReporter(self, self.get_name()) if feed is None else feed.progress(self.get_name()))
+        if feed is not None:   # the composed rig: the same handlers, fed in this process
+            subs: list[Any] = [self._polled.attach(feed.subscribe(f"{ns}/{ch.topic}", qos.depth),
+                                                   self._raw_handler(ch.topic, SAMPLE_BLOCK)) for ch in CHANNELS]
+            subs.append(self._polled.attach(feed.subscribe(f"{ns}/{TRUTH_TOPIC}", qos.depth),
+                                            self._raw_handler(TRUTH_TOPIC, RIG_STATE)))
+            events = self._raw_events_handler()
+            subs.append(self._polled.attach(feed.subscribe(f"{ns}/{EVENTS_TOPIC}", events_qos.depth),
+                                            lambda data, info: events(data)))
         else:
-            subs.append(self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._handler(EVENTS_TOPIC),
-                                                 events_qos))
+            subs = [self._polled.create(SampleBlock, ch.topic, qos, self._raw_handler(ch.topic, SAMPLE_BLOCK))
+                    for ch in CHANNELS]
+            subs.append(self._polled.create(RigState, TRUTH_TOPIC, qos, self._raw_handler(TRUTH_TOPIC, RIG_STATE)))
+            if self.foxglove is not None:
+                subs.append(self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._raw_events_handler(),
+                                                     events_qos, raw=True))
+            else:
+                subs.append(self.create_subscription(ImpactEvent, EVENTS_TOPIC, self._handler(EVENTS_TOPIC),
+                                                     events_qos))
         for sub in subs:
             self._progress.add_subscription(sub)
         if self.mapper is not None:
@@ -155,7 +172,7 @@ class RerunBridgeNode(PollingNode):
         return on_raw
 
     def _raw_events_handler(self):
-        """The impact events as bytes: to Foxglove as they are, deserialised for Rerun."""
+        """The impact events as bytes: to Foxglove as they are, deserialised for Rerun (also in the composed rig)."""
         from rclpy.serialization import deserialize_message
 
         on_message = self._handler(EVENTS_TOPIC)
@@ -163,7 +180,7 @@ class RerunBridgeNode(PollingNode):
         full = f"{self.get_namespace().rstrip('/')}/{EVENTS_TOPIC}"
 
         def on_raw(data: bytes) -> None:
-            if relay.wanted(full):
+            if relay is not None and relay.wanted(full):
                 relay.on_message(full, data)
             if self.mapper is not None:
                 on_message(deserialize_message(data, ImpactEvent))

@@ -36,6 +36,7 @@ from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.errors import ConfigError
 from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
+from rimd_sim.ros.nodes.feed import InProcessFeed
 from rimd_sim.runtime.simulator import Answer, Qos, SimulatorRuntime, load_settings, outputs
 from rimd_sim.settings.config import NODE_PARAMETERS, PARAMETERS
 
@@ -79,17 +80,33 @@ class SimulatorNode(RimdNode):
     REFUSED = (ConfigError,)
     REFUSED_PREFIX = "configuration refused: "
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, feed: InProcessFeed | None = None, **kwargs: Any) -> None:
+        """Declare, build the runtime, create the publishers and services.
+
+        Args:
+            feed: In the composed rig (:mod:`rimd_sim.ros.nodes.composed`): every message is handed to the
+                feed's in-process consumers first, then published; their lockstep progress goes straight to the
+                runtime.
+            kwargs: As rclpy's ``Node`` takes them.
+        """
         super().__init__(**kwargs)
         config, settings = load_settings(self.declare({**PARAMETERS, **NODE_PARAMETERS}))  # ConfigError: refused
+        outs = outputs(config, settings)
         self._pubs = {out.key: self.create_publisher(message_class(out.type_name), out.key, qos_profile(out.qos))
-                      for out in outputs(config, settings)}
+                      for out in outs}
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._stop = threading.Event()
+        send: Callable[[str, bytes], None] = lambda key, data: self._pubs[key].publish(data)  # noqa: E731
+        if feed is not None:
+            for out in outs:
+                feed.offer(self._pubs[out.key].topic_name, out.type_name, self._offered(self._pubs[out.key]))
+            send = self._feeding(feed)
         self._rt = SimulatorRuntime(
-            config, settings, send=lambda key, data: self._pubs[key].publish(data),
+            config, settings, send=send,
             topics={key: pub.topic_name for key, pub in self._pubs.items()}, node=self.get_fully_qualified_name(),
             log=self.log, alive=self.context.ok, match=self._wait_for_matches)
+        if feed is not None:
+            feed.bind(self._rt.progress)
         if settings.lockstep.enabled:
             self.create_subscription(ConsumerProgress, "progress", self._on_progress, QoSProfile(
                 history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE))
@@ -103,6 +120,29 @@ class SimulatorNode(RimdNode):
         self.create_timer(1.0, self._publish_diagnostics)
         self._thread = threading.Thread(target=self._run, name="rimd-pacing", daemon=True)
         self.get_logger().info(self._rt.describe())
+
+    def _feeding(self, feed: InProcessFeed) -> Callable[[str, bytes], None]:
+        """``send(key, data)`` of the composed rig: to the in-process consumers, then on DDS."""
+        pubs = {key: (pub.topic_name, pub.publish) for key, pub in self._pubs.items()}
+        hand_over = feed.send
+
+        def send(key: str, data: bytes) -> None:
+            topic, publish = pubs[key]
+            hand_over(topic, data)
+            publish(data)
+
+        return send
+
+    def _offered(self, pub: Any) -> list[QoSProfile]:
+        """The QoS this publisher offers, as the graph shows it to a recorder (what it stores with the channel)."""
+        deadline = time.monotonic() + MATCH_TIMEOUT_S
+        me = self.get_fully_qualified_name()
+        while True:
+            mine = [i.qos_profile for i in self.get_publishers_info_by_topic(pub.topic_name)
+                    if i.node_namespace.rstrip("/") + "/" + i.node_name == me]
+            if mine or time.monotonic() > deadline:
+                return mine or [pub.qos_profile]
+            time.sleep(0.005)
 
     @property
     def runtime(self) -> SimulatorRuntime:
