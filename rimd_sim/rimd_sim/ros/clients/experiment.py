@@ -5,8 +5,9 @@ is discarded and the steady impact force is read. Here the steps are scheduled o
 time base: step ``k`` starts at ``T0 + k * dwell``, where ``T0`` is the first start of a motor cycle at least a
 lead time ahead of the rig when the experiment begins (the lead doubles while the rig answers that the time has
 already passed), or the stamp the plan names. Each setpoint goes through ``/rig/set_motor_frequency`` with its
-``start_stamp`` while the step before it runs, so however late a request travels (a loaded machine, a fast
-rig) the rig changes its setpoint at the same simulation time, and the same plan gives the same data.
+``start_stamp``, all of them once the first is accepted (the rig queues them), so however late a request travels
+(a loaded machine, a fast rig) the rig changes its setpoint at the same simulation time, and the same plan gives
+the same data.
 
 :class:`ExperimentRecorder` is the experiment's own recorder process (node ``rimd_experiment_recorder``, topics
 ``/rig/.*``): started before the first step (it joins a rig in lockstep by itself: name it among the rig's
@@ -284,12 +285,16 @@ class ExperimentRun:
             else:
                 self.log(f"the recorder's stop_at could not be set to {end_ns} ns ({refused}): the recording goes "
                          "on until the recorder stops; the analysis ends where every stream ends")
+        # Every later step is scheduled now, while the first is still ahead of the rig: the rig queues them and
+        # applies each at its stamp. Scheduled one dwell ahead instead, a starved experiment process (a loaded
+        # machine) could see the rig's time too late and find its next stamp already passed while the rig, held
+        # only by its recorders in lockstep, ran on.
+        for k in range(1, n):
+            response = self._request(freqs[k], times[k], k, n)
+            self.steps.append(_record_step(freqs[k], response, times[k], dwell_ns))
         self.log(f"{n} steps scheduled from t = {start_ns / 1e9:.9f} s, one every {plan.dwell:g} s")
         for k, f in enumerate(freqs):
             self._wait_for_stamp(times[k], k, n, f, show=False)   # step k in force
-            if k + 1 < n:   # scheduled while step k runs: a whole dwell of lead
-                response = self._request(freqs[k + 1], times[k + 1], k + 1, n)
-                self.steps.append(_record_step(freqs[k + 1], response, times[k + 1], dwell_ns))
             self._wait_for_stamp(times[k] + dwell_ns, k, n, f, show=True, origin=times[k])
         if recorder is not None:   # everything up to the end of the last step has reached the recorder
             # The events: each topic arrives in order, so once an event at or after the end is heard, every
