@@ -171,7 +171,7 @@ def test_the_interpreter_refuses_what_it_does_not_know():
 
 
 def _composed_args(args: list[str] | tuple[str, ...]) -> tuple[dict[str, bool], dict[str, dict[str, Any]]]:
-    """``--record``, ``--bridge`` and the ``--param NODE:NAME:=VALUE`` of a composed rig's command line (to --ros-args)."""
+    """``--record``, ``--bridge`` and the ``--param NODE:NAME:=VALUE`` of a composed rig's command line."""
     args = list(args)
     args = args[:args.index("--ros-args")] if "--ros-args" in args else args
     assert len(args) % 2 == 0, args
