@@ -1,6 +1,7 @@
 """An external consumer of the rig for the rig benchmarks: another process that takes the block topics and counts them.
 
-It subscribes (reliable, raw bytes: it counts, it does not deserialise) to the rig's five block topics, checks that
+It subscribes (reliable, raw bytes: it counts, it does not deserialise) to the rig's five block topics (the
+truth a RigState, the others SampleBlock), checks that
 each one's blocks are contiguous (``first_index`` = the previous one's + its sample count), and on SIGINT or SIGTERM
 writes what it saw as JSON to ``--out``. With ``--lockstep NAME`` it is also a lockstep consumer of that name, the
 way docs/rig.md ("Lockstep") tells a Python node to be one: a
@@ -72,7 +73,7 @@ def main() -> int:
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from rimd_msgs.msg import SampleBlock
+    from rimd_msgs.msg import RigState, SampleBlock
     from rimd_sim.io.cdr import block_span
     from rimd_sim.ros.clients.progress import ProgressReporter
     from rimd_sim.ros.nodes.polling import PolledSubscriptions
@@ -105,6 +106,7 @@ def main() -> int:
     node = Consumer(args.lockstep or NAME)
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     counts = {topic: Count() for topic in TOPICS}
+    TYPES = {"/rig/truth": RigState}   # noqa: N806 - the others are SampleBlock
     subs: dict[str, object] = {}
     reporter: ProgressReporter | None = None
     last: dict[str, int] = {}
@@ -121,11 +123,12 @@ def main() -> int:
     if args.batched:
         polled = node.polled = Batched(node, args.period)
         for topic in TOPICS:
-            subs[topic] = polled.create(SampleBlock, topic, qos, lambda data, info, t=topic: on_message(t, data))
+            subs[topic] = polled.create(TYPES.get(topic, SampleBlock), topic, qos,
+                                        lambda data, info, t=topic: on_message(t, data))
     else:
         for topic in TOPICS:
-            subs[topic] = node.create_subscription(SampleBlock, topic, lambda data, t=topic: on_message(t, data), qos,
-                                                   raw=True)
+            subs[topic] = node.create_subscription(TYPES.get(topic, SampleBlock), topic,
+                                                   lambda data, t=topic: on_message(t, data), qos, raw=True)
     if args.lockstep:
         reporter = ProgressReporter(node, args.lockstep, subscriptions=list(subs.values()))
     executor = EventsExecutor()
