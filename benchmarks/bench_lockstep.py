@@ -107,9 +107,10 @@ def consumer_loss(counts: dict, recording: dict[str, int]) -> dict[str, str]:
     out = {}
     for topic, c in counts["topics"].items():
         ok = c["first_index"] == 0 and c["holes"] == 0 and c["messages"] == recording.get(topic)
+        short = c["first_index"] == 0 and c["holes"] == 0 and c["messages"] > (recording.get(topic) or 0)
         out[topic] = ("all from sample 0, as many as recorded" if ok else
                       f"{c['messages']} messages (recorded {recording.get(topic)}), first index {c['first_index']}, "
-                      f"{c['holes']} holes")
+                      f"{c['holes']} holes" + ("; the recording's tail is the shorter" if short else ""))
     return out
 
 
