@@ -141,7 +141,7 @@ def stop_external(proc: subprocess.Popen, tmp: Path) -> dict:
 def report(result: dict) -> None:
     run, procs, flow = result["run"], result["processes"], result["traffic"]
     print(f"\n{run['layout']}: the default rig (`rimd rig{' --separate' if run['layout'] == 'separate' else ''}`, "
-          "config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
+          f"config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
           f"{run['warmup']:g} s of warm-up, from sample 0 "
           f"({'every consumer connected first' if run['from_sample_0'] else 'resumed WITHOUT all consumers'}); "
           f"rig exit status {run['rig_exit_status']}")
