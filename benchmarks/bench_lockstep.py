@@ -1,20 +1,34 @@
 """How fast the rig runs in lockstep with its recorder and Rerun bridge, against the open-loop rig, in one run.
 
-Two rigs, one after the other, each the product's own bring-up (``rimd_sim.ros.bringup``, as ``rimd rig`` starts
+Rigs one after the other, each the product's own bring-up (``rimd_sim.ros.bringup``, as ``rimd rig`` starts
 it) with the default configuration, the recorder (into a temporary directory) and the Rerun bridge (sink
 ``save``, an .rrd in the same directory), on a ROS domain of its own:
 
 * **lockstep**: ``--lockstep --real-time-factor 0``: the simulator waits for the recorder and the bridge;
 * **free**: ``--real-time-factor 0`` without lockstep: the simulator as fast as it can (open loop).
 
+Each in both layouts: the composed rig (the default: the recorder and the bridge in the simulator's process) and
+separate processes (``--separate``). And the lockstep rig with an **external consumer**, in both layouts: a process
+of its own (``benchmarks/_consumer.py``) that subscribes to the five block topics, counts them and reports its
+progress on /rig/progress as a lockstep consumer (``bench_consumer``, named among the rig's consumers as
+``rimd rig --lockstep --consumer bench_consumer`` does), with a ``ProgressReporter`` and ``done()`` after each
+message (``--consumer batched``: a timer takes every waiting message and reports once per topic).
+
 For each, after --warmup s of wall time, --seconds of wall time are measured: simulated seconds per wall second
 (from the rig's /clock), CPU of each process in % of one core (utime + stime from /proc over the window), and
-then, from the recording, whether anything was lost (every channel's first_index contiguous from sample 0).
+then, from the recording, whether anything was lost (every channel's first_index contiguous from sample 0); with the
+external consumer, what it counted too (messages per topic, from sample 0, holes) and how many reports it sent.
+
+The external consumer's hold-back of the rig: the fraction of wall time the rig waits on it, taken from the speeds
+of the same layout with and without it in this one run, 1 - speed(with) / speed(without). It includes the CPU the
+consumer takes from the rig on this 2-core machine, not only the waits for its reports (the simulator's diagnostics
+say who holds the run only once a hold lasts a second).
 
 Goals (set when lockstep was added; docs/benchmarks.md, Lockstep): lockstep >= 20x real time on this 2-core
 machine, and within 15 % of the free-running rate when the consumers keep up (the ratio is taken in this one run).
+Goal of the external consumer: hold-back <= 5 % in the composed rig.
 Run on an otherwise idle machine:
-    python benchmarks/bench_lockstep.py [--seconds 30] [--warmup 8] [--json out.json]
+    python benchmarks/bench_lockstep.py [--seconds 30] [--warmup 8] [--json out.json] [--consumer batched]
 """
 
 from __future__ import annotations
@@ -22,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -30,6 +45,9 @@ from pathlib import Path
 CHANNELS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
             "/rig/truth")
 TICKS = os.sysconf("SC_CLK_TCK")
+HERE = Path(__file__).resolve().parent
+CONSUMER = "bench_consumer"   # the external consumer's lockstep name
+GOAL_HOLD_BACK = 0.05
 
 
 def cpu_seconds(pid: int) -> float:
@@ -59,20 +77,61 @@ def loss(recording: Path) -> dict[str, str]:
     return out
 
 
+def start_consumer(run_dir: Path, env: dict, how: str) -> subprocess.Popen:
+    """The external consumer (benchmarks/_consumer.py), lockstep as ``bench_consumer``, in the rig's domain."""
+    cmd = [sys.executable, str(HERE / "_consumer.py"), "--out", str(run_dir / "consumer.json"), "--lockstep", CONSUMER]
+    if how == "batched":
+        cmd.append("--batched")
+    log = (run_dir / "consumer.log").open("wb")
+    return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                            start_new_session=True)
+
+
+def stop_consumer(proc: subprocess.Popen, run_dir: Path) -> dict:
+    """SIGINT, its counts (or why there are none)."""
+    from rimd_sim.ros.bringup import stop_process
+
+    status = stop_process(proc)
+    try:
+        counts = json.loads((run_dir / "consumer.json").read_text())
+    except (OSError, ValueError):
+        tail = (run_dir / "consumer.log").read_text(errors="replace")[-2000:]
+        return {"exit_status": status, "error": f"no counts; its log ends:\n{tail}"}
+    return {"exit_status": status, **counts}
+
+
+def consumer_loss(counts: dict, recording: dict[str, int]) -> dict[str, str]:
+    """Per block topic: what the external consumer got against what the recorder recorded."""
+    if "error" in counts:
+        return {"all": counts["error"]}
+    out = {}
+    for topic, c in counts["topics"].items():
+        ok = c["first_index"] == 0 and c["holes"] == 0 and c["messages"] == recording.get(topic)
+        short = c["first_index"] == 0 and c["holes"] == 0 and c["messages"] > (recording.get(topic) or 0)
+        out[topic] = ("all from sample 0, as many as recorded" if ok else
+                      f"{c['messages']} messages (recorded {recording.get(topic)}), first index {c['first_index']}, "
+                      f"{c['holes']} holes" + ("; the recording's tail is the shorter" if short else ""))
+    return out
+
+
 def run(mode: str, seconds: float, warmup: float, base: Path, window: float | None = None,
-        separate: bool = False) -> dict:
+        separate: bool = False, consumer: str | None = None) -> dict:
     from rimd_sim.ros.bringup import Rig, plan_rig
     from rimd_sim.ros.clients.rig import RigClient
     from rimd_sim.ros.testing import lease_domain_id, ros_environment
 
     run_dir = Path(tempfile.mkdtemp(prefix=f"{mode}_{window}_", dir=base))   # a recording of its own
+    external = None
     sim = {} if window is None or mode != "lockstep" else {"lockstep.window": window}
     with lease_domain_id() as lease:
         plan = plan_rig(None, output_dir=run_dir / "recording", lockstep=mode == "lockstep", real_time_factor=0.0,
                         parameters={"rimd_rerun": {"sink": "save", "save_path": str(run_dir / "rig.rrd")},
                                     "rimd_simulator": sim},
-                        run_dir=run_dir, separate=separate)
-        rig = Rig(plan, env=ros_environment(lease.domain_id, run_dir / "ros_log"), log_dir=run_dir / "logs")
+                        run_dir=run_dir, separate=separate, consumers=[CONSUMER] if consumer else [])
+        env = ros_environment(lease.domain_id, run_dir / "ros_log")
+        rig = Rig(plan, env=env, log_dir=run_dir / "logs")
+        if consumer:   # the rig waits for it from its first block
+            external = start_consumer(run_dir, dict(env), consumer)
         rig.start()
         try:
             from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -91,16 +150,31 @@ def run(mode: str, seconds: float, warmup: float, base: Path, window: float | No
                     raise RuntimeError(f"the {mode} rig did not start (domain {lease.domain_id}):\n{logs}")
                 client.spin_until(lambda: False, warmup)
                 pids = {name: proc.pid for name, proc in rig.processes.items()}
+                if external is not None:
+                    pids[CONSUMER] = external.pid
                 t0, s0, c0 = time.monotonic(), clock[0], {n: cpu_seconds(p) for n, p in pids.items()}
                 client.spin_until(lambda: False, seconds)
                 t1, s1, c1 = time.monotonic(), clock[0], {n: cpu_seconds(p) for n, p in pids.items()}
         finally:
             status = rig.stop()
+            counts = stop_consumer(external, run_dir) if external is not None else None
     wall = t1 - t0
-    return {"mode": mode, "layout": "separate" if separate else "composed", "speed": (s1 - s0) / 1e9 / wall,
-            "wall_s": wall, "simulated_s": (s1 - s0) / 1e9,
-            "cpu_percent": {n: 100 * (c1[n] - c0[n]) / wall for n in pids}, "exit_status": status,
-            "loss": loss(plan.recording_dir)}
+    result = {"mode": mode, "layout": "separate" if separate else "composed", "consumer": consumer,
+              "speed": (s1 - s0) / 1e9 / wall, "wall_s": wall, "simulated_s": (s1 - s0) / 1e9,
+              "cpu_percent": {n: 100 * (c1[n] - c0[n]) / wall for n in pids}, "exit_status": status,
+              "loss": loss(plan.recording_dir)}
+    if counts is not None:
+        result["external"] = counts
+        result["external_loss"] = consumer_loss(counts, recorded_blocks(plan.recording_dir))
+    return result
+
+
+def recorded_blocks(recording: Path) -> dict[str, int]:
+    """Messages per block topic in the recording."""
+    from rimd_sim.io.reader import open_recording
+
+    rec = open_recording(recording)
+    return {topic: sum(1 for _ in rec.messages([topic])) for topic in CHANNELS}
 
 
 def main() -> int:
@@ -112,6 +186,8 @@ def main() -> int:
                         help="lockstep.window of the lockstep rig (s of simulation time; default: the rig's)")
     parser.add_argument("--compare-windows", type=float, nargs="+", default=None, metavar="W",
                         help="instead: only lockstep rigs, one per window, one after the other (their speeds)")
+    parser.add_argument("--consumer", choices=("per-message", "batched"), default="per-message",
+                        help="how the external consumer takes and reports (default: done() after each message)")
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
     if args.compare_windows:
@@ -126,24 +202,44 @@ def main() -> int:
         return 0
     with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
         # The composed rig (the default: recorder and bridge in the simulator's process) and separate processes,
-        # side by side.
-        results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window, separate)
-                   for separate in (False, True) for mode in ("lockstep", "free")]
-    lock, free = results[:2]
+        # side by side; then each in lockstep with the external consumer too.
+        runs = [(separate, mode, None) for separate in (False, True) for mode in ("lockstep", "free")]
+        runs += [(separate, "lockstep", args.consumer) for separate in (False, True)]
+        results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window, separate, consumer)
+                   for separate, mode, consumer in runs]
     for r in results:
         cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
         cpu += f"; total {sum(r['cpu_percent'].values()):.0f} %"
-        print(f"{r['layout']:>9} {r['mode']:>9}: {r['speed']:6.1f}x real time ({r['simulated_s']:.1f} s simulated in "
+        label = r["mode"] + (f" + {CONSUMER}" if r["consumer"] else "")
+        print(f"{r['layout']:>9} {label:>24}: {r['speed']:6.1f}x real time ({r['simulated_s']:.1f} s simulated in "
               f"{r['wall_s']:.1f} s); CPU {cpu}; exit {r['exit_status']}")
         for topic, verdict in r["loss"].items():
             print(f"{'':>11}{topic}: {verdict}")
+        if r["consumer"]:
+            ext = r["external"]
+            print(f"{'':>11}{CONSUMER} ({r['consumer']}): exit {ext.get('exit_status')}, "
+                  f"{ext.get('reports', '?')} progress reports")
+            for topic, verdict in r["external_loss"].items():
+                print(f"{'':>13}{topic}: {verdict}")
+    by = {(r["layout"], r["mode"], r["consumer"]): r for r in results}
+    lock, free = by["composed", "lockstep", None], by["composed", "free", None]
     ratio = lock["speed"] / free["speed"] if free["speed"] else float("nan")
     print(f"composed lockstep / free: {ratio:.3f}")
+    hold = {}
+    for layout in ("composed", "separate"):
+        alone, with_it = by[layout, "lockstep", None], by[layout, "lockstep", args.consumer]
+        hold[layout] = 1 - with_it["speed"] / alone["speed"] if alone["speed"] else float("nan")
+        print(f"{layout} lockstep with {CONSUMER}: {with_it['speed']:.1f}x against {alone['speed']:.1f}x without: "
+              f"hold-back {100 * hold[layout]:.1f} % of wall time")
+    composed_ext, separate_ext = by["composed", "lockstep", args.consumer], by["separate", "lockstep", args.consumer]
+    print(f"composed / separate, lockstep with {CONSUMER}: {composed_ext['speed'] / separate_ext['speed']:.3f}")
     print(f"goal lockstep >= 20x real time: {'met' if lock['speed'] >= 20 else 'NOT met'} ({lock['speed']:.1f}x)")
     print(f"goal lockstep within 15 % of free running: {'met' if ratio >= 0.85 else 'NOT met'} ({ratio:.3f})")
+    print(f"goal external consumer's hold-back <= {100 * GOAL_HOLD_BACK:g} % (composed): "
+          f"{'met' if hold['composed'] <= GOAL_HOLD_BACK else 'NOT met'} ({100 * hold['composed']:.1f} %)")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
     if args.json:
-        args.json.write_text(json.dumps({"results": results, "ratio": ratio}, indent=1))
+        args.json.write_text(json.dumps({"results": results, "ratio": ratio, "hold_back": hold}, indent=1))
     return 0
 
 

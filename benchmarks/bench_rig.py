@@ -1,32 +1,39 @@
-"""CPU budget of the default rig at real time: ``rimd rig`` as ``make run`` starts it, for --seconds.
+"""CPU budget of the default rig at real time, composed and in separate processes side by side, in one run.
 
-What it runs: exactly ``rimd rig`` with the default config/rimd.yaml (simulator at real time, recorder, Rerun
-bridge with its default sink serve_web, which starts a Rerun server with the web viewer), recording into a
-fresh temporary directory, on a ROS domain of its own (the test suite's leases, ROS_AUTOMATIC_DISCOVERY_RANGE
-LOCALHOST). The measurement starts when the rig runs from sample 0, after --warmup s (default 10: start-up,
-JIT loading and discovery are not the steady state), and lasts --seconds of wall time. The rig, the recording
-and the /proc sampling are :mod:`bench_soak`'s, so both benches measure the same thing.
+What it runs, one after the other: ``rimd rig`` as ``make run`` starts it (the composed rig: the simulator, the
+recorder and the Rerun bridge in one process, docs/rig.md "The composed rig"), then ``rimd rig --separate`` (one
+process per node), each with the default config/rimd.yaml (simulator at real time, recorder, Rerun bridge with its
+default sink serve_web, which starts a Rerun server with the web viewer), recording into a fresh temporary
+directory, on a ROS domain of its own (the test suite's leases, ROS_AUTOMATIC_DISCOVERY_RANGE LOCALHOST). Beside
+each rig runs an external subscriber (``benchmarks/_consumer.py``, not lockstep): a process of its own that takes
+the five block topics over DDS and counts them, as another process's DAQ client would. The measurement starts when
+the rig runs from sample 0, after --warmup s (default 10: start-up, JIT loading and discovery are not the steady
+state), and lasts --seconds of wall time. The rig, the recording and the /proc sampling are :mod:`bench_soak`'s.
 
-Printed (and written as JSON with --json):
-  * per process (simulator, recorder, Rerun bridge, the Rerun server, the ``rimd rig`` parent), from /proc,
-    not from the nodes' own reports: CPU in % of one core (utime + stime over the measured wall time; the
-    worst --period s window), resident memory at the start and end of the measurement;
+Printed for each layout (and written as JSON with --json):
+  * per process (composed: the composed rig; separate: simulator, recorder, Rerun bridge; and the Rerun server,
+    the ``rimd rig`` parent), from /proc, not from the nodes' own reports: CPU in % of one core (utime + stime
+    over the measured wall time; the worst --period s window), resident memory at the start and end; the whole
+    rig (every process the rig runs: the nodes, the Rerun server that holds the web viewer's data, the ``rimd
+    rig`` parent); the external subscriber's CPU apart (it is not the rig);
   * the traffic, from the recording: messages and bytes (serialized payload) per second per topic and in all;
-  * loss: every block topic checked from sample 0 with ``first_index``, impact events by index, motor states
-    one per block (bench_soak's checks);
-  * the goals of the light-rig changes (docs/benchmarks.md): simulator <= 5 %, recorder <= 10 %, Rerun bridge
-    <= 10 %, the whole rig <= 25 % of one core, nothing lost; each with "met" or "NOT met".
-    "The whole rig" is every process the rig runs: the three nodes, the Rerun server that holds the web
-    viewer's data (Rerun's own binary), and the ``rimd rig`` parent; the sum of the three nodes is printed too.
+  * loss: the recorder's count (every block topic from sample 0 with ``first_index``, impact events by index,
+    motor states one per block: bench_soak's checks) and the external subscriber's (each block topic contiguous
+    from its first message, and as many messages from there as the recording has);
+  * the goals: the composed rig <= 12 % of one core in all, nothing lost; for separate processes, the goals of the
+    light-rig changes (docs/benchmarks.md: simulator <= 5 %, recorder <= 10 %, Rerun bridge <= 10 %, the whole
+    rig <= 25 %), each with "met" or "NOT met"; and the composed rig's CPU against the separate rig's.
 
 Run (after ``source env.sh``, from the repository root; the machine otherwise idle):
-    python benchmarks/bench_rig.py [--seconds 120] [--json rig.json] [--keep]
-The exit status is 0 whenever the rig ran and was measured, whatever the verdicts.
+    python benchmarks/bench_rig.py [--seconds 120] [--json rig.json] [--keep] [--only composed|separate]
+The exit status is 0 whenever the rigs ran and were measured, whatever the verdicts.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -37,6 +44,9 @@ import bench_soak as soak  # noqa: E402 - the rig and /proc sampling of the soak
 
 GOALS_PERCENT = {"simulator": 5.0, "recorder": 10.0, "rerun bridge": 10.0}
 GOAL_RIG_PERCENT = 25.0
+GOAL_COMPOSED_PERCENT = 12.0
+EXTERNAL = "external subscriber"
+LAYOUTS = {"composed": (), "separate": ("--separate",)}
 
 
 def traffic(path: Path, seconds_of_data: float) -> dict:
@@ -55,14 +65,27 @@ def traffic(path: Path, seconds_of_data: float) -> dict:
             "bytes_per_s": sum(t["bytes_per_s"] for t in topics.values())}
 
 
+def rig_total(procs: dict) -> tuple[float, list[str]]:
+    """The whole rig's CPU (% of a core) and its processes: all but this bench and the external subscriber."""
+    rig = [n for n in soak.rig_names(procs) if n != EXTERNAL]
+    return sum(procs[n].get("cpu_percent") or 0.0 for n in rig), rig
+
+
+def composed_goals(procs: dict, nothing_lost: dict) -> dict:
+    total, rig = rig_total(procs)
+    measured = procs.get(soak.COMPOSED, {}).get("cpu_percent") is not None
+    return {"rig": {"goal": f"the whole composed rig <= {GOAL_COMPOSED_PERCENT:g} % of one core",
+                    "met": measured and total <= GOAL_COMPOSED_PERCENT, "detail": f"{total:.1f} % ({', '.join(rig)})"},
+            "nothing_lost": nothing_lost}
+
+
 def rig_goals(procs: dict, nothing_lost: dict) -> dict:
     out = {}
     for name, limit in GOALS_PERCENT.items():
         cpu = procs.get(name, {}).get("cpu_percent")
         out[name] = {"goal": f"{name} <= {limit:g} % of one core", "met": cpu is not None and cpu <= limit,
                      "detail": f"{soak._f(cpu)} %"}
-    rig = soak.rig_names(procs)
-    total = sum(procs[n].get("cpu_percent") or 0.0 for n in rig)
+    total, rig = rig_total(procs)
     nodes = sum(procs.get(n, {}).get("cpu_percent") or 0.0 for n in GOALS_PERCENT)
     measured = all(procs.get(n, {}).get("cpu_percent") is not None for n in GOALS_PERCENT)
     out["rig"] = {"goal": f"the whole rig <= {GOAL_RIG_PERCENT:g} % of one core",
@@ -72,24 +95,68 @@ def rig_goals(procs: dict, nothing_lost: dict) -> dict:
     return out
 
 
+def external_loss(counts: dict, recording: Path) -> dict:
+    """The external subscriber's verdict: each block topic contiguous from its first message, as many as recorded."""
+    if "error" in counts:
+        return {"goal": "nothing lost, external subscriber", "met": False, "detail": counts["error"]}
+    from rimd_sim.io.cdr import block_span
+    from rimd_sim.io.reader import open_recording
+
+    rec, details, ok = open_recording(recording), [], True
+    for topic, c in counts["topics"].items():
+        first = c["first_index"]
+        recorded = (sum(1 for m in rec.messages([topic]) if block_span(m.data)[0] >= first)
+                    if first is not None else None)
+        good = first is not None and c["holes"] == 0 and c["messages"] == recorded
+        ok = ok and good
+        details.append(f"{topic.rsplit('/rig/', 1)[-1]} {c['messages']}/{recorded} from index {first}, "
+                       f"{c['holes']} holes")
+    return {"goal": "nothing lost, external subscriber (over DDS, from its first message)", "met": ok,
+            "detail": "; ".join(details)}
+
+
+def start_external(tmp: Path, domain_id: int) -> subprocess.Popen:
+    """The external subscriber (benchmarks/_consumer.py, no lockstep) in the rig's domain."""
+    import os
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(tmp / "ros_log"))
+    env.pop("ROS_STATIC_PEERS", None)
+    return subprocess.Popen([sys.executable, str(Path(__file__).resolve().parent / "_consumer.py"),
+                             "--out", str(tmp / "external.json")], env=env, stdout=(tmp / "external.log").open("wb"),
+                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+
+
+def stop_external(proc: subprocess.Popen, tmp: Path) -> dict:
+    from rimd_sim.ros.bringup import stop_process
+
+    status = stop_process(proc)
+    try:
+        return {"exit_status": status, **json.loads((tmp / "external.json").read_text())}
+    except (OSError, ValueError):
+        return {"exit_status": status,
+                "error": "no counts: " + (tmp / "external.log").read_text(errors="replace")[-1500:]}
+
+
 def report(result: dict) -> None:
     run, procs, flow = result["run"], result["processes"], result["traffic"]
-    print(f"\nthe default rig (`rimd rig`, config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
+    print(f"\n{run['layout']}: the default rig (`rimd rig{' --separate' if run['layout'] == 'separate' else ''}`, "
+          f"config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
           f"{run['warmup']:g} s of warm-up, from sample 0 "
           f"({'every consumer connected first' if run['from_sample_0'] else 'resumed WITHOUT all consumers'}); "
           f"rig exit status {run['rig_exit_status']}")
     print(f"\n  {'process':<20} {'pid':>7} {'CPU % of a core':>16} {'worst ' + format(run['period'], 'g') + ' s':>9} "
           f"{'goal':>6} {'RSS start MB':>13} {'end MB':>8} {'growth MB/h':>12}")
-    rig = soak.rig_names(procs)
-    for name in rig:
+    for name in soak.rig_names(procs):
         p = procs[name]
         goal = GOALS_PERCENT.get(name)
         print(f"  {name:<20} {p['pid']:>7} {soak._f(p.get('cpu_percent')):>16} "
               f"{soak._f(p.get('cpu_percent_worst_period')):>9} {'' if goal is None else format(goal, 'g'):>6} "
               f"{soak._f(p.get('rss_start_mb')):>13} {soak._f(p.get('rss_end_mb')):>8} "
               f"{soak._f(p.get('growth_mb_per_h'), '+.1f'):>12}")
-    total = sum(procs[n].get("cpu_percent") or 0.0 for n in rig)
-    print(f"  {'whole rig':<20} {'':>7} {total:>16.1f} {'':>9} {GOAL_RIG_PERCENT:>6g}")
+    total, _ = rig_total(procs)
+    goal = GOAL_COMPOSED_PERCENT if run["layout"] == "composed" else GOAL_RIG_PERCENT
+    print(f"  {'whole rig':<20} {'':>7} {total:>16.1f} {'':>9} {goal:>6g}   (without the {EXTERNAL})")
     b = procs.get(soak.BENCH, {})
     print(f"  ({soak.BENCH}: {soak._f(b.get('cpu_percent'))} %; memory growth: least-squares slope of RSS "
           f"{'after the first minute' if run['seconds'] >= 180 else 'over the second half (a short run: noise)'})")
@@ -102,47 +169,69 @@ def report(result: dict) -> None:
         print(f"  {goal['goal']}: {soak._verdict(goal['met'])} ({goal['detail']})")
 
 
+def measure(layout: str, args: argparse.Namespace, block_rate: float) -> dict:
+    """One rig of ``layout`` (composed or separate) with the external subscriber, measured; its figures."""
+    from rimd_sim.io.reader import RecordingError
+
+    with soak.RigRun.open(f"bench_rig_{layout}_", args.keep) as run:
+        tmp = run.tmp
+        print(f"bench_rig: `rimd rig {' '.join(LAYOUTS[layout])}` ({layout}) in {tmp}, ROS_DOMAIN_ID "
+              f"{run.domain_id}; {args.warmup:g} s warm-up, then {args.seconds:g} s measured", flush=True)
+        external = start_external(tmp, run.domain_id)
+        try:
+            from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout, LAYOUTS[layout])
+            procs[EXTERNAL] = external.pid
+            started = time.monotonic()
+            expected = [soak.COMPOSED] if layout == "composed" else list(soak.NODES.values())
+            missing = [n for n in expected if n not in procs]
+            if missing:
+                print(f"bench_rig: NOT FOUND: {', '.join(missing)}", file=sys.stderr)
+            time.sleep(args.warmup)
+            series = soak.sample_run(run.rig, procs, args.seconds, args.period)
+            wall = max(s.t[-1] for s in series.values() if s.t)
+            status = soak.stop_rig(run.rig, {n: p for n, p in procs.items() if n != EXTERNAL})
+        finally:
+            counts = stop_external(external, tmp)
+        data_seconds = time.monotonic() - started   # about the simulated time recorded (real time)
+        result: dict = {"run": {"layout": layout, "seconds": wall, "warmup": args.warmup, "period": args.period,
+                                "domain_id": run.domain_id, "rig_exit_status": status,
+                                "from_sample_0": from_sample_0, "tmp": str(tmp)}}
+        result["processes"] = {name: soak.process_figures(s) for name, s in series.items()}
+        result["logs"] = soak.log_reports((tmp / "rig.log").read_text(errors="replace"))
+        result["external"] = counts
+        try:
+            result["recording"] = soak.analyse_recording(tmp / "rec", block_rate)
+            ends = [t["ends_at_s"] for t in result["recording"]["topics"].values() if t.get("ends_at_s")]
+            result["traffic"] = traffic(tmp / "rec", max(ends) if ends else data_seconds)
+            external_verdict = external_loss(counts, tmp / "rec")
+        except RecordingError as exc:
+            raise SystemExit(f"bench_rig: no readable recording ({layout}): {exc}") from None
+        nothing_lost = soak.goals(result)["nothing_lost"]
+        goals = (composed_goals if layout == "composed" else rig_goals)(result["processes"], nothing_lost)
+        result["goals"] = {**goals, "nothing_lost_external": external_verdict}
+        report(result)
+        return result
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=120.0, help="measured wall time (default 120)")
+    parser.add_argument("--seconds", type=float, default=120.0, help="measured wall time per rig (default 120)")
     parser.add_argument("--warmup", type=float, default=10.0, help="s run before measuring (default 10)")
+    parser.add_argument("--only", choices=tuple(LAYOUTS), default=None, help="measure one layout only")
     soak.add_rig_arguments(parser)
     args = parser.parse_args()
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0:
         parser.error("--seconds and --period must be positive, --warmup not negative")
 
-    from rimd_sim.io.reader import RecordingError
     from rimd_sim.settings.config import find_config_file, load_config
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate
-    with soak.RigRun.open("bench_rig_", args.keep) as run:
-        tmp = run.tmp
-        print(f"bench_rig: `rimd rig` in {tmp}, ROS_DOMAIN_ID {run.domain_id}; {args.warmup:g} s warm-up, then "
-              f"{args.seconds:g} s measured", flush=True)
-        from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout)
-        started = time.monotonic()
-        missing = [n for n in soak.NODES.values() if n not in procs]
-        if missing:
-            print(f"bench_rig: NOT FOUND: {', '.join(missing)}", file=sys.stderr)
-        time.sleep(args.warmup)
-        series = soak.sample_run(run.rig, procs, args.seconds, args.period)
-        wall = max(s.t[-1] for s in series.values() if s.t)
-        status = soak.stop_rig(run.rig, procs)
-        data_seconds = time.monotonic() - started   # about the simulated time recorded (real time)
-        result: dict = {"run": {"seconds": wall, "warmup": args.warmup, "period": args.period,
-                                "domain_id": run.domain_id, "rig_exit_status": status,
-                                "from_sample_0": from_sample_0, "tmp": str(tmp)}}
-        result["processes"] = {name: soak.process_figures(s) for name, s in series.items()}
-        result["logs"] = soak.log_reports((tmp / "rig.log").read_text(errors="replace"))
-        try:
-            result["recording"] = soak.analyse_recording(tmp / "rec", block_rate)
-            ends = [t["ends_at_s"] for t in result["recording"]["topics"].values() if t.get("ends_at_s")]
-            result["traffic"] = traffic(tmp / "rec", max(ends) if ends else data_seconds)
-        except RecordingError as exc:
-            raise SystemExit(f"bench_rig: no readable recording: {exc}") from None
-        result["goals"] = rig_goals(result["processes"], soak.goals(result)["nothing_lost"])
-        report(result)
-        soak.write_json(result, args.json)
+    results = {layout: measure(layout, args, block_rate) for layout in LAYOUTS if args.only in (None, layout)}
+    if len(results) == 2:
+        composed, separate = (rig_total(results[n]["processes"])[0] for n in ("composed", "separate"))
+        print(f"\nthe whole rig, composed against separate processes, in this run: {composed:.1f} % against "
+              f"{separate:.1f} % of one core ({composed - separate:+.1f} points)")
+    soak.write_json(results, args.json)
 
 
 if __name__ == "__main__":

@@ -83,6 +83,8 @@ DIAG_TOPIC = "/diagnostics"
 
 #: ``python -m rimd_sim.ros.nodes._entry NAME`` of the rig's children -> name in the report, in report order.
 NODES = {"simulator": "simulator", "recorder": "recorder", "rerun": "rerun bridge"}
+#: The composed rig's process (``rimd rig`` by default): the three nodes in one.
+COMPOSED = "composed rig"
 PARENT = "rimd rig (parent)"
 RERUN_SERVER = "rerun server"
 BENCH = "this bench"
@@ -150,7 +152,7 @@ def rig_processes(rig_pid: int) -> dict[str, int]:
             continue
         if "rimd_sim.ros.nodes._entry" in argv:
             entry = argv[argv.index("rimd_sim.ros.nodes._entry") + 1]
-            found[NODES.get(entry, entry)] = pid
+            found[{**NODES, "composed": COMPOSED}.get(entry, entry)] = pid
         elif "--serve-web" in argv:
             found[RERUN_SERVER] = pid
         else:
@@ -240,7 +242,7 @@ def lease_domain():  # harness.domains.DomainLease
     return lease_domain_id()
 
 
-def start_rig(tmp: Path, domain_id: int, seconds: float) -> subprocess.Popen:
+def start_rig(tmp: Path, domain_id: int, seconds: float, options: tuple[str, ...] = ()) -> subprocess.Popen:
     rimd = shutil.which("rimd")
     if rimd is None:
         raise SystemExit("rimd not on PATH: run `source env.sh` first")
@@ -249,7 +251,7 @@ def start_rig(tmp: Path, domain_id: int, seconds: float) -> subprocess.Popen:
     env.pop("ROS_STATIC_PEERS", None)
     # --duration is only a backstop (the bench stops the rig with SIGINT after --minutes): should the bench
     # die, the rig stops by itself 5 minutes later.
-    cmd = [rimd, "rig", "--output-dir", str(tmp / "rec"), "--duration", f"{seconds + 300:.0f}"]
+    cmd = [rimd, "rig", "--output-dir", str(tmp / "rec"), "--duration", f"{seconds + 300:.0f}", *options]
     log = (tmp / "rig.log").open("wb")
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                             cwd=tmp, start_new_session=True)
@@ -308,9 +310,10 @@ class RigRun:
     def domain_id(self) -> int:
         return self.lease.domain_id
 
-    def start(self, seconds: float, startup_timeout: float) -> tuple[bool, dict[str, int]]:
-        """Start the rig for ``seconds`` and wait until it runs: (from sample 0, its processes)."""
-        self.rig = start_rig(self.tmp, self.domain_id, seconds)
+    def start(self, seconds: float, startup_timeout: float,
+              options: tuple[str, ...] = ()) -> tuple[bool, dict[str, int]]:
+        """Start ``rimd rig OPTIONS`` for ``seconds``; wait until it runs: (from sample 0, its processes)."""
+        self.rig = start_rig(self.tmp, self.domain_id, seconds, options)
         from_sample_0 = wait_running(self.rig, self.tmp / "rig.log", startup_timeout)
         return from_sample_0, rig_processes(self.rig.pid)
 
