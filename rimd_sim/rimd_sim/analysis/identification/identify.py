@@ -523,7 +523,7 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
     """
     runs = fit.run(result.x)
     r = fit.residuals(result.x, runs)
-    jac = fit.jacobian(result.x, runs, r)
+    jac = fit.two_sided_jacobian(result.x, runs, r)
     cov_j = fit.covariance(jac, r)
     cov_b, _ = fit.bootstrap(jac, r, fit.clusters(motor["time"], loc.unwrapped_phase(motor)), resamples=resamples)
     cov_k = fit.jackknife(jac, r, fit.segment_ids())
