@@ -35,7 +35,9 @@ parameter positive, the gap >= 0) runs until its tolerances say it converged (``
 cluster bootstrap (each cluster one excitation cycle: its laser samples and its impacts), linearised at the
 solution (one Gauss-Newton step per resample, Efron and Tibshirani 1993, ch. 9 and 10; the "cluster" or block
 resampling of Cameron and Miller 2015, J. Human Resources 50: 317): errors that grow when the misfit has
-structure (residuals correlated within cycles) instead of assuming white noise.
+structure (residuals correlated within cycles) instead of assuming white noise. Both (and the jackknife) take the
+Jacobian at the solution from both sides (:meth:`JointFit.two_sided_jacobian`, the entries' minmod): a residual
+that jumps within the step (an impact's onset fit switching branch) is not read as a slope.
 """
 
 from __future__ import annotations
