@@ -519,11 +519,13 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
     the forward model's numerical error in quadrature: how far the solution moves when the integrator's
     tolerances are a hundred times tighter (one Gauss-Newton step from the solution with the tighter model's
     residuals). A simulated rig integrates at its tolerance; its impacts then differ from the exact model's by a
-    few micrometres, which the data cannot tell from a parameter's shift.
+    few micrometres, which the data cannot tell from a parameter's shift. Every one of them uses the Jacobian at the
+    solution taken from both sides (:meth:`JointFit.two_sided_jacobian`): a residual that jumps within the step is
+    not read as a slope that pins a parameter (docs/identification.md, "Why the intervals missed").
     """
     runs = fit.run(result.x)
     r = fit.residuals(result.x, runs)
-    jac = fit.jacobian(result.x, runs, r)
+    jac = fit.two_sided_jacobian(result.x, runs, r)
     cov_j = fit.covariance(jac, r)
     cov_b, _ = fit.bootstrap(jac, r, fit.clusters(motor["time"], loc.unwrapped_phase(motor)), resamples=resamples)
     cov_k = fit.jackknife(jac, r, fit.segment_ids())

@@ -35,7 +35,9 @@ parameter positive, the gap >= 0) runs until its tolerances say it converged (``
 cluster bootstrap (each cluster one excitation cycle: its laser samples and its impacts), linearised at the
 solution (one Gauss-Newton step per resample, Efron and Tibshirani 1993, ch. 9 and 10; the "cluster" or block
 resampling of Cameron and Miller 2015, J. Human Resources 50: 317): errors that grow when the misfit has
-structure (residuals correlated within cycles) instead of assuming white noise.
+structure (residuals correlated within cycles) instead of assuming white noise. Both (and the jackknife) take the
+Jacobian at the solution from both sides (:meth:`JointFit.two_sided_jacobian`, the entries' minmod): a residual
+that jumps within the step (an impact's onset fit switching branch) is not read as a slope.
 """
 
 from __future__ import annotations
@@ -85,9 +87,15 @@ CART_RATE = 50.0
 #: integrator at rest (tests/analysis/recordings/test_contact_pulse.py), up to ~1e-3 on a driven, strongly damped
 #: contact.
 PULSE_MODEL_FLOOR = 1e-3
-#: Forward-difference step of the Jacobian (in the unknowns' scaled units): well above the integrator's relative
-#: tolerance (1e-7 by default), well below the parameters' errors.
-FD_STEP = 1e-5
+#: Forward-difference step of the Jacobian (in the unknowns' scaled units): above the integrator's relative tolerance
+#: (1e-7 by default: the columns at 1e-6 and 1e-7 agree), and within the residuals' linear range. A slow impact's
+#: scale residual moves by about its spread per 1e-6 of ``f_n`` (its impact velocity is that sensitive to the
+#: trajectory): a step of 1e-5 crossed Huber's kink at 3 (the difference then understates the slope by a quarter,
+#: and the large columns of ``f_n``, A0 and the shot's state no longer cancel along the valley the data allow) and
+#: one impact's onset fit switched branch within it (a jump read as a slope of 10^5); the covariance then pinned
+#: A0, ``f_n`` and the mass far tighter than the data do, and the fit stopped (``xtol``) on the valley's side
+#: (docs/identification.md, "Uncertainty and verdict").
+FD_STEP = 1e-6
 #: Huber's threshold for the impacts' residuals (in their standard errors).
 HUBER = 3.0
 #: A model impact further than this from a measured onset (s) does not match it.
@@ -102,6 +110,11 @@ def huber(r: np.ndarray, c: float = HUBER) -> np.ndarray:
     """
     a = np.abs(r)
     return np.where(a <= c, r, np.sign(r) * np.sqrt(np.maximum(2 * c * a - c * c, 0.0)))
+
+
+def minmod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Entry by entry: the one of ``a``, ``b`` of smaller magnitude when they have the same sign, else 0."""
+    return np.where(np.sign(a) == np.sign(b), np.where(np.abs(a) <= np.abs(b), a, b), 0.0)
 
 
 @dataclass
@@ -476,8 +489,8 @@ class JointFit:
                 for seg, run in zip(segs, runs, strict=True)]
 
     def jacobian(self, x: np.ndarray, base_runs: list[SegmentRun | None] | None = None,
-                 f0: np.ndarray | None = None) -> np.ndarray:
-        """Forward differences; a segment's state and kick columns re-run that segment only.
+                 f0: np.ndarray | None = None, *, backward: bool = False) -> np.ndarray:
+        """Forward differences (``backward``: backward); a segment's state and kick columns re-run that segment only.
 
         The forward runs of the columns go to :attr:`workers` threads (the compiled kernel releases the GIL);
         the residuals are computed in this thread.
@@ -490,7 +503,7 @@ class JointFit:
         jac = np.zeros((f0.size, x.size))
 
         def column(i: int) -> tuple[int, float, np.ndarray, list]:
-            h = FD_STEP * max(1.0, abs(x[i]))
+            h = (-FD_STEP if backward else FD_STEP) * max(1.0, abs(x[i]))
             xp = x.copy()
             xp[i] += h
             if i < self.n_par:
@@ -571,6 +584,23 @@ class JointFit:
             owner = next(s for s in range(len(self.segments)) if self._i_sel[s][i])
             ids.append(np.full(self.obs.impacts[i].t.size, owner, dtype=np.int64))
         return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+
+    def two_sided_jacobian(self, x: np.ndarray, base_runs: list[SegmentRun | None] | None = None,
+                           f0: np.ndarray | None = None) -> np.ndarray:
+        """The Jacobian the covariances use: forward and backward differences, entry by entry their minmod.
+
+        Where the residual is smooth over the step the two agree (to the step's first order) and this is either;
+        where one side jumps (an impact's onset fit switching branch, a residual crossing Huber's kink) that side
+        reads a jump as a slope, often orders of magnitude too steep, and a covariance from it pins the parameter
+        far tighter than the data do. The minmod (the one of smaller magnitude when both have the same sign, 0 when
+        they disagree in sign: van Leer's slope limiter) keeps the slope both sides support; it never exceeds
+        either in magnitude.
+        """
+        base_runs = self.run(x) if base_runs is None else base_runs
+        f0 = self.residuals(x, base_runs) if f0 is None else f0
+        fwd = self.jacobian(x, base_runs, f0)
+        bwd = self.jacobian(x, base_runs, f0, backward=True)
+        return minmod(fwd, bwd)
 
     def jackknife(self, jac: np.ndarray, r: np.ndarray, groups: np.ndarray) -> np.ndarray:
         """Delete-a-group jackknife covariance, linearised at the solution (Efron and Tibshirani 1993, ch. 11).
