@@ -99,7 +99,8 @@ def _label_force_over_impacts(ax: Axes, ax2: Axes, *, force: str, frequency: str
     ``force`` and ``frequency`` are the axis labels, ``legend`` the options of the force panel's legend.
     """
     ax.set_ylabel(force)
-    ax.legend(**legend)
+    if ax.get_legend_handles_labels()[0]:   # a recording without impacts draws no labelled line
+        ax.legend(**legend)
     ax2.set_xlabel(frequency)
     for a in (ax, ax2):
         a.grid(alpha=0.3)
