@@ -227,11 +227,7 @@ def _window_out(u, v, peaks, lo, hi, pts):
         else:
             pts[j, 0] = math.nan
             pts[j, 1] = math.nan
-    peak = 0.0
-    for i in range(lo, hi):
-        if peaks[i] > peak:
-            peak = peaks[i]
-    return peak
+    return _window_max(peaks, lo, hi)
 
 
 @_jit
