@@ -38,7 +38,6 @@ consumer does not load the twin's numerical stack (numba, numpy, scipy, mcap...)
 from __future__ import annotations
 
 import struct
-import threading
 import time
 import uuid
 from collections.abc import Callable, Sequence
@@ -49,6 +48,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
+from rimd_sim.runtime.progress import ProgressLedger, stamp_ns
 
 __all__ = ["PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter"]
 
@@ -61,13 +61,6 @@ PROGRESS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliabilit
 #: QoS of the session topic: transient local (the current run reaches a late joiner).
 SESSION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def stamp_ns(stamp: Any) -> int:
-    """Integer nanoseconds of a ``builtin_interfaces/Time`` (or an integer, returned as is)."""
-    if isinstance(stamp, int):
-        return stamp
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 #: CDR's encapsulation header of a little-endian message (what ROS 2 publishes).
@@ -160,16 +153,8 @@ class ProgressReporter:
         self._node = node
         self._subscriptions = list(subscriptions)
         self._ready = ready
-        self._min_interval = min_interval
-        self._lock = threading.Lock()
-        self._done: dict[str, int] = {}
-        self._overall: int | None = None
-        self._dirty = False
-        self._joined = False
-        self._left = False
-        self._last_sent = 0.0
+        self._ledger = ProgressLedger(min_interval)
         self._run_id = ""
-        self.reports = 0
         self._pub = node.create_publisher(ConsumerProgress, topic, PROGRESS_QOS)
         node.create_subscription(RigSession, SESSION_TOPIC, self._on_session, SESSION_QOS)
         self._timer = node.create_timer(0.02, self._tick)
@@ -177,11 +162,16 @@ class ProgressReporter:
     @property
     def joined(self) -> bool:
         """Whether it has told a lockstep publisher that it is there."""
-        return self._joined
+        return self._ledger.joined
+
+    @property
+    def reports(self) -> int:
+        """Reports sent so far."""
+        return self._ledger.reports
 
     def add_subscription(self, subscription: Any) -> None:
         """Take one more subscription into account (before the join: it must match a publisher first)."""
-        with self._lock:
+        with self._ledger.lock:
             self._subscriptions.append(subscription)
 
     def done(self, stamp: Any, subscription: Any = None, *, topic: str | None = None) -> None:
@@ -192,16 +182,8 @@ class ProgressReporter:
             subscription: The subscription it came from (its topic is what the report names); or ``topic``.
             topic: The full topic name, when no subscription is given. With neither, one report for all.
         """
-        ns = stamp_ns(stamp)
         name = topic if topic is not None else getattr(subscription, "topic_name", None)
-        with self._lock:
-            if name is None:
-                self._overall = ns if self._overall is None else max(self._overall, ns)
-            elif ns > self._done.get(name, -1):
-                self._done[name] = ns
-            self._dirty = True
-            due = self._joined and time.monotonic() - self._last_sent >= self._min_interval
-        if due:
+        if self._ledger.done(stamp_ns(stamp), name):
             self.flush()
 
     def flush(self, *, join: bool = False) -> None:
@@ -210,16 +192,12 @@ class ProgressReporter:
         The join report names the topics taken, each done through zero (nothing taken yet), so that the publisher
         waits until its writers have matched this node's readers of them before it goes on.
         """
-        with self._lock:
-            if not self._joined:
-                return
-            done = {sub.topic_name: 0 for sub in self._subscriptions} if join else dict(self._done)
-            msg = encode_progress(self.name, self._overall or 0, self.instance, done,
-                                  node=self._node.get_fully_qualified_name())
-            self._dirty = False
-            self._last_sent = time.monotonic()
-            self.reports += 1
-        self._pub.publish(msg)
+        report = self._ledger.take_report([sub.topic_name for sub in self._subscriptions] if join else None)
+        if report is None:
+            return
+        overall, done = report
+        self._pub.publish(encode_progress(self.name, overall, self.instance, done,
+                                          node=self._node.get_fully_qualified_name()))
 
     def leave(self, timeout: float = 1.0) -> bool:
         """Say that the consumer stops cleanly: its progress so far, then its last report, ``leaving``.
@@ -228,16 +206,11 @@ class ProgressReporter:
         ``lockstep.timeout``). Call it once the consumer has finished with everything it will take. Waits (at
         most ``timeout`` s) until the publishers acknowledged the report; returns whether they did.
         """
-        with self._lock:
-            if not self._joined and self._pub.get_subscription_count() == 0:
-                return True   # nobody waits for it
-            joined = self._joined
-        if joined:
-            self.flush()
-        with self._lock:
-            self._joined, self._left = False, True   # no report after the leave (it would join again)
-            msg = encode_progress(self.name, 0, self.instance, leaving=True)
-        self._pub.publish(msg)
+        if not self._ledger.joined and self._pub.get_subscription_count() == 0:
+            return True   # nobody waits for it
+        self.flush()
+        self._ledger.leave()   # no report after the leave (it would join again)
+        self._pub.publish(encode_progress(self.name, 0, self.instance, leaving=True))
         try:
             return bool(self._pub.wait_for_all_acked(Duration(nanoseconds=round(timeout * 1e9))))
         except Exception:  # the context is going down: best effort
@@ -251,17 +224,14 @@ class ProgressReporter:
         return self._ready is None or bool(self._ready())
 
     def _tick(self) -> None:
-        if self._left:
+        ledger = self._ledger
+        if ledger.left:
             return
-        if not self._joined:
-            if self._can_join():
-                with self._lock:
-                    self._joined = True
-                    self._done.clear()
-                    self._overall = None
+        if not ledger.joined:
+            if self._can_join() and ledger.join():
                 self.flush(join=True)
             return
-        if self._dirty or time.monotonic() - self._last_sent > 1.0:
+        if ledger.dirty or time.monotonic() - ledger.last_sent > 1.0:
             self.flush()       # the last report of a burst, or a heartbeat (which is no progress for the rig)
 
     def _on_session(self, msg: RigSession) -> None:
@@ -272,6 +242,6 @@ class ProgressReporter:
         self._run_id = msg.run_id
         if first or msg.reason == "reset":
             return   # a reset goes on with the same stamps: the progress stands
-        with self._lock:
-            self._joined = False
+        with self._ledger.lock:
+            self._ledger.joined = False
             self.instance = uuid.uuid4().hex

@@ -18,14 +18,13 @@ bridge run in the simulator's process. :class:`InProcessFeed` sits between them:
 
 from __future__ import annotations
 
-import threading
-import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from rimd_sim.ros.nodes.polling import LocalSubscription
+from rimd_sim.runtime.progress import ProgressLedger, stamp_ns
 
 __all__ = ["DirectProgress", "FedTopic", "InProcessFeed"]
 
@@ -118,72 +117,49 @@ class DirectProgress:
         self.name = name
         self.instance = uuid.uuid4().hex
         self._feed = feed
-        self._min_interval = min_interval
-        self._lock = threading.Lock()
+        self._ledger = ProgressLedger(min_interval)
         self._topics: list[str] = []
-        self._done: dict[str, int] = {}
-        self._overall: int | None = None
-        self._dirty = False
-        self._joined = False
-        self._left = False
-        self._last_sent = 0.0
-        self.reports = 0
 
     @property
     def joined(self) -> bool:
         """Whether it has joined the lockstep."""
-        return self._joined
+        return self._ledger.joined
+
+    @property
+    def reports(self) -> int:
+        """Reports sent so far."""
+        return self._ledger.reports
 
     def add_subscription(self, subscription: Any) -> None:
         """A topic it takes: named, done through 0, in its join."""
-        with self._lock:
+        with self._ledger.lock:
             self._topics.append(subscription.topic_name)
 
     def done(self, stamp: Any, subscription: Any = None, *, topic: str | None = None) -> None:
         """Finished with a message stamped ``stamp`` (integer ns or a ``Time``) of ``topic`` (or ``subscription``)."""
-        ns = stamp if isinstance(stamp, int) else int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
         name = topic if topic is not None else getattr(subscription, "topic_name", None)
-        with self._lock:
-            if name is None:
-                self._overall = ns if self._overall is None else max(self._overall, ns)
-            elif ns > self._done.get(name, -1):
-                self._done[name] = ns
-            self._dirty = True
-            due = self._joined and time.monotonic() - self._last_sent >= self._min_interval
-        if due:
+        if self._ledger.done(stamp_ns(stamp), name):
             self._send()
 
     def join(self) -> None:
         """Join: every topic taken, done through 0 (nothing taken yet)."""
-        with self._lock:
-            if self._left:
-                return
-            self._joined = True
-        self._send(join=True)
+        if self._ledger.join():
+            self._send(join=True)
 
     def flush(self) -> None:
         """Send the progress not reported yet."""
-        if self._dirty:
+        if self._ledger.dirty:
             self._send()
 
     def _send(self, *, join: bool = False) -> None:
-        with self._lock:
-            if not self._joined:
-                return
-            done = dict.fromkeys(self._topics, 0) if join else dict(self._done)
-            overall = self._overall or 0
-            self._dirty = False
-            self._last_sent = time.monotonic()
-            self.reports += 1
-        self._feed.report(self.name, overall, self.instance, done)
+        report = self._ledger.take_report(list(self._topics) if join else None)
+        if report is not None:
+            self._feed.report(self.name, report[0], self.instance, report[1])
 
     def leave(self, timeout: float = 1.0) -> bool:
         """Finished with everything it will take: the last progress, then ``leaving`` (the rig stops waiting)."""
         del timeout   # in the process: nothing to wait for
-        if self._joined:
-            self._send()
-        with self._lock:
-            joined, self._joined, self._left = self._joined, False, True
-        if joined:
+        self._send()
+        if self._ledger.leave():
             self._feed.report(self.name, 0, self.instance, {}, leaving=True)
         return True

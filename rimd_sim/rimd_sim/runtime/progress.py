@@ -1,0 +1,88 @@
+"""A lockstep consumer's progress ledger: what it has finished, when a report is due, what a report says.
+
+The one bookkeeping behind both ways a consumer reports (docs/rig.md, "Pacing: lockstep"): over ``/rig/progress``
+from another process (:class:`rimd_sim.ros.clients.progress.ProgressReporter`) and straight to the simulator in
+the composed rig (:class:`rimd_sim.ros.nodes.feed.DirectProgress`). How a report travels is theirs; what it holds,
+and when one is due, is decided here once. Thread-safe: a consumer may finish messages on any thread (the recorder
+does on its writer thread).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+__all__ = ["ProgressLedger", "stamp_ns"]
+
+
+def stamp_ns(stamp: Any) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``) or of an integer."""
+    if isinstance(stamp, int):
+        return stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+class ProgressLedger:
+    """How far a consumer has finished, per topic (or overall), and whether a report is due.
+
+    Args:
+        min_interval: Shortest time between two reports (s) sent from :meth:`done`; the caller's timer sends the
+            last one of a burst (:attr:`dirty`).
+    """
+
+    def __init__(self, min_interval: float = 0.005) -> None:
+        self.lock = threading.Lock()
+        self.min_interval = min_interval
+        self.done_ns: dict[str, int] = {}
+        self.overall: int | None = None
+        self.dirty = False
+        self.joined = False
+        self.left = False
+        self.last_sent = 0.0
+        self.reports = 0
+
+    def done(self, ns: int, topic: str | None) -> bool:
+        """The consumer finished a message stamped ``ns`` of ``topic`` (None: of everything it takes).
+
+        Returns whether a report is due now (joined, and ``min_interval`` passed since the last one).
+        """
+        with self.lock:
+            if topic is None:
+                self.overall = ns if self.overall is None else max(self.overall, ns)
+            elif ns > self.done_ns.get(topic, -1):
+                self.done_ns[topic] = ns
+            self.dirty = True
+            return self.joined and time.monotonic() - self.last_sent >= self.min_interval
+
+    def join(self) -> bool:
+        """Join from scratch (nothing finished yet); False once it has left."""
+        with self.lock:
+            if self.left:
+                return False
+            self.joined = True
+            self.done_ns.clear()
+            self.overall = None
+            return True
+
+    def take_report(self, topics: list[str] | None = None) -> tuple[int, dict[str, int]] | None:
+        """What the next report says, marked as sent: ``(overall ns, done ns per topic)``; None before the join.
+
+        ``topics``: the join report, every topic named done through zero (nothing taken yet), so that the publisher
+        waits until it has matched the consumer's readers of them.
+        Call it with :attr:`lock` *not* held.
+        """
+        with self.lock:
+            if not self.joined:
+                return None
+            done = dict.fromkeys(topics, 0) if topics is not None else dict(self.done_ns)
+            self.dirty = False
+            self.last_sent = time.monotonic()
+            self.reports += 1
+            return self.overall or 0, done
+
+    def leave(self) -> bool:
+        """No report after this one (a report would join again); returns whether it had joined."""
+        with self.lock:
+            joined, self.joined, self.left = self.joined, False, True
+            return joined

@@ -1,0 +1,74 @@
+"""The lockstep consumer's progress ledger (``rimd_sim.runtime.progress``): what a report says and when it is due.
+
+Both reporters (over ``/rig/progress`` and in the composed rig's process) keep their books here; the ROS tests
+(tests/ros/test_lockstep.py, tests/ros/test_composed_rig.py) show them reporting; these the books themselves.
+"""
+
+from __future__ import annotations
+
+import threading
+from types import SimpleNamespace
+
+from rimd_sim.runtime.progress import ProgressLedger, stamp_ns
+
+
+def test_stamp_ns_of_a_time_and_of_an_integer():
+    assert stamp_ns(SimpleNamespace(sec=3, nanosec=25)) == 3_000_000_025
+    assert stamp_ns(7) == 7
+
+
+def test_nothing_is_reported_before_the_join_and_the_join_names_every_topic_at_zero():
+    ledger = ProgressLedger(min_interval=0.0)
+    assert ledger.done(5, "/a") is False            # not joined: never due
+    assert ledger.take_report() is None
+    assert ledger.join()
+    assert ledger.done_ns == {}                      # a join starts from scratch
+    assert ledger.take_report(["/a", "/b"]) == (0, {"/a": 0, "/b": 0})
+    assert ledger.reports == 1
+
+
+def test_progress_only_moves_forward_per_topic_and_overall():
+    ledger = ProgressLedger(min_interval=0.0)
+    ledger.join()
+    assert ledger.done(20, "/a")
+    ledger.done(10, "/a")                            # an older message finished later: no step back
+    ledger.done(15, "/b")
+    ledger.done(40, None)
+    ledger.done(30, None)
+    assert ledger.dirty
+    assert ledger.take_report() == (40, {"/a": 20, "/b": 15})
+    assert not ledger.dirty
+
+
+def test_a_report_is_due_only_after_min_interval_and_the_last_one_stays_dirty():
+    ledger = ProgressLedger(min_interval=3600.0)
+    ledger.join()
+    ledger.take_report(["/a"])                       # the join report was just sent
+    assert ledger.done(1, "/a") is False             # within min_interval: not due ...
+    assert ledger.dirty                              # ... but left for the caller's timer
+
+
+def test_after_leaving_nothing_joins_or_reports_again():
+    ledger = ProgressLedger(min_interval=0.0)
+    assert ledger.join()
+    assert ledger.leave() is True                    # it had joined: the caller says "leaving"
+    assert ledger.leave() is False
+    assert ledger.join() is False
+    assert ledger.done(1, "/a") is False
+    assert ledger.take_report() is None
+
+
+def test_concurrent_done_calls_keep_the_largest_stamp():
+    ledger = ProgressLedger(min_interval=0.0)
+    ledger.join()
+
+    def finish(offset: int) -> None:
+        for ns in range(offset, 20_000, 4):
+            ledger.done(ns, "/a")
+
+    threads = [threading.Thread(target=finish, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=30)
+    assert ledger.take_report() == (0, {"/a": 19_999})
