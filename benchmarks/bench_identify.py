@@ -13,8 +13,8 @@ covering the truth (target: at least 95 %). Errors are in % (the gap: in um). ``
 (default 24): the coverage on a second draw says the uncertainty is not fitted to the first.
 
 ``--faults``: each rig also with a 0.3 s force dropout over an impact, block loss on the RIMD laser (30 % for 3 s)
-and a stuck cart laser (0.5 s), in the core (the wiring is not the point), against the clean answer (target:
-within 1 %). ``--captures``: each rig also with the 1 MHz triggered captures, in the core; the contact's
+and a stuck cart laser (0.5 s), recorded as the battery is (through the rig, or ``--core``), against the clean
+answer (target: within 1 %). ``--captures``: each rig also with the 1 MHz triggered captures; the contact's
 parameters against the truth (target: within 0.5 %); ``--captures-only``: that section alone.
 
 **The time.** ``--time``: a 60 s recording of 6 steps of the default rig (the steps of ``--for-identification``)
@@ -100,45 +100,39 @@ def _header() -> str:
     return f"rig {cells} cover   wall verdict"
 
 
-def battery(args: argparse.Namespace, work: Path) -> None:
+def _how(factory) -> str:
+    return "by the core in this process" if factory is None else "through the rig (simulator node, rimd experiment)"
+
+
+def battery(args: argparse.Namespace, work: Path, factory) -> None:
     from rimd_sim.analysis.identification.design import identification_steps
     from rimd_sim.settings.config import SimConfig
 
     rigs = draw_rigs(args.rigs, seed=args.seed)
-    print(f"battery: {len(rigs)} rigs (seed {args.seed}), 6 steps of {DWELL:g} s each, recorded "
-          + ("by the core in this process" if args.core else "through the rig (simulator node, rimd experiment, 8x)")
-          + f"; {_load()}")
+    print(f"battery: {len(rigs)} rigs (seed {args.seed}), 6 steps of {DWELL:g} s each, recorded {_how(factory)}; "
+          f"{_load()}")
     for i, rig in enumerate(rigs):
         print(f"  rig {i:>2}: " + ", ".join(f"{SHORT[n]} {rig[n] * (1e3 if n in ('gap', 'amplitude') else 1):.4g}"
                                              for n in NAMES))
     print(_header())
     totals = {"covered": 0, "params": 0, "accepted": 0, "walls": []}
     clean: dict[int, dict] = {}
-    factory = None
-    if not args.core:   # each rig in lockstep with the experiment's recorder, on a ROS domain of its own
-        from rimd_sim.ros.testing import RigFactory
-
-        factory = RigFactory(work)
-    try:
-        for i, rig in enumerate(rigs):
-            design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
-            schedule = Schedule(design.frequencies, dwell=DWELL, seed=100 + i)
-            if args.core:
-                recording = work / f"rig{i}.mcap"
-                write_core_recording(recording, rig, schedule)
-            else:
-                recording = record_through_rig(factory, work / f"rig{i}", rig, schedule)
-            report, wall, _ = _identify(recording, work / f"id{i}")
-            line, covered, params, accepted = _row(i, rig, report, wall)
-            print(line, flush=True)
-            clean[i] = report
-            totals["covered"] += covered
-            totals["params"] += params
-            totals["accepted"] += accepted
-            totals["walls"].append(wall)
-    finally:
-        if factory is not None:
-            factory.stop_all()
+    for i, rig in enumerate(rigs):
+        design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
+        schedule = Schedule(design.frequencies, dwell=DWELL, seed=100 + i)
+        if factory is None:
+            recording = work / f"rig{i}.mcap"
+            write_core_recording(recording, rig, schedule)
+        else:
+            recording = record_through_rig(factory, work / f"rig{i}", rig, schedule)
+        report, wall, _ = _identify(recording, work / f"id{i}")
+        line, covered, params, accepted = _row(i, rig, report, wall)
+        print(line, flush=True)
+        clean[i] = report
+        totals["covered"] += covered
+        totals["params"] += params
+        totals["accepted"] += accepted
+        totals["walls"].append(wall)
     n = len(rigs)
     print(f"identified within target or the parameter named by the verdict: {totals['accepted']}/{n} rigs "
           f"(target: all)")
@@ -147,18 +141,21 @@ def battery(args: argparse.Namespace, work: Path) -> None:
     print(f"rimd identify wall time per 62 s recording: median {sorted(totals['walls'])[n // 2]:.1f} s, "
           f"largest {max(totals['walls']):.1f} s ({_load()} now)")
     if args.faults:
-        faults(rigs, clean, work)
+        faults(rigs, clean, work, factory)
     if args.captures:
-        captures(rigs, work)
+        captures(rigs, work, factory)
 
 
-def _core_case(i: int, rig: dict, work: Path, case: str, schedule: Schedule) -> tuple[dict | None, float]:
-    """Rig ``i`` run by the core on ``schedule``, written as the recorder writes it, identified.
+def _case(i: int, rig: dict, work: Path, case: str, schedule: Schedule, factory) -> tuple[dict | None, float]:
+    """Rig ``i`` on ``schedule``, recorded through the rig (``factory``) or, when None, by the core, identified.
 
     Returns the report (None, said on a line, when refused) and the wall time.
     """
-    recording = work / f"rig{i}_{case}.mcap"
-    write_core_recording(recording, rig, schedule)
+    if factory is None:
+        recording = work / f"rig{i}_{case}.mcap"
+        write_core_recording(recording, rig, schedule)
+    else:
+        recording = record_through_rig(factory, work / f"rig{i}_{case}", rig, schedule)
     report, wall, _ = _identify(recording, work / f"id{i}_{case}")
     if "refused" in report:
         print(f"{i:>3} REFUSED: {report['refused']}")
@@ -166,13 +163,13 @@ def _core_case(i: int, rig: dict, work: Path, case: str, schedule: Schedule) -> 
     return report, wall
 
 
-def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
+def faults(rigs: list[dict], clean: dict[int, dict], work: Path, factory) -> None:
     """Each rig with a force dropout over an impact, block loss and a stuck laser, against its clean answer."""
     from rimd_sim.analysis.identification.design import identification_steps
     from rimd_sim.settings.config import SimConfig
 
-    print(f"\nfaults (in the core): a 0.3 s force dropout over an impact near 40 s, block loss 30 % on the RIMD laser "
-          f"30-33 s, the cart laser stuck 20-20.5 s; the answer against the clean one; {_load()}")
+    print(f"\nfaults ({_how(factory)}): a 0.3 s force dropout over an impact near 40 s, block loss 30 % on the "
+          f"RIMD laser 30-33 s, the cart laser stuck 20-20.5 s; the answer against the clean one; {_load()}")
     print("rig " + " ".join(f"{SHORT[n] + (' um' if n == 'gap' else ' %'):>9}" for n in NAMES)
           + "  within 1 % / 20 um  kicks in the hole  windows said")
     ok_all = 0
@@ -183,8 +180,8 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
         hidden = impact_near(rig, design.frequencies, 40.0, DWELL)
         extra = [{"channel": "impact_force", "kind": "dropout", "start": round(hidden - 0.15, 3), "duration": 0.3},
                  *FAULTS]
-        report, _ = _core_case(i, rig, work, "faults", Schedule(design.frequencies, dwell=DWELL, faults=extra,
-                                                                seed=100 + i))
+        report, _ = _case(i, rig, work, "faults", Schedule(design.frequencies, dwell=DWELL, faults=extra,
+                                                           seed=100 + i), factory)
         if report is None:
             continue
         diffs = [_error(n, report["estimates"][n]["value"], clean[i]["estimates"][n]["value"]) for n in NAMES]
@@ -197,18 +194,18 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path) -> None:
     print(f"within 1 % (gap 20 um) of the clean answer: {ok_all}/{len(rigs)} rigs (target: all)")
 
 
-def captures(rigs: list[dict], work: Path) -> None:
+def captures(rigs: list[dict], work: Path, factory) -> None:
     """Each rig with the 1 MHz triggered captures: the contact's parameters against the truth."""
     from rimd_sim.analysis.identification.design import identification_steps
     from rimd_sim.settings.config import SimConfig
 
-    print(f"\ncaptures (in the core, 1 MHz): the contact's parameters against the truth; {_load()}")
+    print(f"\ncaptures ({_how(factory)}, 1 MHz): the contact's parameters against the truth; {_load()}")
     print("rig        m %        k %        c %  k and c within 0.5 %")
     ok_all = 0
     for i, rig in enumerate(rigs):
         design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
-        report, wall = _core_case(i, rig, work, "captures", Schedule(design.frequencies, dwell=DWELL, capture=True,
-                                                                     seed=100 + i))
+        report, wall = _case(i, rig, work, "captures", Schedule(design.frequencies, dwell=DWELL, capture=True,
+                                                                seed=100 + i), factory)
         if report is None:
             continue
         errs = [_error(n, report["estimates"][n]["value"], rig[n]) for n in ("mass", "contact.stiffness",
@@ -242,22 +239,31 @@ def main() -> None:
     parser.add_argument("--rigs", type=int, default=14, help="rigs in the battery (default 14)")
     parser.add_argument("--seed", type=int, default=24, help="seed of the battery's draw (default 24)")
     parser.add_argument("--core", action="store_true", help="record in the core, not through the rig")
-    parser.add_argument("--faults", action="store_true", help="also each rig with faults (in the core)")
-    parser.add_argument("--captures", action="store_true", help="also each rig with captures (in the core)")
+    parser.add_argument("--faults", action="store_true", help="also each rig with faults")
+    parser.add_argument("--captures", action="store_true", help="also each rig with captures")
     parser.add_argument("--time", action="store_true", help="only the time target (default rig, 60 s)")
     parser.add_argument("--captures-only", action="store_true",
-                        help="only the captures' section (it needs no clean answer), in the core")
+                        help="only the captures' section (it needs no clean answer)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_identify_") as tmp:
         work = Path(tmp)
         if args.time:
             timing(work)
             return
-        if args.captures_only:
-            print(f"battery: {args.rigs} rigs (seed {args.seed}), 6 steps of {DWELL:g} s each; {_load()}")
-            captures(draw_rigs(args.rigs, seed=args.seed), work)
-            return
-        battery(args, work)
+        factory = None
+        if not args.core:   # each rig in lockstep with the experiment's recorder, on a ROS domain of its own
+            from rimd_sim.ros.testing import RigFactory
+
+            factory = RigFactory(work)
+        try:
+            if args.captures_only:
+                print(f"battery: {args.rigs} rigs (seed {args.seed}), 6 steps of {DWELL:g} s each; {_load()}")
+                captures(draw_rigs(args.rigs, seed=args.seed), work, factory)
+            else:
+                battery(args, work, factory)
+        finally:
+            if factory is not None:
+                factory.stop_all()
 
 
 if __name__ == "__main__":
