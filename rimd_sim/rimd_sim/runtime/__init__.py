@@ -1,2 +1,1 @@
-"""The ROS-free cores of the nodes: pacing and lockstep (and a consumer's progress), the recorder's session, the player,
-playback control."""
+"""The ROS-free cores of the nodes: pacing and lockstep, a consumer's progress, the recorder's session, the player."""

@@ -63,6 +63,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from rimd_sim.analysis.dynamics.steady import CHAOTIC, check_frequency, constant_frequency, steady_orbit
+from rimd_sim.analysis.peaks import sampled_peak
 from rimd_sim.errors import AnalysisError, ConfigError, IntegrationError
 from rimd_sim.model import kernel as k
 from rimd_sim.model.rig_model import ChatteringError, RigModel, model_for
@@ -416,13 +417,7 @@ def _measure(problem: _Problem, x: np.ndarray, lam: float) -> dict:
     times = (first + np.arange(rows.shape[1])) / cfg.truth_rate
     inside = times < 2 * n / f
     delta = rows[k.T_DELTA][inside]
-    j = int(np.argmax(delta))
-    dmax = float(delta[j])
-    if 0 < j < delta.size - 1:  # parabola through the largest sample and its neighbours
-        a, b, c = delta[j - 1], delta[j], delta[j + 1]
-        den = a - 2.0 * b + c
-        if den < 0:
-            dmax = float(b - 0.125 * (c - a) ** 2 / den)
+    dmax = sampled_peak(delta)
     return {
         "orbit": orbit,
         "impacts": len(impacts),

@@ -40,6 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rimd_sim.analysis.peaks import sampled_peak
+
 __all__ = ["PulseFit", "PulseSamples", "SpringDashpotPulse", "fit_onsets", "fit_pulses", "onset_scale_errors",
            "pulse_residuals", "pulse_of", "pulse_peaks"]
 
@@ -204,14 +206,7 @@ class SpringDashpotPulse:
         release = self.release()
         s = np.linspace(0.0, release, 2001)
         f = scale * self.shape(s)
-        k = int(np.argmax(f))
-        peak = float(f[k])
-        if 0 < k < s.size - 1:   # parabola through the largest point and its neighbours
-            y0, y1, y2 = f[k - 1], f[k], f[k + 1]
-            den = y0 - 2 * y1 + y2
-            if den < 0:
-                peak = float(y1 - 0.125 * (y0 - y2) ** 2 / den)
-        return peak, release, float(_trapezoid(f, s))
+        return sampled_peak(f), release, float(_trapezoid(f, s))
 
 
 def pulse_of(mass: float, stiffness: float, damping: float, *, cos_theta: float = 1.0,
