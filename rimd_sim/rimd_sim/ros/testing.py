@@ -14,7 +14,11 @@ however loaded the CI runner is (docs/rig.md, "Pacing: lockstep"; docs/testing.m
 ``rimd_rig(...)`` returns once the rig is ready (:meth:`RigHandle.wait_ready`): every node in the ROS graph, the
 simulator's services served, and its lockstep wait armed. The simulator says the last in its ``/diagnostics``
 (status ``rimd_simulator: pacing``, a ``lockstep NAME state`` value per consumer), which it publishes once its
-executor spins, after its pacing thread has started (or, started paused, is ready to). A first run on an empty
+executor spins, after its pacing thread has started (or, started paused, is ready to), every second and at once
+to a reader that has just matched. This process makes its own node (its DDS participant) only once each process
+of the rig has said that its participant is up (a ready file in ``RIMD_READY_DIR``), and on the rig's discovery
+range, so that its first announcements reach the rig's participants (made earlier, it was found only at its
+next periodic announcement, seconds later). A first run on an empty
 numba cache compiles for half a minute before that. The wait is bounded (``ready_timeout``; the ini key
 ``rimd_ready_timeout``, the environment variable ``RIMD_READY_TIMEOUT``; default :data:`DEFAULT_READY_TIMEOUT_S`),
 says what it waits for every few seconds on stderr, and fails naming what was missing and the nodes' last log
