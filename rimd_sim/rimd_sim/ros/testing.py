@@ -615,7 +615,7 @@ class RigFactory:
             handle_env = ros_environment(lease.domain_id, run_dir / "ros_log")
             ready_dir = run_dir / "ready"
             ready_dir.mkdir()
-            rig = Rig(plan, env={**handle_env, READY_DIR_ENV: str(ready_dir), **(env or {})},
+            rig = Rig(plan, env={**handle_env, **(env or {}), READY_DIR_ENV: str(ready_dir)},
                       log_dir=run_dir / "logs")
             rig.start()
         except BaseException:
