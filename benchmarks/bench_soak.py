@@ -12,16 +12,17 @@ Goals: nothing lost; resident memory growth <= 5 MB per hour per process; block 
 p99 <= 5 ms. Each goal gets a verdict line, "met" or "NOT met".
 
 Figures printed (and written as JSON with --json; MB = 10^6 bytes, ms = 10^-3 s):
-  * per process of the rig (simulator, recorder, Rerun bridge, the Rerun server that the bridge starts for
-    its serve_web sink, the ``rimd rig`` parent; found as descendants of the rig's process), their sum, and
-    this bench, from /proc every --period s (default 5), from sample 0 to the stop (start-up excluded): CPU in
-    % of one core (utime + stime over wall time: mean over the run, and the worst period), resident memory
-    (VmRSS) at the start, the end, the peak, at nine points in time, and its growth in MB per hour: the
-    least-squares slope (numpy.polyfit) of RSS over the samples after the first minute (runs of less than two
-    minutes: over their second half, said in the printout; so short a fit is noise, not a verdict). The
-    memory goal is judged for every process of the rig. The Rerun server keeps the viewer's data up to the
-    bridge's memory_limit (1 GiB in config/rimd.yaml), so it grows until it gets there by design; it is
-    judged all the same, with that note;
+  * per process of the rig (the composed rig, which runs the simulator, the recorder and the Rerun bridge in
+    one process; with --separate the simulator, the recorder and the Rerun bridge each in its own; the Rerun
+    server that the bridge starts for its serve_web sink, the ``rimd rig`` parent; found as descendants of the
+    rig's process), their sum, and this bench, from /proc every --period s (default 5), from sample 0 to the
+    stop (start-up excluded): CPU in % of one core (utime + stime over wall time: mean over the run, and the
+    worst period), resident memory (VmRSS) at the start, the end, the peak, at nine points in time, and its
+    growth in MB per hour: the least-squares slope (numpy.polyfit) of RSS over the samples after the first
+    minute (runs of less than two minutes: over their second half, said in the printout; so short a fit is
+    noise, not a verdict). The memory goal is judged for every process of the rig. The Rerun server keeps the
+    viewer's data up to the bridge's memory_limit (1 GiB in config/rimd.yaml), so it grows until it gets there
+    by design; it is judged all the same, with that note;
   * loss, from the recording, every message read: each block topic (SampleBlock / RigState) must start at
     first_index 0 and be contiguous (each block's first_index = the previous one's + its sample count):
     messages, samples, holes, lost samples, and the simulated time where it ends (all topics end at the same
@@ -44,7 +45,7 @@ Figures printed (and written as JSON with --json; MB = 10^6 bytes, ms = 10^-3 s)
     delivery p99 over every block.
 
 Run (after ``source env.sh``, from the repository root):
-    python benchmarks/bench_soak.py --minutes 60 [--json soak.json] [--keep] [--period 5]
+    python benchmarks/bench_soak.py --minutes 60 [--separate] [--json soak.json] [--keep] [--period 5]
 The exit status is 0 whenever the soak ran and was analysed, whatever the verdicts (read the goal lines);
 a short run (--minutes 1) checks the bench and the loss, its memory growth figures are noise.
 --keep (or BENCH_KEEP=1) keeps the temporary directory (recording, rig.log, ROS logs). It needs about 1.5 GB
@@ -496,9 +497,14 @@ def log_reports(log: str) -> dict:
 # ---- report ------------------------------------------------------------------------------------------------
 
 def rig_names(procs: dict) -> list[str]:
-    """The rig's processes in report order: the nodes, then the others (Rerun server, parent, ...)."""
-    nodes = [n for n in NODES.values() if n in procs]
+    """The rig's processes in report order: the nodes' (or the composed rig's), then the others (Rerun server, ...)."""
+    nodes = [n for n in (COMPOSED, *NODES.values()) if n in procs]
     return nodes + [n for n in procs if n not in nodes and n != BENCH]
+
+
+def node_processes(separate: bool) -> list[str]:
+    """The report names of the processes that run the nodes: the composed rig's one (the default), else one each."""
+    return list(NODES.values()) if separate else [COMPOSED]
 
 
 def rerun_memory_limit() -> str:
@@ -521,7 +527,8 @@ def _verdict(ok: bool) -> str:
 def report(result: dict) -> None:
     run, procs, rec, logs = result["run"], result["processes"], result["recording"], result["logs"]
     print()
-    print(f"soak of `rimd rig` (recorder, Rerun bridge, simulator at real time; config/rimd.yaml): "
+    layout = "one process each, --separate" if run.get("separate") else "composed in one process"
+    print(f"soak of `rimd rig` (recorder, Rerun bridge, simulator at real time, {layout}; config/rimd.yaml): "
           f"{run['seconds']:.1f} s of wall time from sample 0 "
           f"({'every consumer connected first' if run['from_sample_0'] else 'resumed WITHOUT all consumers'}), "
           f"ROS_DOMAIN_ID {run['domain_id']} on localhost; rig exit status {run['rig_exit_status']}")
@@ -613,7 +620,8 @@ def goals(result: dict) -> dict:
         "detail": f"lost samples per block topic {lost}, events lost {t[EVENTS_TOPIC]['lost']}, motor states lost "
                   f"{t[MOTOR_TOPIC]['lost']}, tails agree {rec['tails_agree']}, recording complete {rec['complete']}, "
                   f"recorder reports loss {logs['recorder_reports_loss']}"}}
-    for name in dict.fromkeys([*NODES.values(), *rig_names(procs)]):   # every node, found or not, and the rest
+    expected = node_processes(result["run"].get("separate", False))
+    for name in dict.fromkeys([*expected, *rig_names(procs)]):   # every node process, found or not, and the rest
         growth = procs.get(name, {}).get("growth_mb_per_h")
         note = (f"; it holds the web viewer's data up to the bridge's memory_limit ({rerun_memory_limit()}), "
                 "so it grows until then by design" if name == RERUN_SERVER else "")
@@ -641,6 +649,8 @@ def goals(result: dict) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0, help="wall time of the soak from sample 0 (default 60)")
+    parser.add_argument("--separate", action="store_true",
+                        help="`rimd rig --separate`: each node in a process of its own (default: composed, one)")
     add_rig_arguments(parser)
     args = parser.parse_args()
     if args.minutes <= 0 or args.period <= 0:
@@ -654,9 +664,9 @@ def main() -> None:
         tmp = run.tmp
         print(f"bench_soak: {args.minutes:g} min of `rimd rig` in {tmp}, ROS_DOMAIN_ID {run.domain_id}; "
               f"sampling /proc every {args.period:g} s", flush=True)
-        from_sample_0, procs = run.start(seconds, args.startup_timeout)
+        from_sample_0, procs = run.start(seconds, args.startup_timeout, ("--separate",) if args.separate else ())
         rig = run.rig
-        missing = [n for n in NODES.values() if n not in procs]
+        missing = [n for n in node_processes(args.separate) if n not in procs]
         print(f"bench_soak: running from sample 0: {', '.join(f'{n} {p}' for n, p in procs.items())}"
               + (f"; NOT FOUND: {', '.join(missing)}" if missing else ""), flush=True)
         series = sample_run(rig, procs, seconds, args.period)
@@ -669,7 +679,7 @@ def main() -> None:
         print("bench_soak: reading the recording", flush=True)
         result: dict = {"run": {"minutes": args.minutes, "seconds": wall, "period": args.period,
                                 "domain_id": run.domain_id, "rig_exit_status": status,
-                                "from_sample_0": from_sample_0, "tmp": str(tmp)}}
+                                "from_sample_0": from_sample_0, "separate": args.separate, "tmp": str(tmp)}}
         result["processes"] = {name: process_figures(s) for name, s in series.items()}
         result["logs"] = log_reports((tmp / "rig.log").read_text(errors="replace"))
         from rimd_sim.io.reader import RecordingError

@@ -217,3 +217,26 @@ def test_a_rig_not_ready_in_time_fails_naming_what_was_missing(rimd_rig):
     assert message.startswith("rimd_rig: the rig was not ready within 0.2 s (ROS_DOMAIN_ID "), message
     assert "; still waiting for " in message and "rimd_simulator" in message, message
     assert "RIMD_READY_TIMEOUT" in message and "--- rimd_simulator: " in message, message
+
+
+@pytest.mark.ros
+def test_the_test_s_participant_is_made_once_every_process_of_the_rig_has_its_own(rimd_rig, monkeypatch):
+    from rimd_sim.ros.clients import rig as rig_client
+
+    made: list[int] = []   # wall-clock ns at which the test's client (its participant) was made
+    make = rig_client.RigClient.__init__
+
+    def recorded(self, *args, **kwargs):
+        made.append(time.time_ns())
+        make(self, *args, **kwargs)
+
+    monkeypatch.setattr(rig_client.RigClient, "__init__", recorded)
+    before = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    rig = rimd_rig(consumers=["nobody"], separate=True)   # the recorder and the simulator: two processes
+    files = {p.name: p.stat().st_mtime_ns for p in (rig.run_dir / "ready").iterdir()}
+    assert sorted(files) == sorted(str(proc.pid) for proc in rig.rig.processes.values()), files
+    assert len(made) == 1 and max(files.values()) <= made[0], (files, made)
+    assert os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") == before   # set for the client's context only
+    assert "RIMD_READY_DIR" not in rig.env   # the rig's processes', not the test's
+    assert rig.motor(4.0, timeout=5.0).success
+

@@ -6,7 +6,8 @@ every topic arrives over DDS as contiguous blocks stamped ``t0 + first_index / s
 answer with the runtime's answers (a refusal with its reason and the setpoint in force, an acceptance with the
 stamp it takes effect, also a requested stamp) and the rig keeps publishing; the parameter services refuse a bad
 value with the rule; at real time the pacing thread publishes rate x time samples with one wall-clock t0; pause
-stops the stream and resume continues it without a gap.
+stops the stream and resume continues it without a gap. In this process: the first /diagnostics come as soon as
+the node spins, to a reader that has matched, not at the 1 Hz timer's first tick.
 """
 
 from __future__ import annotations
@@ -271,3 +272,26 @@ def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     assert any(_ns(t.header.stamp) == target for t in truth)   # a truth block starts at the reset's boundary
     assert spin_until(ros_executor, lambda: f"reset at simulation time {t_reset:.6f} s" in rig.output(), timeout=10)
     assert rig.stop() == 0, rig.tail()
+
+
+def test_a_reader_of_diagnostics_hears_the_simulator_once_it_spins_not_at_its_first_tick(rclpy_context,
+                                                                                         ros_executor):
+    """In process: /diagnostics come at once to a reader that has matched, not one second later (the 1 Hz timer)."""
+    import time
+
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from rimd_sim.ros.nodes.simulator import SimulatorNode
+
+    listener = rclpy.create_node("diagnostics_listener", context=rclpy_context)
+    ros_executor.add_node(listener)
+    heard: list[float] = []
+    listener.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: heard.append(time.monotonic()), 10)
+    simulator = SimulatorNode(context=rclpy_context)   # its timer's first tick: 1 s after it was made
+    made = time.monotonic()
+    ros_executor.add_node(simulator)
+    while not heard and time.monotonic() < made + 3.0:
+        ros_executor.spin_once(timeout_sec=0.05)
+    assert heard, "no /diagnostics in 3 s"
+    assert heard[0] - made < 0.8, f"the first /diagnostics came {heard[0] - made:.2f} s after the node was made"

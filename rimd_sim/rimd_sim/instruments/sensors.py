@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from scipy import signal
 
+from rimd_sim.instruments.butterworth import highpass1_sos, lowpass2_sos
 from rimd_sim.settings.config import CHANNEL_NAMES, ChannelConfig
 
 __all__ = ["Instrument", "Reading"]
@@ -79,9 +79,9 @@ class Instrument:
         ch = self._channel
         sections = []
         if 0.0 < ch.bandwidth < 0.45 * ch.sample_rate:
-            sections.append(signal.butter(2, ch.bandwidth, btype="lowpass", fs=ch.sample_rate, output="sos"))
+            sections.append(lowpass2_sos(ch.bandwidth, ch.sample_rate))   # = scipy.signal.butter(2, ..., "sos")
         if ch.highpass > 0.0:
-            sections.append(signal.butter(1, ch.highpass, btype="highpass", fs=ch.sample_rate, output="sos"))
+            sections.append(highpass1_sos(ch.highpass, ch.sample_rate))   # = scipy.signal.butter(1, ..., "sos")
         self._sos = np.vstack(sections) if sections else None
         self._zi = np.zeros((self._sos.shape[0], 2)) if self._sos is not None else None
 

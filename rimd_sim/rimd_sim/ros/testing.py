@@ -14,7 +14,11 @@ however loaded the CI runner is (docs/rig.md, "Pacing: lockstep"; docs/testing.m
 ``rimd_rig(...)`` returns once the rig is ready (:meth:`RigHandle.wait_ready`): every node in the ROS graph, the
 simulator's services served, and its lockstep wait armed. The simulator says the last in its ``/diagnostics``
 (status ``rimd_simulator: pacing``, a ``lockstep NAME state`` value per consumer), which it publishes once its
-executor spins, after its pacing thread has started (or, started paused, is ready to). A first run on an empty
+executor spins, after its pacing thread has started (or, started paused, is ready to), every second and at once
+to a reader that has just matched. This process makes its own node (its DDS participant) only once each process
+of the rig has said that its participant is up (a ready file in ``RIMD_READY_DIR``), and on the rig's discovery
+range, so that its first announcements reach the rig's participants (made earlier, it was found only at its
+next periodic announcement, seconds later). A first run on an empty
 numba cache compiles for half a minute before that. The wait is bounded (``ready_timeout``; the ini key
 ``rimd_ready_timeout``, the environment variable ``RIMD_READY_TIMEOUT``; default :data:`DEFAULT_READY_TIMEOUT_S`),
 says what it waits for every few seconds on stderr, and fails naming what was missing and the nodes' last log
@@ -291,6 +295,8 @@ class RigHandle:
     #: Seconds from the start of the wait (right after the processes started) until the rig was ready.
     ready_after: float = math.nan
     _stopped: bool = False
+    #: Where the rig's processes write their ready files (``RIMD_READY_DIR``); None: not waited for.
+    _ready_dir: Path | None = None
 
     @property
     def config(self) -> Any:
@@ -353,7 +359,8 @@ class RigHandle:
             from rimd_sim.ros.clients.rig import RigClient
 
             self._client = RigClient(domain_id=self.domain_id, timeout=SERVICE_TIMEOUT_S, name="rimd_test_rig",
-                                     check=self.check_alive)
+                                     check=self.check_alive,
+                                     discovery_range=self.env.get("ROS_AUTOMATIC_DISCOVERY_RANGE"))
 
             def on_clock(msg: Clock) -> None:
                 self._clock_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
@@ -372,8 +379,12 @@ class RigHandle:
     def wait_ready(self, timeout: float, say: Callable[[str], None] = _say) -> float:
         """Wait until the rig is ready (see the module docstring); the seconds it took.
 
-        Ready: every node of the rig in the ROS graph, the simulator's services (:data:`RIG_SERVICES`) served,
-        and its ``/diagnostics`` naming the state of each lockstep consumer (its lockstep wait armed).
+        First each process of the rig says that its DDS participant is up (a ready file, written once its first
+        node is made); only then does this process make its own participant, on the rig's discovery range, so
+        that its first announcements reach the rig's participants instead of nobody (made earlier, it was
+        found only at its periodic announcement, seconds later). Then ready: every node of the rig in the
+        ROS graph, the simulator's services (:data:`RIG_SERVICES`) served, and its ``/diagnostics`` naming the
+        state of each lockstep consumer (its lockstep wait armed).
 
         Args:
             timeout: Seconds.
@@ -383,9 +394,15 @@ class RigHandle:
             UnavailableError: A node exited (named, with its status and last log lines), or the rig was not ready
                 within ``timeout`` s (what was missing, and each node's last log lines).
         """
-        from diagnostic_msgs.msg import DiagnosticArray
-
         started = time.monotonic()
+        from diagnostic_msgs.msg import DiagnosticArray  # rclpy and the messages load while the rig starts
+
+        from rimd_sim.ros.clients.rig import RigClient  # noqa: F401 - loaded now, used by client()
+
+        next_report = [started + READY_REPORT_S]
+        while missing := self._not_built():
+            self._still_waiting(missing, started, timeout, next_report, say)
+            time.sleep(0.01)
         client = self.client()
         node = client.node
         armed: list[str] = []   # the simulator's pacing message, once it names every consumer's lockstep state
@@ -398,26 +415,35 @@ class RigHandle:
 
         sub = node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
         try:
-            next_report = started + READY_REPORT_S
-            while True:
-                self.check_alive("while the rig came up")
-                missing = self._not_ready(client, bool(armed))
-                now = time.monotonic()
-                if not missing:
-                    return now - started
-                if now - started >= timeout:
-                    tails = "\n".join(self.log_tail(p.name) for p in self.rig.plan.processes)
-                    raise UnavailableError(
-                        f"rimd_rig: the rig was not ready within {timeout:g} s (ROS_DOMAIN_ID {self.domain_id}, run "
-                        f"directory {self.run_dir}); still waiting for {missing}. A first run on an empty numba "
-                        f"cache compiles for a while: a longer wait is rimd_rig(ready_timeout=...), the ini key "
-                        f"{READY_TIMEOUT_INI} or {READY_TIMEOUT_ENV} (docs/testing.md)\n{tails}")
-                if now >= next_report:
-                    say(f"rimd_rig: waiting for {missing} ({now - started:.0f} s of {timeout:g} s)")
-                    next_report += READY_REPORT_S
+            while missing := self._not_ready(client, bool(armed)):
+                self._still_waiting(missing, started, timeout, next_report, say)
                 client.executor.spin_once(timeout_sec=0.05)
+            return time.monotonic() - started
         finally:
             node.destroy_subscription(sub)
+
+    def _still_waiting(self, missing: str, started: float, timeout: float, next_report: list[float],
+                       say: Callable[[str], None]) -> None:
+        """One turn of the ready wait: fail when a node exited or the time is up; say what is missing now and then."""
+        self.check_alive("while the rig came up")
+        now = time.monotonic()
+        if now - started >= timeout:
+            tails = "\n".join(self.log_tail(p.name) for p in self.rig.plan.processes)
+            raise UnavailableError(
+                f"rimd_rig: the rig was not ready within {timeout:g} s (ROS_DOMAIN_ID {self.domain_id}, run "
+                f"directory {self.run_dir}); still waiting for {missing}. A first run on an empty numba "
+                f"cache compiles for a while: a longer wait is rimd_rig(ready_timeout=...), the ini key "
+                f"{READY_TIMEOUT_INI} or {READY_TIMEOUT_ENV} (docs/testing.md)\n{tails}")
+        if now >= next_report[0]:
+            say(f"rimd_rig: waiting for {missing} ({now - started:.0f} s of {timeout:g} s)")
+            next_report[0] += READY_REPORT_S
+
+    def _not_built(self) -> str:
+        """The rig's processes whose DDS participant is not up yet (no ready file), in words ('' when all are)."""
+        if self._ready_dir is None:
+            return ""
+        names = [name for name, proc in self.rig.processes.items() if not (self._ready_dir / str(proc.pid)).exists()]
+        return "; ".join(f"{name} (starting: its node not made yet)" for name in names)
 
     def _not_ready(self, client: Any, armed: bool) -> str:
         """What the rig still lacks to be ready, in words ('' when ready)."""
@@ -566,6 +592,7 @@ class RigFactory:
                 (nothing started).
         """
         from rimd_sim.ros.bringup import Rig, plan_rig
+        from rimd_sim.ros.nodes.registry import READY_DIR_ENV
 
         wait = configured_ready_timeout(self._config) if ready_timeout is None else float(ready_timeout)
         if not (math.isfinite(wait) and wait > 0):
@@ -586,7 +613,10 @@ class RigFactory:
                             parameters={"rimd_simulator": sim, "rimd_rerun": bridge}, run_dir=run_dir,
                             separate=separate)
             handle_env = ros_environment(lease.domain_id, run_dir / "ros_log")
-            rig = Rig(plan, env={**handle_env, **(env or {})}, log_dir=run_dir / "logs")
+            ready_dir = run_dir / "ready"
+            ready_dir.mkdir()
+            rig = Rig(plan, env={**handle_env, **(env or {}), READY_DIR_ENV: str(ready_dir)},
+                      log_dir=run_dir / "logs")
             rig.start()
         except BaseException:
             if rig is not None:
@@ -594,7 +624,7 @@ class RigFactory:
             lease.release()
             raise
         handle = RigHandle(lease.domain_id, handle_env, run_dir, plan.recording_dir, plan.lockstep_consumers, rig,
-                           lease)
+                           lease, _ready_dir=ready_dir)
         self._rigs.append(handle)
         try:
             handle.ready_after = handle.wait_ready(wait)

@@ -12,9 +12,10 @@ a process of the rig has exited, instead of waiting out the timeout). The one-sh
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
 from rimd_sim.errors import CommandError
@@ -24,6 +25,8 @@ if TYPE_CHECKING:
 
 __all__ = ["RigClient", "TRIGGERS"]
 
+#: The environment variable rcl takes a context's discovery range from.
+DISCOVERY_RANGE_ENV = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 #: The rig's Trigger services, by the name users type.
 TRIGGERS = ("pause", "resume", "reset", "clear_faults")
 
@@ -43,6 +46,23 @@ _SERVICE_TYPES = {"set_motor_frequency": _srv("SetMotorFrequency"), "perturb": _
                   "inject_fault": _srv("InjectFault"), **{name: _srv("Trigger") for name in TRIGGERS}}
 
 
+@contextlib.contextmanager
+def _discovery_range(value: str | None) -> Iterator[None]:
+    """``ROS_AUTOMATIC_DISCOVERY_RANGE`` set to ``value`` meanwhile (None: left as it is); restored after."""
+    if value is None:
+        yield
+        return
+    before = os.environ.get(DISCOVERY_RANGE_ENV)
+    os.environ[DISCOVERY_RANGE_ENV] = value
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(DISCOVERY_RANGE_ENV, None)
+        else:
+            os.environ[DISCOVERY_RANGE_ENV] = before
+
+
 def stamp(seconds: float | None) -> Any:
     """A ``builtin_interfaces/Time`` of ``seconds`` (zero for None: the next block boundary)."""
     from builtin_interfaces.msg import Time
@@ -60,10 +80,15 @@ class RigClient:
         timeout: Seconds a call may take, the service found and its answer received (a call may give its own).
         name: The client node's name.
         check: Called at every turn of the client's waits (about every 50 ms); what it raises ends the wait.
+        discovery_range: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` of the client's context (``LOCALHOST``, ``SUBNET``...;
+            default: this process's environment). A rig started on ``LOCALHOST`` (the pytest plugin's) hears
+            only participants on that range: a client on the default range is found by it only at its periodic
+            announcement, seconds later.
     """
 
     def __init__(self, *, domain_id: int | None = None, namespace: str = "/rig", timeout: float = 10.0,
-                 name: str = "rimd_client", check: Callable[[], None] | None = None) -> None:
+                 name: str = "rimd_client", check: Callable[[], None] | None = None,
+                 discovery_range: str | None = None) -> None:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
@@ -73,7 +98,9 @@ class RigClient:
         self.check = check
         self.domain_id = int(os.environ.get("ROS_DOMAIN_ID", "0") or 0) if domain_id is None else domain_id
         self.context: Context | None = rclpy.Context()   # None once closed
-        rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        with _discovery_range(discovery_range):   # rcl reads it when the context is initialised
+            rclpy.init(context=self.context, domain_id=self.domain_id,
+                       signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.context, start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

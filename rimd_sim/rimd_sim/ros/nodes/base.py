@@ -52,11 +52,12 @@ from rclpy.signals import SignalHandlerOptions
 
 from rimd_sim.errors import InputError
 from rimd_sim.ros.nodes._stop import StopRequest, install_stop_handlers
+from rimd_sim.ros.nodes.registry import READY_DIR_ENV
 from rimd_sim.settings.config import misapplied_section, misapplied_section_message
 from rimd_sim.settings.params import Param
 
-__all__ = ["EXECUTOR_ENV", "RimdNode", "declare", "descriptor", "executor_kind", "log_at", "make_executor",
-           "refuse_unnamed", "run_node", "spin_until_stopped"]
+__all__ = ["EXECUTOR_ENV", "READY_DIR_ENV", "RimdNode", "declare", "descriptor", "executor_kind", "log_at",
+           "make_executor", "refuse_unnamed", "run_node", "spin_until_stopped"]
 
 #: Longest time between a stop request and the loop noticing it (s). rcl_wait cannot be interrupted by a
 #: Python signal handler, so the loop waits at most this long before it looks at the request.
@@ -277,6 +278,25 @@ def run_node(name: str, make_node: Callable[[], Node], refused: tuple[type[BaseE
     return status
 
 
+_participant_said: list[bool] = []   # the ready file is written once per process
+
+
+def _say_participant_up() -> None:
+    """Write this process's ready file (:data:`READY_DIR_ENV`) once, when asked: its DDS participant is up.
+
+    A failure to write is said on stderr, not fatal.
+    """
+    folder = os.environ.get(READY_DIR_ENV)
+    if not folder or _participant_said:
+        return
+    _participant_said.append(True)
+    try:
+        (Path(folder) / str(os.getpid())).touch()
+    except OSError as exc:
+        print(f"could not write the ready file of process {os.getpid()} in {folder} ({READY_DIR_ENV}): {exc}",
+              file=sys.stderr)
+
+
 # ---- the base class ----------------------------------------------------------------------------------------------
 
 class RimdNode(Node):
@@ -303,6 +323,7 @@ class RimdNode(Node):
         if self.NAMESPACE is not None:
             kwargs.setdefault("namespace", self.NAMESPACE)
         super().__init__(node_name or self.NODE_NAME, **kwargs)
+        _say_participant_up()
 
     def declare(self, table: Mapping[str, Param]) -> dict[str, Any]:
         """Declare the parameters of ``table`` (:func:`declare`); return their values as ROS holds them."""

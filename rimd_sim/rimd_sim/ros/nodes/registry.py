@@ -10,10 +10,16 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-__all__ = ["ENTRY_MODULE", "NODES", "NodeEntry", "by_name", "console_scripts", "rig_nodes"]
+__all__ = ["ENTRY_MODULE", "NODES", "READY_DIR_ENV", "NodeEntry", "by_name", "console_scripts", "rig_nodes"]
 
 #: The module whose functions the console scripts run (it installs the stop handlers before any heavy import).
 ENTRY_MODULE = "rimd_sim.ros.nodes._entry"
+
+#: Environment variable naming a directory where a node process, once its first node is made (its DDS participant
+#: is up), writes an empty file named after its process id (:class:`rimd_sim.ros.nodes.base.RimdNode`). The pytest
+#: plugin waits for it before it makes its own participant: one made earlier sends its first announcements to
+#: nobody and may be found only at its next periodic one, seconds later (docs/testing.md).
+READY_DIR_ENV = "RIMD_READY_DIR"
 
 
 class NodeEntry(NamedTuple):

@@ -27,6 +27,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import Executor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
@@ -94,7 +95,10 @@ class SimulatorNode(RimdNode):
         outs = outputs(config, settings)
         self._pubs = {out.key: self.create_publisher(message_class(out.type_name), out.key, qos_profile(out.qos))
                       for out in outs}
-        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        # Every second, and at once for a reader that has just matched (a client waiting for the rig to be ready
+        # hears it then, not up to a second later); the executor runs the callback, so only once it spins.
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=(
+            PublisherEventCallbacks(matched=self._on_diagnostics_matched)))
         self._stop = threading.Event()
         send: Callable[[str, bytes], None] = lambda key, data: self._pubs[key].publish(data)  # noqa: E731
         if feed is not None:
@@ -226,6 +230,14 @@ class SimulatorNode(RimdNode):
         self._rt.progress(msg.consumer, from_time(msg.done_through), instance=msg.instance, topics=list(msg.topics),
                           topics_done_ns=[from_time(d) for d in msg.topics_done_through], leaving=msg.leaving,
                           node=msg.node)
+
+    def _on_diagnostics_matched(self, status: Any) -> None:
+        """A reader of /diagnostics matched (or left): a new one hears the status now.
+
+        Readers matched before the executor spins come as one event whose change may say 0 (the count says them).
+        """
+        if status.current_count > 0 and status.current_count_change >= 0:
+            self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
         subscribers = {p.topic_name: p.get_subscription_count() for p in self._pubs.values()}
