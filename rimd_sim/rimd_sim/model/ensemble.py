@@ -73,10 +73,15 @@ from rimd_sim.model.rig_model import MODELS
 from rimd_sim.model.validity import PointMeasures
 
 __all__ = [
-    "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "EnsembleResult", "StopRule", "run_cells",
+    "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "STOP_METHODS", "EnsembleResult", "StopRule", "run_cells",
 ]
 
 KIND_PERIODIC, KIND_CHAOTIC, KIND_FAILED = 0, 1, 2
+#: The early-stopping methods (module docstring): the convergence test on the stroboscopic map, and the former
+#: fixed confirmation window (kept to reproduce earlier maps bit for bit).
+STOP_METHODS = ("window", "contraction")
+#: Repetition below which the ``contraction`` method takes points as converged without a ratio (exact repeats).
+EXACT = 1e-12
 
 _jit = k._jit
 
@@ -88,17 +93,28 @@ class StopRule:
         min_cycles: Cycles always run before a stop is considered.
         max_cycles: The cap (cycles); 0 for none other than ``measure_cycles`` after ``min_cycles``.
         measure_cycles: Cycles classified at the cap.
-        min_window: Shortest confirmation window (cycles).
-        confirm: Periods in the confirmation window (at least).
+        min_window: Shortest confirmation window (cycles) of the ``window`` method.
+        confirm: Periods in the confirmation window (at least) of the ``window`` method.
         max_period: Longest period looked for (cycles).
         tolerance: Classification tolerance (non-dimensional).
-        stop_tolerance: Repetition required to stop early (non-dimensional).
+        stop_tolerance: Repetition required to stop early (non-dimensional); for the ``contraction`` method, the
+            bound on the points' remaining drift to their limit, and on their latest repetition.
         early: False runs every trajectory to the cap (a fixed-length run).
+        method: ``contraction`` (the convergence test on the stroboscopic map) or ``window`` (the fixed
+            confirmation window): :data:`STOP_METHODS`, module docstring.
+        block: Shortest block of the ``contraction`` method (cycles); a block is ``max(block, 2 n)`` cycles.
+        contraction: Largest ratio between the latest block's repetition and the block's before it.
+        quiet_cycles: Cycles without impact (two blocks) after which the ``contraction`` method stops on a
+            no-impact motion whose points converge.
+        quiet_tolerance: Bound on the remaining drift of such a no-impact motion's points.
     """
 
     def __init__(self, *, min_cycles: int = 30, max_cycles: int = 192, measure_cycles: int = 72,
                  min_window: int = 24, confirm: int = 4, max_period: int = 12, tolerance: float = 1e-3,
-                 stop_tolerance: float | None = None, early: bool = True) -> None:
+                 stop_tolerance: float | None = None, early: bool = True, method: str = "window", block: int = 4,
+                 contraction: float = 0.5, quiet_cycles: int = 12, quiet_tolerance: float = 1e-2) -> None:
+        if method not in STOP_METHODS:
+            raise ConfigError("stop", method, f"must be one of {', '.join(STOP_METHODS)}")
         self.min_cycles = int(min_cycles)
         self.max_cycles = int(max_cycles)
         self.measure_cycles = int(measure_cycles)
@@ -108,17 +124,26 @@ class StopRule:
         self.tolerance = float(tolerance)
         self.stop_tolerance = float(tolerance / 10.0 if stop_tolerance is None else stop_tolerance)
         self.early = bool(early)
+        self.method = method
+        self.block = int(block)
+        self.contraction = float(contraction)
+        self.quiet_cycles = int(quiet_cycles)
+        self.quiet_tolerance = float(quiet_tolerance)
 
     def vector(self) -> np.ndarray:
         """The rule as the float vector the compiled loop reads."""
         return np.array([self.min_cycles, self.max_cycles, self.measure_cycles, self.min_window, self.confirm,
-                         self.max_period, self.tolerance, self.stop_tolerance, 1.0 if self.early else 0.0])
+                         self.max_period, self.tolerance, self.stop_tolerance, 1.0 if self.early else 0.0,
+                         float(STOP_METHODS.index(self.method)), self.block, self.contraction, self.quiet_cycles,
+                         self.quiet_tolerance])
 
     def __repr__(self) -> str:  # noqa: D105
         return (f"StopRule(min_cycles={self.min_cycles}, max_cycles={self.max_cycles}, "
                 f"measure_cycles={self.measure_cycles}, min_window={self.min_window}, confirm={self.confirm}, "
                 f"max_period={self.max_period}, tolerance={self.tolerance}, "
-                f"stop_tolerance={self.stop_tolerance}, early={self.early})")
+                f"stop_tolerance={self.stop_tolerance}, early={self.early}, method={self.method!r}, "
+                f"block={self.block}, contraction={self.contraction}, quiet_cycles={self.quiet_cycles}, "
+                f"quiet_tolerance={self.quiet_tolerance})")
 
 
 @dataclass(eq=False)
@@ -209,6 +234,66 @@ def _settled(u, v, counts, c, max_period, min_window, confirm, stol):
                 break
         if ok:
             return n, length
+    return 0, 0
+
+
+@_jit
+def _blocks(u, v, c, n, h):
+    """Largest repetition ``max(|du|, |dv|)`` over period ``n`` in the two blocks of ``h`` cycles before ``c``.
+
+    Returns ``(older, latest)``.
+    """
+    ea = 0.0
+    eb = 0.0
+    for i in range(c - 2 * h, c):
+        e = max(abs(u[i] - u[i - n]), abs(v[i] - v[i - n]))
+        if i < c - h:
+            ea = max(ea, e)
+        else:
+            eb = max(eb, e)
+    return ea, eb
+
+
+@_jit
+def _converged(u, v, counts, c, max_period, block, qmax, stol, quiet, quiet_tol):
+    """The ``contraction`` test after cycle ``c - 1`` (module docstring): ``(n, lo)``, or ``(0, 0)``.
+
+    ``n`` is the period found (-1 for a no-impact motion), ``lo`` the first cycle of the window to classify.
+    """
+    if quiet > 0 and c >= quiet + 1:
+        ok = True
+        for i in range(c - quiet, c):
+            if counts[i] != 0:
+                ok = False
+                break
+        if ok:
+            h = quiet // 2
+            ea, eb = _blocks(u, v, c, 1, h)
+            if eb < EXACT:
+                return -1, c - quiet
+            q = eb / ea if ea > 0.0 else 1.0
+            if q <= qmax and eb * h * q / (1.0 - q) <= quiet_tol:
+                return -1, c - quiet
+    for n in range(1, max_period + 1):
+        h = max(block, 2 * n)
+        if 2 * h + n > c:
+            return 0, 0
+        ok = True
+        for i in range(c - 2 * h, c):
+            if counts[i] != counts[i - n]:
+                ok = False
+                break
+        if not ok:
+            continue
+        ea, eb = _blocks(u, v, c, n, h)
+        if eb < EXACT:
+            return n, c - h - n
+        if eb > stol or ea <= 0.0:
+            continue
+        q = eb / ea
+        # The remaining drift of each point to its limit, the latest repetitions shrinking by q per block.
+        if q <= qmax and eb * (h / n) * q / (1.0 - q) <= stol:
+            return n, c - h - n
     return 0, 0
 
 
@@ -310,6 +395,11 @@ def _loop(name: str) -> types.ModuleType:
         tol = rule[6]
         stol = rule[7]
         early = rule[8] > 0.0
+        contraction = rule[9] > 0.0
+        block = int(rule[10])
+        qmax = rule[11]
+        quiet = int(rule[12])
+        quiet_tol = rule[13]
         loop.init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, p[k.P_HMAX], imp_out)
         fs[k.F_THMAX] = abs(ya[0])   # the start counts, as in RigModel.advance
         peak = 0.0
@@ -358,9 +448,12 @@ def _loop(name: str) -> types.ModuleType:
                         ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status, math.nan, math.nan)
             c_done += 1
             if early and min_cycles <= c_done <= cap:
-                n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
-                if n > 0:
+                if contraction:
+                    n, lo = _converged(u, v, counts, c_done, max_period, block, qmax, stol, quiet, quiet_tol)
+                else:
+                    n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
                     lo = c_done - length - n
+                if n != 0:
                     period, imp, kind = _classify_window(u, v, counts, lo, c_done, max_period, tol)
                     w_peak = _window_out(u, v, peaks, lo, c_done, pts)
                     return (period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP], fs[k.F_THMAX],
