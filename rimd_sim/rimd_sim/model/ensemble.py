@@ -82,6 +82,13 @@ KIND_PERIODIC, KIND_CHAOTIC, KIND_FAILED = 0, 1, 2
 STOP_METHODS = ("window", "contraction")
 #: Repetition below which the ``contraction`` method takes points as converged without a ratio (exact repeats).
 EXACT = 1e-12
+#: A no-impact motion stops when its largest reach, times ``QUIET_PEAK`` (the reach is read at the ends of the
+#: steps, short of the true peak), is clear of the stop by ``QUIET_MARGIN`` times its remaining drift.
+QUIET_PEAK = 1.02
+QUIET_MARGIN = 2.0
+#: Largest ratio between the two blocks of such a motion (without impact it is a damped oscillation about its
+#: forced response: the ratio only sizes the remaining drift, the margin or ``quiet_tolerance`` decides).
+QUIET_CONTRACTION = 0.9
 
 _jit = k._jit
 
@@ -255,10 +262,12 @@ def _blocks(u, v, c, n, h):
 
 
 @_jit
-def _converged(u, v, counts, c, max_period, block, qmax, stol, quiet, quiet_tol):
+def _converged(u, v, counts, reach, c, max_period, block, qmax, stol, quiet, quiet_tol, u_stop, spread):
     """The ``contraction`` test after cycle ``c - 1`` (module docstring): ``(n, lo)``, or ``(0, 0)``.
 
     ``n`` is the period found (-1 for a no-impact motion), ``lo`` the first cycle of the window to classify.
+    ``reach`` holds per cycle the largest ``l sin|theta| / A0`` reached, ``u_stop`` is the stop's ``gap / A0``
+    and ``spread`` ``1 + Omega / omega_n`` (a repetition in ``v`` as a change of the amplitude in ``u``).
     """
     if quiet > 0 and c >= quiet + 1:
         ok = True
@@ -272,8 +281,16 @@ def _converged(u, v, counts, c, max_period, block, qmax, stol, quiet, quiet_tol)
             if eb < EXACT:
                 return -1, c - quiet
             q = eb / ea if ea > 0.0 else 1.0
-            if q <= qmax and eb * h * q / (1.0 - q) <= quiet_tol:
-                return -1, c - quiet
+            if q <= QUIET_CONTRACTION:
+                tail = eb * h * q / (1.0 - q)
+                if tail <= quiet_tol:
+                    return -1, c - quiet
+                # Clear of the stop by more than the motion can still change (twice its remaining drift).
+                top = 0.0
+                for i in range(c - h, c):
+                    top = max(top, reach[i])
+                if u_stop - QUIET_PEAK * top > QUIET_MARGIN * spread * tail:
+                    return -1, c - quiet
     for n in range(1, max_period + 1):
         h = max(block, 2 * n)
         if 2 * h + n > c:
@@ -380,7 +397,7 @@ def _loop(name: str) -> types.ModuleType:
     @compiled
     def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
                 ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out, peaks, vels,
-                pts):
+                pts, reach):
         """One trajectory.
 
         Returns ``(period, impacts, kind, cycles, theta, theta_dot, steps, max_abs_theta, peak_force,
@@ -410,6 +427,10 @@ def _loop(name: str) -> types.ModuleType:
             counts[i] = 0
             peaks[i] = 0.0
             vels[i] = 0.0
+            reach[i] = 0.0
+        u_stop = p[k.P_GAP] / a0
+        spread = 1.0 + omega / p[k.P_WN]
+        seg = 0.0   # the largest |theta| since the last cycle completed (contraction only)
         # Point of cycle c: state at c / f (emitted once the integration passes it). Impacts of cycle c are final
         # once the integration has passed (c + 1.5) / f (a contact lasts milliseconds), as in steady_orbit.
         c_done = 0  # cycles 0 .. c_done - 1 have their point and impact count final
@@ -417,8 +438,14 @@ def _loop(name: str) -> types.ModuleType:
             t_stop = (c_done + 1.5) / f
             ist[k.I_IMPOUT] = 0
             ist[k.I_STROUT] = 0
+            keep = fs[k.F_THMAX]
+            if contraction:
+                fs[k.F_THMAX] = 0.0   # the driver's running max, read per call and restored after it
             status = drv.advance(p, fs, ist, ya, yb, fa, Q, t_stop, ch_rate, ch_qty, ch_next, ch_stop, ch_base,
                                  ch_out, 1.0, tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
+            if contraction:
+                seg = max(seg, fs[k.F_THMAX])
+                fs[k.F_THMAX] = max(keep, fs[k.F_THMAX])
             for j in range(ist[k.I_STROUT]):
                 cyc = int(st_out[j, k.S_CYCLE])
                 if cyc <= cap + 1:
@@ -447,9 +474,13 @@ def _loop(name: str) -> types.ModuleType:
                 return (0, 0, KIND_FAILED, c_done, th_s[max(c_done - 1, 0)], om_s[max(c_done - 1, 0)],
                         ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status, math.nan, math.nan)
             c_done += 1
+            if contraction:
+                reach[c_done - 1] = length_l * math.sin(min(seg, 0.5 * math.pi)) / a0
+                seg = 0.0
             if early and min_cycles <= c_done <= cap:
                 if contraction:
-                    n, lo = _converged(u, v, counts, c_done, max_period, block, qmax, stol, quiet, quiet_tol)
+                    n, lo = _converged(u, v, counts, reach, c_done, max_period, block, qmax, stol, quiet, quiet_tol,
+                                       u_stop, spread)
                 else:
                     n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
                     lo = c_done - length - n
@@ -485,6 +516,7 @@ def _loop(name: str) -> types.ModuleType:
         counts = np.zeros(cap + 2, dtype=np.int64)
         peaks = np.zeros(cap + 2)
         vels = np.zeros(cap + 2)
+        reach = np.zeros(cap + 2)
         imp_out = np.empty((256, k.N_RECORD))
         st_out = np.empty((8, n_strobe))
         ch_rate = np.zeros(0)
@@ -509,7 +541,7 @@ def _loop(name: str) -> types.ModuleType:
              w_vel) = loop.run_one(
                 params[gap_index[i]], freqs[i], th0, om0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts,
                 imp_out, st_out, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base,
-                tr_out, peaks, vels, out_pts[i])
+                tr_out, peaks, vels, out_pts[i], reach)
             out_i[i, 0] = period
             out_i[i, 1] = imp
             out_i[i, 2] = kind
