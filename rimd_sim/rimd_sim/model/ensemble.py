@@ -9,12 +9,41 @@ the integrator never shortens a step to land on a stop time, so the trajectory i
 ``RigModel`` run from the same start, however it is cut). The compiled loop is built once per model, at its
 first use, like the driver.
 
-Early stopping (the rule)
--------------------------
+Early stopping (the rules)
+--------------------------
 The stroboscopic point of cycle ``c`` is the state at ``t = c / f`` in the non-dimensional coordinates of
 :mod:`rimd_sim.analysis.dynamics.steady` (``u = l sin(theta) / A0``, ``v = l theta' cos(theta) / (A0 Omega)``),
-paired with the number of impacts that start in cycle ``c``. After each cycle, once at least ``min_cycles``
-cycles have run, the trajectory stops when, for some period ``n <= max_period`` (12),
+paired with the number of impacts that start in cycle ``c``. Two methods (:data:`STOP_METHODS`, the rule's
+``method``): ``window``, the former rule (the default of :class:`StopRule`, so of every map but the Peterka map),
+and ``contraction``, the Peterka map's default.
+
+``contraction``: a convergence test on the stroboscopic (Poincare) map, without a fixed confirmation window.
+After each cycle ``c``, for the smallest period ``n <= max_period`` for which it holds, the trajectory stops when
+
+* the impact counts of the last two blocks of ``h = max(block, 2 n)`` cycles (``block`` 4) repeat with period
+  ``n``;
+* the repetition ``e_i = max(|u_i - u_{i-n}|, |v_i - v_{i-n}|)`` of the latest block is at most ``stop_tolerance``
+  (1e-4), and shrinks: its largest value is at most ``contraction`` (0.5) times the largest of the block before,
+  the ratio ``q`` of a geometric convergence; a saddle passage or a chaotic motion grows or holds instead;
+* the remaining drift of each point to its limit, bounded by the geometric tail ``e (h / n) q / (1 - q)``, is at
+  most ``stop_tolerance`` (or the latest repetition is below 1e-12, exact).
+
+The window classified is then the latest block and the period before it (``h + n >= 3 n`` cycles), by the rule
+of :func:`~rimd_sim.analysis.dynamics.steady.classify`, whose points are within ``stop_tolerance`` of their limit:
+so a motion still converging with alternating points (near a period doubling) is not taken for ``2/2``, its
+period-1 repetition being converged too before it is classified. A motion without impact for ``quiet_cycles``
+(12) cycles stops as ``no impact`` when its period-1 repetition shrinks between the two halves (ratio at most
+0.9: without impact it is a damped oscillation about its forced response) and either its remaining drift is at
+most ``quiet_tolerance`` (1e-2) or its largest reach in the last half (``l sin|theta| / A0`` from the driver's
+running ``|theta|`` per call, times 1.02 for the ends of the steps) is short of the stop (``gap / A0``) by more
+than ``2 (1 + Omega / omega_n)`` times that drift (a drift in ``v`` is an amplitude ``Omega / omega_n`` times as
+large in ``u``). The
+running maximum is read per call and restored after it, so the valid domain's largest ``|theta|`` is unchanged.
+No floor of cycles: a motion that starts on its attractor (a continuation) stops after ``2 h + n`` cycles (9 for a
+period 1). Trajectories that never converge run to the cap, as with ``window``.
+
+``window``, the former rule: after each cycle, once at least ``min_cycles`` cycles have run, the trajectory stops
+when, for some period ``n <= max_period`` (12),
 
 * every point of the last ``L = max(min_window, confirm * n)`` cycles lies within ``stop_tolerance`` (in
   ``u`` and in ``v``) of the point of the same phase in the period just before them (cycle ``c - L - n`` +

@@ -24,10 +24,14 @@ default 1, ``rimd peterka --starts N``), run in the same compiled call per row:
 A cell is marked as holding coexisting attractors when its starts end on more than one class
 (``classes_found``). The mark is a lower bound: an attractor whose basin misses every start is not found;
 with N - 1 Halton points, a basin that covers less than about 1 / (N - 1) of the region can be missed.
-``starts=0`` is the three-start map. Each trajectory stops as soon as its motion is known (the rule of
-:mod:`rimd_sim.model.ensemble`: a period n <= 12 repeated to 1e-4 over max(24, 4 n) cycles, after at least 30
-cycles) or at the cap, ``transient_cycles + measure_cycles`` (default 120 + 72, twice the fixed length the
-map used before early stopping), where its last ``measure_cycles`` are classified. One gap row is one task:
+``starts=0`` is the three-start map. Each trajectory stops as soon as its motion is known or at the cap,
+``transient_cycles + measure_cycles`` (default 120 + 72, twice the fixed length the map used before early
+stopping), where its last ``measure_cycles`` are classified. Known means, by default (``stop="contraction"``, the
+rule of :mod:`rimd_sim.model.ensemble`), that its stroboscopic points repeat with a period n <= 12 and that their
+repetition shrinks between two blocks of max(4, 2 n) cycles so that they are within 1e-4 of their limit (a
+no-impact motion: shrinking, and clear of the stop by more than it can still change); ``stop="window"`` is the
+former rule (a period repeated to 1e-4 over max(24, 4 n) cycles, after at least 30 cycles), which reproduces the
+maps made before it bit for bit. :func:`rest_classes` is a fixed-length reference. One gap row is one task:
 its 3 x frequencies trajectories run in one compiled call (the ``continued`` start runs along the row); the
 tasks go through the executor seam (:mod:`rimd_sim.analysis.executor`): a local process pool on all cores,
 or a Dask cluster.
