@@ -98,6 +98,24 @@ def test_the_contraction_stop_classifies_as_a_run_ten_times_the_cap():
         peterka(config, gaps, freqs, stop="confirm", workers=1)
 
 
+def test_rimd_peterka_stop_window_is_the_former_rule(tmp_path):
+    """``rimd peterka --stop window`` writes the former rule's map (its classes and cycles as the API's
+    ``stop="window"``) and says so in ``summary.json``; the default says ``contraction``."""
+    from rimd_sim.analysis.dynamics.peterka import peterka
+
+    grid = ["--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3", "--f-max", "8", "--freqs", "3",
+            "--starts", "0", "--workers", "1"]
+    assert cli.main(["peterka", *grid, "--stop", "window", "--out", str(tmp_path / "w")]) == 0
+    assert cli.main(["peterka", *grid, "--out", str(tmp_path / "c")]) == 0
+    old, new = read_json(tmp_path / "w" / "summary.json"), read_json(tmp_path / "c" / "summary.json")
+    assert (old["stop"], new["stop"]) == ("window", "contraction")
+    assert new["cycles_run"]["mean"] < old["cycles_run"]["mean"]
+    api = peterka(load_config(None), [0.0, 2.4e-3], [3.0, 5.5, 8.0], starts=0, stop="window", workers=1)
+    with np.load(tmp_path / "w" / "peterka.npz") as npz:
+        assert npz["cycles"].tolist() == api.cycles.tolist()
+        assert npz["classes"][npz["codes"][0]].tolist() == api.primary.tolist()
+
+
 @pytest.mark.process
 def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     """Every third gap row of the default map: >= 99 % of the cells (class from rest) as the fixed-length run
