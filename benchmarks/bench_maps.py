@@ -7,22 +7,30 @@ the load average is printed with each figure):
    a. before: one ``RigModel`` per trajectory through ``steady_orbit``, fixed 60 + 36 cycles
       (as before the ensemble kernel);
    b. batching: the ensemble kernel (every trajectory of a gap row in one compiled call), same fixed cycles;
-   c. early stop: the ensemble kernel stopping each trajectory when its motion is known, cap 96 cycles;
-   d. the default now: early stop with the cap at twice the former cycles (120 + 72).
-   Speed-up of each step against the one before, and of d against a.
+   c. early stop: the ensemble kernel stopping each trajectory when its motion is known (the former ``window``
+      stop), cap 96 cycles;
+   d. early stop with the cap at twice the former cycles (120 + 72), the former ``window`` stop;
+   e. the default now: the same cap, the ``contraction`` stop (docs/analyses.md, Maps at scale).
+   Speed-up of each step against the one before, and of d and e against a.
 2. The default 31 x 61 map: early stop (d) against the fixed-length run with twice the former cycles: agreement
    per start and every differing cell, with a 10x longer run's class.
-3. 200 x 200 with the default (d) (target <= 30 s on 2 cores), and an N x N map (default 400) to project
-   1000 x 1000 (measured there if --big 1000).
+3. 200 x 200 with the default (the ``contraction`` stop, target <= 30 s on 2 workers) and, in the same run, with
+   the former ``window`` stop (the ratio); then an N x N map (default 400) to project 1000 x 1000 (measured there
+   if --big 1000).
 4. Scaling: the S x S map through a real Dask scheduler with 1 and then 2 ``dask worker`` processes (one thread
    each) on loopback: efficiency t1 / (2 t2) (target >= 90 %); the time per cell-cycle against one
    trajectory's own speed in the core.
+6. Agreement with a reference ten times as long: on an R x R map (default 100, ``--reference-size``), the class
+   from rest of the default map (``contraction``) and of the former ``window`` stop against ``rest_classes``: every
+   trajectory from rest run 1920 cycles (ten times the cap, no early stop), its last 72 classified (target
+   >= 99.5 % of the cells); the cells each gets wrong where the other is right; the time of both maps (ratio).
 5. The single-trajectory core as users meet it: ``rimd sweep --workers 1`` (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300
    cycles from rest) in real-time factor, and the scipy ``solve_ivp`` event-driven reference
    (tests/harness/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
 
 Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
-[--sections 1,2,3,4,5]
+[--sections 1,2,3,4,5,6] [--workers 2] [--reference-size 100]. Sections 2 and 4 run the default stop
+(``contraction``).
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -87,14 +96,17 @@ def steps(config, size, workers):
     print(f"  b. + batching (ensemble kernel, fixed 96 cycles):           {tb:7.1f} s   x{ta / tb:.2f} vs a "
           f"(classes identical to a in {100 * same:.2f} % of cell-starts)   {load()}")
     tc, rc = timed_map(config, gaps, freqs, transient_cycles=60, measure_cycles=36, continued_transient_cycles=30,
-                       workers=workers)
+                       stop="window", workers=workers)
     print(f"  c. + early stop (cap 96 cycles):                            {tc:7.1f} s   x{tb / tc:.2f} vs b; "
           f"mean {rc.cycles.mean():.1f} cycles per trajectory, {100 * (rc.cycles <= 96).mean():.1f} % stopped "
           f"early   {load()}")
-    td, rd = timed_map(config, gaps, freqs, workers=workers)
-    print(f"  d. default now (early stop, cap 192 = 2 x 96):              {td:7.1f} s   x{tc / td:.2f} vs c; "
+    td, rd = timed_map(config, gaps, freqs, stop="window", workers=workers)
+    print(f"  d. early stop (window), cap 192 = 2 x 96:                   {td:7.1f} s   x{tc / td:.2f} vs c; "
           f"x{ta / td:.2f} vs a; mean {rd.cycles.mean():.1f} cycles, {100 * (rd.cycles <= 192).mean():.1f} % "
           f"stopped early   {load()}")
+    te, re_ = timed_map(config, gaps, freqs, workers=workers)
+    print(f"  e. default now (contraction stop, cap 192):                 {te:7.1f} s   x{td / te:.2f} vs d; "
+          f"x{ta / te:.2f} vs a; mean {re_.cycles.mean():.1f} cycles   {load()}")
     return ta, td, rd
 
 
@@ -127,11 +139,14 @@ def agreement(config, workers, size=None):
 
 def big(config, workers, n_big, skip_big):
     gaps, freqs = grid(200)
-    print(f"\n3. Big maps (default: early stop, cap 192), local pool, {load()}")
+    print(f"\n3. Big maps (early stop, cap 192), pool of {workers or os.cpu_count()}, {load()}")
     t200, r200 = timed_map(config, gaps, freqs, workers=workers)
-    print(f"  200 x 200: {t200:.1f} s on {r200.workers} processes "
-          "(target <= 30 s; before the ensemble kernel: 168 s idle), "
+    print(f"  200 x 200, default (contraction stop): {t200:.1f} s on {r200.workers} processes (target <= 30 s on 2), "
           f"mean {r200.cycles.mean():.1f} cycles per trajectory   {load()}")
+    tw, rw = timed_map(config, gaps, freqs, stop="window", workers=workers)
+    same = float((rw.primary == r200.primary).mean())
+    print(f"  200 x 200, former (window stop):       {tw:.1f} s, mean {rw.cycles.mean():.1f} cycles: the default "
+          f"x{tw / t200:.2f} faster; classes from rest the same in {100 * same:.2f} % of the cells   {load()}")
     if skip_big:
         return t200, r200
     gaps, freqs = grid(n_big)
@@ -141,6 +156,28 @@ def big(config, workers, n_big, skip_big):
         line += f"; 1000 x 1000 projected (x{(1000 / n_big) ** 2:.2f} cells): {tb * (1000 / n_big) ** 2 / 60:.1f} min"
     print(line)
     return t200, r200
+
+
+def reference_agreement(config, workers, size):
+    """Section 6: the default and the former stop against 1920 cycles from rest, on a size x size map."""
+    gaps, freqs = grid(size)
+    print(f"\n6. {size} x {size} map against a reference ten times as long (1920 cycles from rest, last 72 "
+          f"classified), {load()}")
+    tc, new = timed_map(config, gaps, freqs, workers=workers)
+    tw, old = timed_map(config, gaps, freqs, stop="window", workers=workers)
+    print(f"  default (contraction) {tc:.1f} s, mean {new.cycles.mean():.1f} cycles; former (window) {tw:.1f} s, "
+          f"mean {old.cycles.mean():.1f} cycles: x{tw / tc:.2f}   {load()}")
+    t0 = time.perf_counter()
+    ref = pk.rest_classes(config, gaps, freqs, cycles=1920, measure_cycles=72, workers=workers)
+    print(f"  reference: {time.perf_counter() - t0:.1f} s   {load()}")
+    ok_new, ok_old = new.primary == ref, old.primary == ref
+    print(f"  agreement from rest: default {100 * ok_new.mean():.2f} %, former {100 * ok_old.mean():.2f} % "
+          f"(target >= 99.5 %); the default wrong where the former is right: {int((~ok_new & ok_old).sum())} "
+          f"cells, the reverse: {int((ok_new & ~ok_old).sum())}; both wrong: {int((~ok_new & ~ok_old).sum())}, of "
+          f"which the former ran to the cap: {int((~ok_new & ~ok_old & (old.cycles[0] > 192)).sum())}")
+    wrong = Counter(zip(new.primary[~ok_new].tolist(), ref[~ok_new].tolist(), strict=True))
+    print("  the default's differing cells (map, reference: cells): "
+          + ", ".join(f"{a} vs {b}: {n}" for (a, b), n in wrong.most_common(8)))
 
 
 def _port() -> int:
@@ -248,7 +285,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
     parser.add_argument("--compare-size", type=int, default=None,
                         help="section 2 on an N x N map instead of the default 31 x 61")
-    parser.add_argument("--sections", default="1,2,3,4,5", help="sections to run (default 1,2,3,4,5)")
+    parser.add_argument("--sections", default="1,2,3,4,5,6", help="sections to run (default 1,2,3,4,5,6)")
+    parser.add_argument("--reference-size", type=int, default=100,
+                        help="section 6 on an N x N map (default 100; 200 is the full map, about 4x as long)")
     args = parser.parse_args()
     sections = {int(x) for x in args.sections.split(",")}
     config = SimConfig()
@@ -264,6 +303,8 @@ def main() -> None:
         dask_scaling(config, args.steps_size)
     if 5 in sections:
         single_trajectory(config)
+    if 6 in sections:
+        reference_agreement(config, args.workers, args.reference_size)
 
 
 if __name__ == "__main__":

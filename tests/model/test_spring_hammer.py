@@ -95,7 +95,7 @@ def public_hashes() -> dict[str, str]:
     }
     pts = sweep(rimd, [3.75, 7.25], "rest", cycles=60, measure_cycles=20, workers=1).points
     out["sweep.rimd"] = _digest([tuple(repr(asdict(p)[k]) for k in SWEEP_FIELDS) for p in pts])
-    m = peterka(paper, [0.0, 1e-3], [3.0, 4.5], starts=0, workers=1)
+    m = peterka(paper, [0.0, 1e-3], [3.0, 4.5], starts=0, stop="window", workers=1)
     out["peterka.paper"] = _digest(m.labels.tolist(), m.cycles, m.max_force, m.max_abs_theta)
     return out
 

@@ -9,12 +9,41 @@ the integrator never shortens a step to land on a stop time, so the trajectory i
 ``RigModel`` run from the same start, however it is cut). The compiled loop is built once per model, at its
 first use, like the driver.
 
-Early stopping (the rule)
--------------------------
+Early stopping (the rules)
+--------------------------
 The stroboscopic point of cycle ``c`` is the state at ``t = c / f`` in the non-dimensional coordinates of
 :mod:`rimd_sim.analysis.dynamics.steady` (``u = l sin(theta) / A0``, ``v = l theta' cos(theta) / (A0 Omega)``),
-paired with the number of impacts that start in cycle ``c``. After each cycle, once at least ``min_cycles``
-cycles have run, the trajectory stops when, for some period ``n <= max_period`` (12),
+paired with the number of impacts that start in cycle ``c``. Two methods (:data:`STOP_METHODS`, the rule's
+``method``): ``window``, the former rule (the default of :class:`StopRule`, so of every map but the Peterka map),
+and ``contraction``, the Peterka map's default.
+
+``contraction``: a convergence test on the stroboscopic (Poincare) map, without a fixed confirmation window.
+After each cycle ``c``, for the smallest period ``n <= max_period`` for which it holds, the trajectory stops when
+
+* the impact counts of the last two blocks of ``h = max(block, 2 n)`` cycles (``block`` 4) repeat with period
+  ``n``;
+* the repetition ``e_i = max(|u_i - u_{i-n}|, |v_i - v_{i-n}|)`` of the latest block is at most ``stop_tolerance``
+  (1e-4), and shrinks: its largest value is at most ``contraction`` (0.5) times the largest of the block before,
+  the ratio ``q`` of a geometric convergence; a saddle passage or a chaotic motion grows or holds instead;
+* the remaining drift of each point to its limit, bounded by the geometric tail ``e (h / n) q / (1 - q)``, is at
+  most ``stop_tolerance`` (or the latest repetition is below 1e-12, exact).
+
+The window classified is then the latest block and the period before it (``h + n >= 3 n`` cycles), by the rule
+of :func:`~rimd_sim.analysis.dynamics.steady.classify`, whose points are within ``stop_tolerance`` of their limit:
+so a motion still converging with alternating points (near a period doubling) is not taken for ``2/2``, its
+period-1 repetition being converged too before it is classified. A motion without impact for ``quiet_cycles``
+(12) cycles stops as ``no impact`` when its period-1 repetition shrinks between the two halves (ratio at most
+0.9: without impact it is a damped oscillation about its forced response) and either its remaining drift is at
+most ``quiet_tolerance`` (1e-2) or its largest reach in the last half (``l sin|theta| / A0`` from the driver's
+running ``|theta|`` per call, times 1.02 for the ends of the steps) is short of the stop (``gap / A0``) by more
+than ``2 (1 + Omega / omega_n)`` times that drift (a drift in ``v`` is an amplitude ``Omega / omega_n`` times as
+large in ``u``). The
+running maximum is read per call and restored after it, so the valid domain's largest ``|theta|`` is unchanged.
+No floor of cycles: a motion that starts on its attractor (a continuation) stops after ``2 h + n`` cycles (9 for a
+period 1). Trajectories that never converge run to the cap, as with ``window``.
+
+``window``, the former rule: after each cycle, once at least ``min_cycles`` cycles have run, the trajectory stops
+when, for some period ``n <= max_period`` (12),
 
 * every point of the last ``L = max(min_window, confirm * n)`` cycles lies within ``stop_tolerance`` (in
   ``u`` and in ``v``) of the point of the same phase in the period just before them (cycle ``c - L - n`` +
@@ -73,10 +102,22 @@ from rimd_sim.model.rig_model import MODELS
 from rimd_sim.model.validity import PointMeasures
 
 __all__ = [
-    "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "EnsembleResult", "StopRule", "run_cells",
+    "KIND_CHAOTIC", "KIND_FAILED", "KIND_PERIODIC", "STOP_METHODS", "EnsembleResult", "StopRule", "run_cells",
 ]
 
 KIND_PERIODIC, KIND_CHAOTIC, KIND_FAILED = 0, 1, 2
+#: The early-stopping methods (module docstring): the convergence test on the stroboscopic map, and the former
+#: fixed confirmation window (kept to reproduce earlier maps bit for bit).
+STOP_METHODS = ("window", "contraction")
+#: Repetition below which the ``contraction`` method takes points as converged without a ratio (exact repeats).
+EXACT = 1e-12
+#: A no-impact motion stops when its largest reach, times ``QUIET_PEAK`` (the reach is read at the ends of the
+#: steps, short of the true peak), is clear of the stop by ``QUIET_MARGIN`` times its remaining drift.
+QUIET_PEAK = 1.02
+QUIET_MARGIN = 2.0
+#: Largest ratio between the two blocks of such a motion (without impact it is a damped oscillation about its
+#: forced response: the ratio only sizes the remaining drift, the margin or ``quiet_tolerance`` decides).
+QUIET_CONTRACTION = 0.9
 
 _jit = k._jit
 
@@ -88,17 +129,28 @@ class StopRule:
         min_cycles: Cycles always run before a stop is considered.
         max_cycles: The cap (cycles); 0 for none other than ``measure_cycles`` after ``min_cycles``.
         measure_cycles: Cycles classified at the cap.
-        min_window: Shortest confirmation window (cycles).
-        confirm: Periods in the confirmation window (at least).
+        min_window: Shortest confirmation window (cycles) of the ``window`` method.
+        confirm: Periods in the confirmation window (at least) of the ``window`` method.
         max_period: Longest period looked for (cycles).
         tolerance: Classification tolerance (non-dimensional).
-        stop_tolerance: Repetition required to stop early (non-dimensional).
+        stop_tolerance: Repetition required to stop early (non-dimensional); for the ``contraction`` method, the
+            bound on the points' remaining drift to their limit, and on their latest repetition.
         early: False runs every trajectory to the cap (a fixed-length run).
+        method: ``contraction`` (the convergence test on the stroboscopic map) or ``window`` (the fixed
+            confirmation window): :data:`STOP_METHODS`, module docstring.
+        block: Shortest block of the ``contraction`` method (cycles); a block is ``max(block, 2 n)`` cycles.
+        contraction: Largest ratio between the latest block's repetition and the block's before it.
+        quiet_cycles: Cycles without impact (two blocks) after which the ``contraction`` method stops on a
+            no-impact motion whose points converge.
+        quiet_tolerance: Bound on the remaining drift of such a no-impact motion's points.
     """
 
     def __init__(self, *, min_cycles: int = 30, max_cycles: int = 192, measure_cycles: int = 72,
                  min_window: int = 24, confirm: int = 4, max_period: int = 12, tolerance: float = 1e-3,
-                 stop_tolerance: float | None = None, early: bool = True) -> None:
+                 stop_tolerance: float | None = None, early: bool = True, method: str = "window", block: int = 4,
+                 contraction: float = 0.5, quiet_cycles: int = 12, quiet_tolerance: float = 1e-2) -> None:
+        if method not in STOP_METHODS:
+            raise ConfigError("stop", method, f"must be one of {', '.join(STOP_METHODS)}")
         self.min_cycles = int(min_cycles)
         self.max_cycles = int(max_cycles)
         self.measure_cycles = int(measure_cycles)
@@ -108,17 +160,26 @@ class StopRule:
         self.tolerance = float(tolerance)
         self.stop_tolerance = float(tolerance / 10.0 if stop_tolerance is None else stop_tolerance)
         self.early = bool(early)
+        self.method = method
+        self.block = int(block)
+        self.contraction = float(contraction)
+        self.quiet_cycles = int(quiet_cycles)
+        self.quiet_tolerance = float(quiet_tolerance)
 
     def vector(self) -> np.ndarray:
         """The rule as the float vector the compiled loop reads."""
         return np.array([self.min_cycles, self.max_cycles, self.measure_cycles, self.min_window, self.confirm,
-                         self.max_period, self.tolerance, self.stop_tolerance, 1.0 if self.early else 0.0])
+                         self.max_period, self.tolerance, self.stop_tolerance, 1.0 if self.early else 0.0,
+                         float(STOP_METHODS.index(self.method)), self.block, self.contraction, self.quiet_cycles,
+                         self.quiet_tolerance])
 
     def __repr__(self) -> str:  # noqa: D105
         return (f"StopRule(min_cycles={self.min_cycles}, max_cycles={self.max_cycles}, "
                 f"measure_cycles={self.measure_cycles}, min_window={self.min_window}, confirm={self.confirm}, "
                 f"max_period={self.max_period}, tolerance={self.tolerance}, "
-                f"stop_tolerance={self.stop_tolerance}, early={self.early})")
+                f"stop_tolerance={self.stop_tolerance}, early={self.early}, method={self.method!r}, "
+                f"block={self.block}, contraction={self.contraction}, quiet_cycles={self.quiet_cycles}, "
+                f"quiet_tolerance={self.quiet_tolerance})")
 
 
 @dataclass(eq=False)
@@ -213,6 +274,76 @@ def _settled(u, v, counts, c, max_period, min_window, confirm, stol):
 
 
 @_jit
+def _blocks(u, v, c, n, h):
+    """Largest repetition ``max(|du|, |dv|)`` over period ``n`` in the two blocks of ``h`` cycles before ``c``.
+
+    Returns ``(older, latest)``.
+    """
+    ea = 0.0
+    eb = 0.0
+    for i in range(c - 2 * h, c):
+        e = max(abs(u[i] - u[i - n]), abs(v[i] - v[i - n]))
+        if i < c - h:
+            ea = max(ea, e)
+        else:
+            eb = max(eb, e)
+    return ea, eb
+
+
+@_jit
+def _converged(u, v, counts, reach, c, max_period, block, qmax, stol, quiet, quiet_tol, u_stop, spread):
+    """The ``contraction`` test after cycle ``c - 1`` (module docstring): ``(n, lo)``, or ``(0, 0)``.
+
+    ``n`` is the period found (-1 for a no-impact motion), ``lo`` the first cycle of the window to classify.
+    ``reach`` holds per cycle the largest ``l sin|theta| / A0`` reached, ``u_stop`` is the stop's ``gap / A0``
+    and ``spread`` ``1 + Omega / omega_n`` (a repetition in ``v`` as a change of the amplitude in ``u``).
+    """
+    if quiet > 0 and c >= quiet + 1:
+        ok = True
+        for i in range(c - quiet, c):
+            if counts[i] != 0:
+                ok = False
+                break
+        if ok:
+            h = quiet // 2
+            ea, eb = _blocks(u, v, c, 1, h)
+            if eb < EXACT:
+                return -1, c - quiet
+            q = eb / ea if ea > 0.0 else 1.0
+            if q <= QUIET_CONTRACTION:
+                tail = eb * h * q / (1.0 - q)
+                if tail <= quiet_tol:
+                    return -1, c - quiet
+                # Clear of the stop by more than the motion can still change (twice its remaining drift).
+                top = 0.0
+                for i in range(c - h, c):
+                    top = max(top, reach[i])
+                if u_stop - QUIET_PEAK * top > QUIET_MARGIN * spread * tail:
+                    return -1, c - quiet
+    for n in range(1, max_period + 1):
+        h = max(block, 2 * n)
+        if 2 * h + n > c:
+            return 0, 0
+        ok = True
+        for i in range(c - 2 * h, c):
+            if counts[i] != counts[i - n]:
+                ok = False
+                break
+        if not ok:
+            continue
+        ea, eb = _blocks(u, v, c, n, h)
+        if eb < EXACT:
+            return n, c - h - n
+        if eb > stol or ea <= 0.0:
+            continue
+        q = eb / ea
+        # The remaining drift of each point to its limit, the latest repetitions shrinking by q per block.
+        if q <= qmax and eb * (h / n) * q / (1.0 - q) <= stol:
+            return n, c - h - n
+    return 0, 0
+
+
+@_jit
 def _window_out(u, v, peaks, lo, hi, pts):
     """The largest peak of cycles ``lo .. hi - 1``.
 
@@ -295,7 +426,7 @@ def _loop(name: str) -> types.ModuleType:
     @compiled
     def run_one(p, f, theta0, theta_dot0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts, imp_out, st_out,
                 ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base, tr_out, peaks, vels,
-                pts):
+                pts, reach):
         """One trajectory.
 
         Returns ``(period, impacts, kind, cycles, theta, theta_dot, steps, max_abs_theta, peak_force,
@@ -310,6 +441,11 @@ def _loop(name: str) -> types.ModuleType:
         tol = rule[6]
         stol = rule[7]
         early = rule[8] > 0.0
+        contraction = rule[9] > 0.0
+        block = int(rule[10])
+        qmax = rule[11]
+        quiet = int(rule[12])
+        quiet_tol = rule[13]
         loop.init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, p[k.P_HMAX], imp_out)
         fs[k.F_THMAX] = abs(ya[0])   # the start counts, as in RigModel.advance
         peak = 0.0
@@ -320,6 +456,10 @@ def _loop(name: str) -> types.ModuleType:
             counts[i] = 0
             peaks[i] = 0.0
             vels[i] = 0.0
+            reach[i] = 0.0
+        u_stop = p[k.P_GAP] / a0
+        spread = 1.0 + omega / p[k.P_WN]
+        seg = 0.0   # the largest |theta| since the last cycle completed (contraction only)
         # Point of cycle c: state at c / f (emitted once the integration passes it). Impacts of cycle c are final
         # once the integration has passed (c + 1.5) / f (a contact lasts milliseconds), as in steady_orbit.
         c_done = 0  # cycles 0 .. c_done - 1 have their point and impact count final
@@ -327,8 +467,14 @@ def _loop(name: str) -> types.ModuleType:
             t_stop = (c_done + 1.5) / f
             ist[k.I_IMPOUT] = 0
             ist[k.I_STROUT] = 0
+            keep = fs[k.F_THMAX]
+            if contraction:
+                fs[k.F_THMAX] = 0.0   # the driver's running max, read per call and restored after it
             status = drv.advance(p, fs, ist, ya, yb, fa, Q, t_stop, ch_rate, ch_qty, ch_next, ch_stop, ch_base,
                                  ch_out, 1.0, tr_next, tr_stop, tr_base, tr_out, imp_out, st_out)
+            if contraction:
+                seg = max(seg, fs[k.F_THMAX])
+                fs[k.F_THMAX] = max(keep, fs[k.F_THMAX])
             for j in range(ist[k.I_STROUT]):
                 cyc = int(st_out[j, k.S_CYCLE])
                 if cyc <= cap + 1:
@@ -357,10 +503,17 @@ def _loop(name: str) -> types.ModuleType:
                 return (0, 0, KIND_FAILED, c_done, th_s[max(c_done - 1, 0)], om_s[max(c_done - 1, 0)],
                         ist[k.I_NSTEP], fs[k.F_THMAX], peak, math.nan, status, math.nan, math.nan)
             c_done += 1
+            if contraction:
+                reach[c_done - 1] = length_l * math.sin(min(seg, 0.5 * math.pi)) / a0
+                seg = 0.0
             if early and min_cycles <= c_done <= cap:
-                n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
-                if n > 0:
+                if contraction:
+                    n, lo = _converged(u, v, counts, reach, c_done, max_period, block, qmax, stol, quiet, quiet_tol,
+                                       u_stop, spread)
+                else:
+                    n, length = _settled(u, v, counts, c_done, max_period, min_window, confirm, stol)
                     lo = c_done - length - n
+                if n != 0:
                     period, imp, kind = _classify_window(u, v, counts, lo, c_done, max_period, tol)
                     w_peak = _window_out(u, v, peaks, lo, c_done, pts)
                     return (period, imp, kind, c_done, th_s[c_done], om_s[c_done], ist[k.I_NSTEP], fs[k.F_THMAX],
@@ -392,6 +545,7 @@ def _loop(name: str) -> types.ModuleType:
         counts = np.zeros(cap + 2, dtype=np.int64)
         peaks = np.zeros(cap + 2)
         vels = np.zeros(cap + 2)
+        reach = np.zeros(cap + 2)
         imp_out = np.empty((256, k.N_RECORD))
         st_out = np.empty((8, n_strobe))
         ch_rate = np.zeros(0)
@@ -416,7 +570,7 @@ def _loop(name: str) -> types.ModuleType:
              w_vel) = loop.run_one(
                 params[gap_index[i]], freqs[i], th0, om0, rule, fs, ist, ya, yb, fa, Q, u, v, th_s, om_s, counts,
                 imp_out, st_out, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out, tr_next, tr_stop, tr_base,
-                tr_out, peaks, vels, out_pts[i])
+                tr_out, peaks, vels, out_pts[i], reach)
             out_i[i, 0] = period
             out_i[i, 1] = imp
             out_i[i, 2] = kind

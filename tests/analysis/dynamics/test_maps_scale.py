@@ -30,6 +30,7 @@ import rimd_sim
 from harness.outputs import read_json
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics.steady import steady_orbit
+from rimd_sim.errors import ConfigError
 from rimd_sim.model.ensemble import StopRule, run_cells
 from rimd_sim.model.rig_model import model_for
 from rimd_sim.settings.config import load_config
@@ -68,6 +69,51 @@ def test_early_stop_stops_settled_motions_early_and_runs_chaos_to_the_cap():
                     np.zeros(2), np.zeros(2), rule)
     assert res.labels() == ["1/1", "chaotic/non-periodic"]
     assert rule.min_cycles <= res.cycles[0] <= 40 and res.cycles[1] == rule.max_cycles + 1
+
+
+def test_the_contraction_stop_classifies_as_a_run_ten_times_the_cap():
+    """The default stop (``contraction``) on a 4 x 7 grid of the default rig: the class from rest of every cell
+    (1/1, 3/1, 2/2, 1/2, 5/12, 1/3, no impact and chaotic among them) equals that of a fixed run of 1920 cycles
+    (ten times the cap), with far fewer cycles than the former rule; ``stop="window"`` is the former rule, cell for
+    cell the ensemble run with its rule (``StopRule()``: the 24-cycle window after at least 30 cycles)."""
+    from rimd_sim.analysis.dynamics.peterka import peterka, rest_classes
+
+    config = load_config(None)
+    gaps, freqs = [0.0, 0.8e-3, 1.6e-3, 2.4e-3], np.linspace(2.0, 8.0, 7)
+    new = peterka(config, gaps, freqs, starts=0, workers=1)
+    old = peterka(config, gaps, freqs, starts=0, stop="window", workers=1)
+    reference = rest_classes(config, gaps, freqs, cycles=1920, workers=1)
+    assert new.stop == "contraction" and old.stop == "window"
+    assert new.primary.tolist() == reference.tolist()
+    assert len(set(reference.ravel().tolist())) >= 7
+    settled = new.cycles[0] <= 192
+    assert new.cycles[0][settled].mean() < 0.6 * old.cycles[0][settled].mean()
+    assert new.cycles[0].min() < 30 <= old.cycles[0].min()   # no 30-cycle floor
+    for i, g in enumerate(gaps):
+        cfg = config.with_parameters({"gap": g})
+        res = run_cells("rigid", model_for(cfg).params(cfg)[None, :], np.zeros(7, dtype=np.int64), freqs,
+                        np.zeros(7), np.zeros(7), StopRule())
+        assert old.labels[0, i].tolist() == res.labels() and old.cycles[0, i].tolist() == res.cycles.tolist()
+    with pytest.raises(ConfigError, match="stop"):
+        peterka(config, gaps, freqs, stop="confirm", workers=1)
+
+
+def test_rimd_peterka_stop_window_is_the_former_rule(tmp_path):
+    """``rimd peterka --stop window`` writes the former rule's map (its classes and cycles as the API's
+    ``stop="window"``) and says so in ``summary.json``; the default says ``contraction``."""
+    from rimd_sim.analysis.dynamics.peterka import peterka
+
+    grid = ["--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3", "--f-max", "8", "--freqs", "3",
+            "--starts", "0", "--workers", "1"]
+    assert cli.main(["peterka", *grid, "--stop", "window", "--out", str(tmp_path / "w")]) == 0
+    assert cli.main(["peterka", *grid, "--out", str(tmp_path / "c")]) == 0
+    old, new = read_json(tmp_path / "w" / "summary.json"), read_json(tmp_path / "c" / "summary.json")
+    assert (old["stop"], new["stop"]) == ("window", "contraction")
+    assert new["cycles_run"]["mean"] < old["cycles_run"]["mean"]
+    api = peterka(load_config(None), [0.0, 2.4e-3], [3.0, 5.5, 8.0], starts=0, stop="window", workers=1)
+    with np.load(tmp_path / "w" / "peterka.npz") as npz:
+        assert npz["cycles"].tolist() == api.cycles.tolist()
+        assert npz["classes"][npz["codes"][0]].tolist() == api.primary.tolist()
 
 
 @pytest.mark.process

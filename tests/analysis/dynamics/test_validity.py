@@ -218,11 +218,12 @@ def test_researchers_basins_are_marked_and_the_verb_exits_3(fn11, tmp_path, caps
 
 def test_paper_map_cells_are_valid_and_their_classes_unchanged(tmp_path, capsys):
     """The default rig's map at gap 0 and 2.4 mm: every cell valid, the verb exits 0 with no validity line, and
-    the classes and cycles are those of the map before the valid domain (pinned from the code before it)."""
+    the classes and cycles are those of the map before the valid domain (pinned from the code before it, whose
+    stop rule was the confirmation window)."""
     from rimd_sim.analysis.dynamics.peterka import peterka
 
     result = peterka(SimConfig(), [0.0, 2.4e-3], [3.0, 5.5, 8.0], transient_cycles=30, measure_cycles=24,
-                     workers=1)
+                     stop="window", workers=1)
     assert result.labels.tolist() == [[["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
                                       [["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
                                       [["1/1", "3/2", "1/2"], ["no impact", "no impact", "no impact"]]]

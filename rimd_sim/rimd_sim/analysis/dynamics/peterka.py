@@ -24,10 +24,14 @@ default 1, ``rimd peterka --starts N``), run in the same compiled call per row:
 A cell is marked as holding coexisting attractors when its starts end on more than one class
 (``classes_found``). The mark is a lower bound: an attractor whose basin misses every start is not found;
 with N - 1 Halton points, a basin that covers less than about 1 / (N - 1) of the region can be missed.
-``starts=0`` is the three-start map. Each trajectory stops as soon as its motion is known (the rule of
-:mod:`rimd_sim.model.ensemble`: a period n <= 12 repeated to 1e-4 over max(24, 4 n) cycles, after at least 30
-cycles) or at the cap, ``transient_cycles + measure_cycles`` (default 120 + 72, twice the fixed length the
-map used before early stopping), where its last ``measure_cycles`` are classified. One gap row is one task:
+``starts=0`` is the three-start map. Each trajectory stops as soon as its motion is known or at the cap,
+``transient_cycles + measure_cycles`` (default 120 + 72, twice the fixed length the map used before early
+stopping), where its last ``measure_cycles`` are classified. Known means, by default (``stop="contraction"``, the
+rule of :mod:`rimd_sim.model.ensemble`), that its stroboscopic points repeat with a period n <= 12 and that their
+repetition shrinks between two blocks of max(4, 2 n) cycles so that they are within 1e-4 of their limit (a
+no-impact motion: shrinking, and clear of the stop by more than it can still change); ``stop="window"`` is the
+former rule (a period repeated to 1e-4 over max(24, 4 n) cycles, after at least 30 cycles), which reproduces the
+maps made before it bit for bit. :func:`rest_classes` is a fixed-length reference. One gap row is one task:
 its 3 x frequencies trajectories run in one compiled call (the ``continued`` start runs along the row); the
 tasks go through the executor seam (:mod:`rimd_sim.analysis.executor`): a local process pool on all cores,
 or a Dask cluster.
@@ -76,7 +80,7 @@ from rimd_sim.analysis.dynamics.steady import (
 from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.errors import ConfigError, IntegrationError
 from rimd_sim.model import validity
-from rimd_sim.model.ensemble import StopRule, run_cells
+from rimd_sim.model.ensemble import STOP_METHODS, StopRule, run_cells
 from rimd_sim.model.rig_model import model_for
 from rimd_sim.model.validity import (
     PointMeasures,
@@ -86,10 +90,12 @@ from rimd_sim.model.validity import (
 )
 from rimd_sim.settings.config import SimConfig
 
-__all__ = ["BasinsResult", "DEFAULT_EXTRA_STARTS", "PeterkaResult", "START_NAMES", "basins", "extra_starts",
-           "peterka"]
+__all__ = ["BasinsResult", "DEFAULT_EXTRA_STARTS", "DEFAULT_STOP", "PeterkaResult", "START_NAMES", "basins",
+           "extra_starts", "peterka", "rest_classes"]
 
 START_NAMES = ("rest", "kick", "continued")
+#: How a Peterka map's trajectories are judged settled by default (module docstring; ``window``: the former rule).
+DEFAULT_STOP = "contraction"
 #: Extra starts per Peterka cell by default: the no-impact forced response (module docstring).
 DEFAULT_EXTRA_STARTS = 1
 FAILED = "integration failed"
@@ -125,6 +131,7 @@ class PeterkaResult:
         peak_force: Largest impact force (N) of the classified window of the ``rest`` start, per cell (rows,
             columns): the steady force of the cell's motion from rest; 0 without impact, NaN where it failed.
         impact_velocity: Largest impact velocity (m/s, the approach speed at contact onset) of the same window.
+        stop: How trajectories were judged settled when stopping early (``contraction`` or ``window``).
     """
 
     gaps_mm: np.ndarray
@@ -148,6 +155,7 @@ class PeterkaResult:
     extra_max_force: np.ndarray | None = None
     peak_force: np.ndarray | None = None
     impact_velocity: np.ndarray | None = None
+    stop: str = "window"
 
     @property
     def starts(self) -> int:
@@ -343,15 +351,24 @@ def _check_cycles(transient: int, measure: int) -> None:
         raise ConfigError("cycles", (transient, measure), "need transient_cycles >= 0 and measure_cycles >= 6")
 
 
-def stop_rule(transient_cycles: int, measure_cycles: int, early_stop: bool) -> StopRule:
-    """The rule of :mod:`rimd_sim.model.ensemble` with the cap ``transient + measure`` cycles."""
-    return StopRule(max_cycles=transient_cycles + measure_cycles, measure_cycles=measure_cycles, early=early_stop,
-                    min_cycles=min(30, transient_cycles + measure_cycles))
+def stop_rule(transient_cycles: int, measure_cycles: int, early_stop: bool, method: str = "window") -> StopRule:
+    """The rule of :mod:`rimd_sim.model.ensemble` with the cap ``transient + measure`` cycles.
+
+    ``method`` ``window`` (the fixed confirmation window, at least 30 cycles) or ``contraction`` (the convergence
+    test on the stroboscopic map, no floor but its own blocks).
+    """
+    cap = transient_cycles + measure_cycles
+    if method == "contraction":
+        return StopRule(max_cycles=cap, measure_cycles=measure_cycles, early=early_stop, min_cycles=0,
+                        method=method)
+    return StopRule(max_cycles=cap, measure_cycles=measure_cycles, early=early_stop, min_cycles=min(30, cap),
+                    method=method)
 
 
 def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int = 120, measure_cycles: int = 72,
             continued_transient_cycles: int = 60, early_stop: bool = True, starts: int = DEFAULT_EXTRA_STARTS,
-            workers: int | None = None, scheduler: str | None = None, progress=None) -> PeterkaResult:
+            stop: str = DEFAULT_STOP, workers: int | None = None, scheduler: str | None = None,
+            progress=None) -> PeterkaResult:
     """Classify every (gap, frequency) cell from three starts (module docstring).
 
     Args:
@@ -366,6 +383,9 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
             fixed-length run).
         starts: Extra starts per cell looking for coexisting attractors (module docstring), >= 0; 0 is the
             three-start map.
+        stop: How a trajectory is judged settled when stopping early (module docstring): ``contraction`` (the
+            default, the convergence test on the stroboscopic map) or ``window`` (the former fixed confirmation
+            window: the maps made before, bit for bit).
         workers: Local processes (default: all cores).
         scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
         progress: Optional callable ``progress(rows_done, rows)``.
@@ -374,9 +394,11 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
         The classes per start and cell, the cycles run, the valid domain's verdicts and the costs.
 
     Raises:
-        ConfigError: For a bad gap, frequency or cycle count.
+        ConfigError: For a bad gap, frequency, cycle count or stop method.
         SchedulerError: For an unusable scheduler.
     """
+    if stop not in STOP_METHODS:
+        raise ConfigError("stop", stop, f"must be one of {', '.join(STOP_METHODS)}")
     gaps = [float(g) for g in gaps_m]
     if not gaps or any(not (math.isfinite(g) and g >= 0) for g in gaps):
         raise ConfigError("gaps", gaps, "must be non-empty, each finite and >= 0 m")
@@ -386,8 +408,8 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
     if not (isinstance(starts, int | np.integer) and 0 <= starts <= 4096):
         raise ConfigError("starts", starts, "must be an integer in [0, 4096]")
     start = time.perf_counter()
-    rule = stop_rule(transient_cycles, measure_cycles, early_stop)
-    continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop)
+    rule = stop_rule(transient_cycles, measure_cycles, early_stop, stop)
+    continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop, stop)
     rig = config.rig
     jobs = []
     for g in gaps:
@@ -422,7 +444,7 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
                            extra_invalid_rules=all_rules[named:] if starts else None,
                            extra_max_abs_theta=theta[named:] if starts else None,
                            extra_max_force=force[named:] if starts else None,
-                           peak_force=window[..., 0], impact_velocity=window[..., 1])
+                           peak_force=window[..., 0], impact_velocity=window[..., 1], stop=stop)
     return _with_validity(result, dom)
 
 
@@ -512,6 +534,34 @@ def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, 
     return {"fixed_cycles": int(fixed.cycles_per_start), "agreement_from_rest": agreement[0],
             "agreement_per_start": dict(zip(START_NAMES, agreement, strict=True)),
             "fixed_wall_seconds": fixed.wall_seconds, "differing_cells": cells}
+
+
+def _rest_row(args) -> list[str]:
+    """One gap row of :func:`rest_classes`: every frequency from rest, at fixed length, in one compiled call."""
+    model, p, freqs, rule = args
+    n = len(freqs)
+    return run_cells(model, p[None, :], np.zeros(n, dtype=np.int64), freqs, np.zeros(n), np.zeros(n),
+                     rule).labels()
+
+
+def rest_classes(config: SimConfig, gaps_m, frequencies_hz, *, cycles: int = 1920, measure_cycles: int = 72,
+                 workers: int | None = None, scheduler: str | None = None, progress=None) -> np.ndarray:
+    """The class from rest of every (gap, frequency) cell after a fixed number of cycles: a map's reference.
+
+    Each trajectory runs ``cycles`` cycles (no early stop) and its last ``measure_cycles`` are classified, as the
+    ``rest`` start of :func:`peterka` at its cap; default ten times the default cap (192). Returns the labels,
+    shape ``(gaps, frequencies)``.
+    """
+    freqs = np.array(sorted(check_frequencies(config, frequencies_hz)))
+    _check_cycles(cycles - measure_cycles, measure_cycles)
+    rule = StopRule(early=False, max_cycles=cycles, measure_cycles=measure_cycles)
+    jobs = []
+    for g in gaps_m:
+        cfg = config.with_parameters({"gap": float(g)})
+        model = model_for(cfg)
+        jobs.append((model.name, model.params(cfg), freqs, rule))
+    rows, _, _ = run_tasks(_rest_row, jobs, workers=workers, scheduler=scheduler, progress=progress)
+    return np.array(rows, dtype=object)
 
 
 def cycles_summary(cycles: np.ndarray, cap: int) -> dict:

@@ -43,6 +43,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"extra starts per cell looking for coexisting attractors, default "
                              f"{DEFAULT_EXTRA_STARTS} (the no-impact forced response; more: points spread over "
                              f"the region of rimd basins); 0: the three-start map")
+    parser.add_argument("--stop", choices=("contraction", "window"), default="contraction",
+                        help="how a trajectory is judged settled: contraction (default: its stroboscopic points "
+                             "repeat and their repetition shrinks, so they are within 1e-4 of their limit) or "
+                             "window (the former rule: a 24-cycle confirmation window after at least 30 cycles, "
+                             "to reproduce earlier maps bit for bit)")
     add_accept_invalid_argument(parser)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the cap) and list the differing cells in "
@@ -73,7 +78,7 @@ def main(args: argparse.Namespace) -> int:
     freqs = np.linspace(args.f_min, args.f_max, args.freqs)
     result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
                      measure_cycles=args.measure_cycles, early_stop=not args.fixed_length, starts=args.starts,
-                     workers=args.workers, scheduler=args.scheduler,
+                     stop=args.stop, workers=args.workers, scheduler=args.scheduler,
                      progress=progress_printer("peterka", "gap rows"))
     comparison = None
     if args.compare_fixed and not args.fixed_length:
@@ -96,7 +101,7 @@ def main(args: argparse.Namespace) -> int:
                         + (f" and {args.starts - 1} Halton points over the region of rimd basins"
                            if args.starts > 1 else "")},
         "transient_cycles": args.transient_cycles,
-        "measure_cycles": args.measure_cycles, "early_stop": result.early_stop,
+        "measure_cycles": args.measure_cycles, "early_stop": result.early_stop, "stop": result.stop,
         "cycles_run": cycles_summary(result.cycles, result.cycles_per_start),
         "wall_seconds": result.wall_seconds, "workers": result.workers, "where": result.where,
         "validity": result.validity,
