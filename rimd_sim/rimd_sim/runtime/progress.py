@@ -13,7 +13,13 @@ import threading
 import time
 from typing import Any
 
-__all__ = ["ProgressLedger", "stamp_ns"]
+__all__ = ["PACING_STATUS", "PUBLISHED_KEY", "ProgressLedger", "stamp_ns"]
+
+#: The end of the name of a lockstep publisher's status on ``/diagnostics`` (``rimd_simulator: pacing``): what a
+#: consumer reads to learn what it publishes and whether it waits for it.
+PACING_STATUS = ": pacing"
+#: The end of the key of each topic a publisher publishes, in that status (``/rig/impact/force published``).
+PUBLISHED_KEY = " published"
 
 
 def stamp_ns(stamp: Any) -> int:

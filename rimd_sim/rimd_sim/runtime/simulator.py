@@ -52,6 +52,7 @@ from rimd_sim.instruments.faults import parse_fault_entry
 from rimd_sim.instruments.rig_simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.io.cdr import BLOCK_ARRAYS, CdrWriter, SampleBlockEncoder
 from rimd_sim.runtime.pacing import Go, Hold, Pacer, Wait
+from rimd_sim.runtime.progress import PACING_STATUS, PUBLISHED_KEY
 from rimd_sim.settings.config import (
     CHANNEL_NAMES,
     MAX_RAMP_RATE,
@@ -737,7 +738,7 @@ class SimulatorRuntime:
             values["stamps_behind_wall_clock_s"] = f"{self._paused_wall:.3f}"
         for out in self._outputs:   # per topic: what went out, and to how many matched subscribers
             topic = self._topics[out.key]
-            values[f"{topic} published"] = str(self._sent.get(topic, 0))
+            values[f"{topic}{PUBLISHED_KEY}"] = str(self._sent.get(topic, 0))
             values[f"{topic} subscribers"] = str(subscribers.get(topic, 0))
         if self._lockstep is not None and lockstep is not None:
             values["lockstep_waiting_for"] = holding
@@ -748,7 +749,7 @@ class SimulatorRuntime:
                         "left" if c.left else "dropped" if c.dropped else "timed out" if c.timed_out
                         else "not joined" if c.done_ns is None else "joined")
         name = self._node.rsplit("/", 1)[-1]
-        pacing = Status(f"{name}: pacing", level, message, SESSION_FRAME, values)
+        pacing = Status(f"{name}{PACING_STATUS}", level, message, SESSION_FRAME, values)
         with self._lock:
             active = self._sim.active_faults()
         faults = {f"fault_{f.number}": (

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from rimd_sim.errors import CommandError
+from rimd_sim.runtime.progress import PACING_STATUS, PUBLISHED_KEY
 from rimd_sim.settings.recording import PROGRESS_STAMP_KEY, RecorderSettings, compile_patterns
 
 __all__ = ["RECORDER_NODE", "ExperimentPlan", "ExperimentRecorder", "ExperimentRun", "frequency_steps"]
@@ -102,6 +103,7 @@ class ExperimentRecorder:
 
         self._client, self.directory, self._log_path, self._log = client, directory, log_path, log
         self.written: dict[str, int] = {}   # topic -> header stamp (ns) of the last message it wrote
+        self.rig_topics: set[str] = set()   # what the rig says it publishes (its pacing status)
         self.proc: subprocess.Popen | None = None
         client.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
 
@@ -111,6 +113,9 @@ class ExperimentRecorder:
                 for kv in status.values:
                     if kv.key.endswith(PROGRESS_STAMP_KEY):
                         self.written[kv.key[: -len(PROGRESS_STAMP_KEY)]] = int(kv.value)
+            elif status.name.endswith(PACING_STATUS):
+                self.rig_topics.update(kv.key[: -len(PUBLISHED_KEY)] for kv in status.values
+                                       if kv.key.endswith(PUBLISHED_KEY) and kv.key.startswith("/rig/"))
 
     def tail(self, lines: int = 5) -> str:
         """The end of its output, for an error message."""
@@ -140,7 +145,11 @@ class ExperimentRecorder:
         self._log(f"recorder started (pid {self.proc.pid}), recording into {self.directory}")
 
     def wait_subscribed(self, timeout: float) -> None:
-        """Wait until it subscribes to every rig topic that has a publisher (those it never records aside).
+        """Wait until it subscribes to every rig topic (those it never records aside).
+
+        The rig's topics are those its pacing status on ``/diagnostics`` lists, and any other ``/rig/`` topic with
+        a publisher: the graph alone is not enough, since under load it can show some of the rig's publishers
+        before the others, and a topic the recorder subscribed to only after the run began misses its start.
 
         Raises:
             CommandError: It exited, or did not subscribe in time (stopped then).
@@ -153,9 +162,11 @@ class ExperimentRecorder:
         def subscribed() -> bool:
             if proc.poll() is not None:
                 return True
-            topics = [name for name, _ in node.get_topic_names_and_types()
-                      if name.startswith("/rig/") and node.count_publishers(name) > 0
-                      and not any(p.fullmatch(name) for p in excluded)]
+            if not self.rig_topics:
+                return False   # the rig's own list not heard yet
+            topics = {name for name, _ in node.get_topic_names_and_types()
+                      if name.startswith("/rig/") and node.count_publishers(name) > 0} | self.rig_topics
+            topics = {name for name in topics if not any(p.fullmatch(name) for p in excluded)}
             return bool(topics) and all(
                 any(info.node_name == RECORDER_NODE for info in node.get_subscriptions_info_by_topic(t))
                 for t in topics)

@@ -48,6 +48,9 @@ DEFAULT_NAMESPACE = "rig"
 #: Longest the rig waits for DDS to match the readers the graph already shows (s): before its first block, and
 #: in lockstep whenever a consumer joins.
 MATCH_TIMEOUT_S = 2.0
+#: The same in lockstep, where nothing may be lost however loaded the machine (s): a consumer that joined waits
+#: for its readers to be matched rather than miss the first blocks.
+MATCH_TIMEOUT_LOCKSTEP_S = 15.0
 
 
 def to_time(ns: int) -> Time:
@@ -105,6 +108,7 @@ class SimulatorNode(RimdNode):
             for out in outs:
                 feed.offer(self._pubs[out.key].topic_name, out.type_name, self._offered(self._pubs[out.key]))
             send = self._feeding(feed)
+        self._lockstep = settings.lockstep.enabled   # read by the wait for matches
         self._rt = SimulatorRuntime(
             config, settings, send=send,
             topics={key: pub.topic_name for key, pub in self._pubs.items()}, node=self.get_fully_qualified_name(),
@@ -204,12 +208,13 @@ class SimulatorNode(RimdNode):
         lag the consumer's too (under load, by more than the match): a joining consumer names its node and
         topics, and the wait lasts until the graph here shows that node's readers of them, and they are matched.
         """
-        deadline = time.monotonic() + MATCH_TIMEOUT_S
+        timeout = MATCH_TIMEOUT_LOCKSTEP_S if self._lockstep else MATCH_TIMEOUT_S
+        deadline = time.monotonic() + timeout
         while (unmatched := self._unmatched(joining)) and time.monotonic() < deadline and not self._stop.is_set():
             time.sleep(0.005)
         if unmatched:
             self.get_logger().warning(f"publishing although readers of {', '.join(unmatched)} are not matched after "
-                                      f"{MATCH_TIMEOUT_S:g} s: they may miss blocks")
+                                      f"{timeout:g} s: they may miss blocks")
 
     def _unmatched(self, joining: dict[str, list[str]]) -> list[str]:
         """Topics whose publisher has not matched every subscription the graph shows yet (DDS discovery).
