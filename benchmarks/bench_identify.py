@@ -194,7 +194,7 @@ def faults(rigs: list[dict], clean: dict[int, dict], work: Path, factory) -> Non
     print(f"within 1 % (gap 20 um) of the clean answer: {ok_all}/{len(rigs)} rigs (target: all)")
 
 
-def captures(rigs: list[dict], work: Path, factory) -> None:
+def captures(rigs: list[dict], work: Path, factory, only: set[int] | None = None) -> None:
     """Each rig with the 1 MHz triggered captures: the contact's parameters against the truth."""
     from rimd_sim.analysis.identification.design import identification_steps
     from rimd_sim.settings.config import SimConfig
@@ -203,6 +203,8 @@ def captures(rigs: list[dict], work: Path, factory) -> None:
     print("rig        m %        k %        c %  k and c within 0.5 %")
     ok_all = 0
     for i, rig in enumerate(rigs):
+        if only is not None and i not in only:
+            continue
         design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
         report, wall = _case(i, rig, work, "captures", Schedule(design.frequencies, dwell=DWELL, capture=True,
                                                                 seed=100 + i), factory)
@@ -213,7 +215,8 @@ def captures(rigs: list[dict], work: Path, factory) -> None:
         ok = all(abs(e) <= 0.5 for e in errs[1:])   # the contact's parameters: k and c
         ok_all += ok
         print(f"{i:>3} " + " ".join(f"{e:+10.4f}" for e in errs) + f"  {'yes' if ok else 'NO':>20}  ({wall:.0f} s)")
-    print(f"contact (k, c) within 0.5 % with captures: {ok_all}/{len(rigs)} rigs (target: all)")
+    n = len(rigs) if only is None else len(only)
+    print(f"contact (k, c) within 0.5 % with captures: {ok_all}/{n} rigs (target: all)")
 
 
 def timing(work: Path) -> None:
@@ -244,6 +247,8 @@ def main() -> None:
     parser.add_argument("--time", action="store_true", help="only the time target (default rig, 60 s)")
     parser.add_argument("--captures-only", action="store_true",
                         help="only the captures' section (it needs no clean answer)")
+    parser.add_argument("--only", default="", metavar="I,J,...",
+                        help="with --captures-only: only these rigs of the draw (to share the work between runs)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_identify_") as tmp:
         work = Path(tmp)
@@ -258,7 +263,8 @@ def main() -> None:
         try:
             if args.captures_only:
                 print(f"battery: {args.rigs} rigs (seed {args.seed}), 6 steps of {DWELL:g} s each; {_load()}")
-                captures(draw_rigs(args.rigs, seed=args.seed), work, factory)
+                only = {int(i) for i in args.only.split(",")} if args.only else None
+                captures(draw_rigs(args.rigs, seed=args.seed), work, factory, only)
             else:
                 battery(args, work, factory)
         finally:
