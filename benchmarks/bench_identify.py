@@ -104,6 +104,15 @@ def _how(factory) -> str:
     return "by the core in this process" if factory is None else "through the rig (simulator node, rimd experiment)"
 
 
+def _record(factory, where: Path, rig: dict, schedule: Schedule) -> Path:
+    """``schedule`` on ``rig`` recorded through the rig (``factory``) or, when None, by the core; the recording."""
+    if factory is None:
+        recording = where.with_suffix(".mcap")
+        write_core_recording(recording, rig, schedule)
+        return recording
+    return record_through_rig(factory, where, rig, schedule)
+
+
 def battery(args: argparse.Namespace, work: Path, factory) -> None:
     from rimd_sim.analysis.identification.design import identification_steps
     from rimd_sim.settings.config import SimConfig
@@ -120,12 +129,7 @@ def battery(args: argparse.Namespace, work: Path, factory) -> None:
     for i, rig in enumerate(rigs):
         design = identification_steps(SimConfig().with_parameters(rig), dwell=DWELL, settle=3.0)
         schedule = Schedule(design.frequencies, dwell=DWELL, seed=100 + i)
-        if factory is None:
-            recording = work / f"rig{i}.mcap"
-            write_core_recording(recording, rig, schedule)
-        else:
-            recording = record_through_rig(factory, work / f"rig{i}", rig, schedule)
-        report, wall, _ = _identify(recording, work / f"id{i}")
+        report, wall, _ = _identify(_record(factory, work / f"rig{i}", rig, schedule), work / f"id{i}")
         line, covered, params, accepted = _row(i, rig, report, wall)
         print(line, flush=True)
         clean[i] = report
@@ -151,12 +155,7 @@ def _case(i: int, rig: dict, work: Path, case: str, schedule: Schedule, factory)
 
     Returns the report (None, said on a line, when refused) and the wall time.
     """
-    if factory is None:
-        recording = work / f"rig{i}_{case}.mcap"
-        write_core_recording(recording, rig, schedule)
-    else:
-        recording = record_through_rig(factory, work / f"rig{i}_{case}", rig, schedule)
-    report, wall, _ = _identify(recording, work / f"id{i}_{case}")
+    report, wall, _ = _identify(_record(factory, work / f"rig{i}_{case}", rig, schedule), work / f"id{i}_{case}")
     if "refused" in report:
         print(f"{i:>3} REFUSED: {report['refused']}")
         return None, wall
@@ -250,6 +249,16 @@ def main() -> None:
     parser.add_argument("--only", default="", metavar="I,J,...",
                         help="with --captures-only: only these rigs of the draw (to share the work between runs)")
     args = parser.parse_args()
+    only = None
+    if args.only:
+        if not args.captures_only:
+            parser.error("--only applies to --captures-only")
+        try:
+            only = {int(i) for i in args.only.split(",")}
+        except ValueError:
+            parser.error(f"--only {args.only!r}: must be rig indices separated by commas, e.g. 0,3,7")
+        if not all(0 <= i < args.rigs for i in only):
+            parser.error(f"--only {args.only!r}: each index must be in 0..{args.rigs - 1}")
     with tempfile.TemporaryDirectory(prefix="bench_identify_") as tmp:
         work = Path(tmp)
         if args.time:
@@ -263,7 +272,6 @@ def main() -> None:
         try:
             if args.captures_only:
                 print(f"battery: {args.rigs} rigs (seed {args.seed}), 6 steps of {DWELL:g} s each; {_load()}")
-                only = {int(i) for i in args.only.split(",")} if args.only else None
                 captures(draw_rigs(args.rigs, seed=args.seed), work, factory, only)
             else:
                 battery(args, work, factory)
