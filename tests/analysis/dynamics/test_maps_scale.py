@@ -230,6 +230,15 @@ PETERKA = ["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "6",
            "--freqs", "12", "--transient-cycles", "60", "--measure-cycles", "36"]
 
 
+def test_rimd_peterka_offers_the_analysis_stop_methods_and_default():
+    """The verb mirrors the methods and the default without importing the analysis to build its parser."""
+    from rimd_sim.analysis.dynamics.peterka import DEFAULT_STOP
+    from rimd_sim.cli.verbs import peterka as verb
+    from rimd_sim.model.ensemble import STOP_METHODS
+
+    assert (tuple(verb.STOP_METHODS), verb.DEFAULT_STOP) == (STOP_METHODS, DEFAULT_STOP)
+
+
 @pytest.mark.process
 def test_dask_peterka_is_the_local_map_even_when_a_worker_dies(cluster, tmp_path):
     """``peterka.csv`` through the cluster equals the local one byte for byte; then again with one of the two

@@ -27,6 +27,8 @@ from rimd_sim.cli.verbs._analysis_io import (
 
 #: ``rimd_sim.analysis.dynamics.peterka.DEFAULT_EXTRA_STARTS``, without importing the analysis to build the parser.
 DEFAULT_EXTRA_STARTS = 1
+#: ``rimd_sim.model.ensemble.STOP_METHODS`` and ``rimd_sim.analysis.dynamics.peterka.DEFAULT_STOP``, likewise.
+STOP_METHODS, DEFAULT_STOP = ("window", "contraction"), "contraction"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"extra starts per cell looking for coexisting attractors, default "
                              f"{DEFAULT_EXTRA_STARTS} (the no-impact forced response; more: points spread over "
                              f"the region of rimd basins); 0: the three-start map")
-    parser.add_argument("--stop", choices=("contraction", "window"), default="contraction",
+    parser.add_argument("--stop", choices=STOP_METHODS, default=DEFAULT_STOP,
                         help="how a trajectory is judged settled: contraction (default: its stroboscopic points "
                              "repeat and their repetition shrinks, so they are within 1e-4 of their limit) or "
                              "window (the former rule: a 24-cycle confirmation window after at least 30 cycles, "
