@@ -6,7 +6,7 @@ low-pass and a 1st-order high-pass. Both are designed here as ``scipy.signal.but
 output="sos")`` designs them, step by step with the same numpy operations in the same order (the analog
 prototype's poles, the frequency pre-warped for the bilinear transform, the transform, and the pairing of poles
 and zeros into one section), so that the coefficients are the same floating-point numbers, signs of zeros
-included, and the readings bit-identical: ``tests/core/test_butterworth.py`` compares them with scipy's over
+included, and the readings bit-identical: ``tests/instruments/test_butterworth.py`` compares them with scipy's over
 the whole range of cutoffs.
 """
 
