@@ -228,3 +228,60 @@ def test_a_stop_stamp_cuts_every_topic_there_and_the_file_stays_standard(tmp_pat
     assert (report.written, report.lost) == (3, 0)   # left out at the stop: not loss
     assert any(f"stopped at stamp {stop} ns: 3 message(s) at or after it left out, 1 block(s) cut" in line
                for line in s.summary())
+
+
+def _blocks_from(first_block: int, count: int, rate: float, n: int) -> list[bytes]:
+    return [serialize_message(SampleBlock(first_index=(first_block + i) * n, sample_rate=rate, unit="m",
+                                          samples=[0.0] * n)) for i in range(count)]
+
+
+def test_loss_the_file_cannot_show_is_counted_said_and_written_into_it(tmp_path):
+    """What a lockstep recorder knows was lost before the file: the transport's declared losses, and a sampled
+    topic that starts later than the run (a lockstep rig waits for its consumer from sample 0 on every topic).
+    Counted per topic, said in the summary, written into the recording (``rimd_loss``), read back by the
+    analysis' loss report; nothing of it without lockstep, or when no topic starts at the run's start."""
+    from rimd_sim.analysis.recordings.recorded import RecordedData, loss_text
+    from rimd_sim.runtime.recorder import LOSS_METADATA
+
+    force = "/rig/impact/force"
+    lockstep = [True]
+    s, log, _ = session(tmp_path, in_lockstep=lambda: lockstep[0])
+    s.add_topic(force, BLOCK, [qos_profile_dict(depth=100)])
+    for i, data in enumerate(_blocks_from(0, 10, 20000.0, 200)):          # from the run's start: index 0
+        s.put(force, data, 10**18 + i)
+    for i, data in enumerate(_blocks_from(3, 7, 2000.0, 20)):             # its first 3 blocks never came
+        s.put(TOPIC, data, 10**18 + i)
+    s.transport_lost(TOPIC, 3)
+    s.process()
+    report = s.loss_report()
+    assert (report[TOPIC].missing_at_start, report[TOPIC].transport_lost, report[TOPIC].lost_samples) == (60, 3, 0)
+    assert report[force].lost == 0
+    assert any(level == "warning" and "declared 3 message(s) lost" in line for level, line in log)
+    line = next(x for x in s.summary() if x.startswith(f"  {TOPIC}:"))
+    assert "3 messages declared lost by the transport" in line and "60 samples missing at the start" in line
+    lockstep[0] = False                                                  # a free-run recorder: topics start apart
+    assert s.loss_report()[TOPIC].missing_at_start == 0
+    lockstep[0] = True
+    s.close()
+    recording = open_recording(tmp_path / "rec")
+    assert recording.metadata[LOSS_METADATA] == {f"{TOPIC} transport_lost": "3", f"{TOPIC} missing_at_start": "60"}
+    loss = RecordedData(tmp_path / "rec", recording, 0).loss()
+    assert loss["recorder"] == {f"{TOPIC} transport_lost": 3, f"{TOPIC} missing_at_start": 60}
+    assert "said by the recorder" in loss_text(loss)
+
+
+def test_a_lockstep_recording_joined_mid_run_says_nothing_of_late_starts(tmp_path):
+    """No topic from the run's start (a consumer that joined a run under way, its topics subscribed a block
+    apart): the start says nothing, and a recording without loss has no ``rimd_loss`` record."""
+    from rimd_sim.runtime.recorder import LOSS_METADATA
+
+    force = "/rig/impact/force"
+    s, _, _ = session(tmp_path, in_lockstep=lambda: True)
+    s.add_topic(force, BLOCK, [qos_profile_dict(depth=100)])
+    for i, data in enumerate(_blocks_from(50, 5, 20000.0, 200)):
+        s.put(force, data, 10**18 + i)
+    for i, data in enumerate(_blocks_from(51, 5, 2000.0, 20)):
+        s.put(TOPIC, data, 10**18 + i)
+    s.close()
+    assert all(r.lost == 0 for r in s.loss_report().values())
+    assert LOSS_METADATA not in open_recording(tmp_path / "rec").metadata

@@ -44,6 +44,7 @@ class ProgressLedger:
         self.overall: int | None = None
         self.dirty = False
         self.joined = False
+        self.joins = 0   # how many times it joined (a lockstep consumer, once it is > 0)
         self.left = False
         self.last_sent = 0.0
         self.reports = 0
@@ -67,6 +68,7 @@ class ProgressLedger:
             if self.left:
                 return False
             self.joined = True
+            self.joins += 1
             self.done_ns.clear()
             self.overall = None
             return True

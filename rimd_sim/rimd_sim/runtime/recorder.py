@@ -19,6 +19,12 @@ how far each topic is written. The recorder node feeds it and reports it.
   out still count as handled in ``on_written``: a rig in lockstep goes on, and a client waiting for a topic to
   reach the stop sees it. A message without a stamp is written. ``rimd experiment`` sets it to the end of its
   last step, so its recording ends there on every topic however late the recorder is stopped.
+* Loss the file cannot show is counted too: messages the transport declares lost (:meth:`RecordingSession.
+  transport_lost`, DDS's sample-lost status: a reliable reader told that samples are gone), and, for a lockstep
+  consumer (``in_lockstep``), samples *missing at the start* of a sampled topic: the rig waits for a lockstep
+  consumer from its join on, so every sampled topic must start at the same time; one that starts later than the
+  earliest lost its first blocks on the way (:meth:`LossCounter.missing_at_start`). When it finishes, the session
+  writes both into the recording (:data:`~rimd_sim.settings.recording.LOSS_METADATA`), and its summary counts them.
 * Everything the writer does happens in order: :meth:`run_on_writer` runs a function after the messages queued
   before it (``~/split``, ``~/stop``); :meth:`close` writes everything queued, finishes the file and returns.
 
@@ -41,9 +47,9 @@ from rimd_sim.errors import CommandError
 from rimd_sim.io.bag import BagWriter, FileInfo, WriteFailure
 from rimd_sim.io.cdr import BLOCK_TYPES, block_span, cut_block, read_block, samples_before
 from rimd_sim.io.msgdefs import MessageDefinitionError
-from rimd_sim.settings.recording import STOP_METADATA
+from rimd_sim.settings.recording import LOSS_METADATA, STOP_METADATA
 
-__all__ = ["STOP_METADATA", "LossCounter", "RecordingSession", "StopRefused", "TopicLoss"]
+__all__ = ["LOSS_METADATA", "STOP_METADATA", "LossCounter", "RecordingSession", "StopRefused", "TopicLoss"]
 
 
 class StopRefused(CommandError):
@@ -65,6 +71,7 @@ class LossCounter:
     def __init__(self) -> None:
         self.expected: dict[str, int] = {}
         self.first: dict[str, int] = {}
+        self.rate: dict[str, float] = {}   # per topic: the sample rate of its first block (Hz)
         self.lost_samples: dict[str, int] = {}
         self.lost_blocks: dict[str, int] = {}
         self.restarts: dict[str, int] = {}
@@ -84,6 +91,27 @@ class LossCounter:
         self.expected[topic] = first_index + count
         return missing
 
+    def missing_at_start(self) -> dict[str, int]:
+        """Per sampled topic: the samples between the earliest start of any topic and its own first block.
+
+        Sample indices count from the run's start on every channel, so ``first / rate`` is when a topic's first
+        block starts. Only when some topic starts at the run's start (index 0): then every topic should, for a
+        lockstep consumer (the rig waits for it before its first block). A consumer that joins a run under way
+        may have subscribed to its topics a block apart: nothing is said then. Meaningful in lockstep only.
+        """
+        starts = {t: self.first[t] / r for t, r in self.rate.items() if r > 0 and t in self.first}
+        if not starts:
+            return {}
+        earliest = min(starts.values())
+        if earliest != 0:
+            return {}
+        out = {}
+        for topic, start in starts.items():
+            missing = round((start - earliest) * self.rate[topic])
+            if missing > 0:
+                out[topic] = missing
+        return out
+
 @dataclass(frozen=True)
 class TopicLoss:
     """What one topic received, wrote and lost."""
@@ -94,11 +122,14 @@ class TopicLoss:
     lost_blocks: int
     queue_dropped: int
     not_written: int
+    transport_lost: int = 0
+    missing_at_start: int = 0
 
     @property
     def lost(self) -> int:
         """Messages or samples missing from the recording, whatever the cause."""
-        return self.lost_samples + self.queue_dropped + self.not_written
+        return (self.lost_samples + self.queue_dropped + self.not_written + self.transport_lost
+                + self.missing_at_start)
 
 
 class RecordingSession:
@@ -113,6 +144,8 @@ class RecordingSession:
         log: ``log(level, line)``, level ``info``, ``warning`` or ``error``.
         on_written: Called on the writer thread after each batch with the header stamp (ns) of the last
             message written per topic, for the messages that have one.
+        in_lockstep: Whether the consumer has joined a lockstep run (then a sampled topic that starts late
+            counts as loss); None: never.
         clock: Monotonic seconds.
     """
 
@@ -120,6 +153,7 @@ class RecordingSession:
                  batch_delay: float = 0.02, reminder: float = 30.0,
                  log: Callable[[str, str], None] = lambda level, line: None,
                  on_written: Callable[[dict[str, int]], None] | None = None,
+                 in_lockstep: Callable[[], bool] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.bag = bag
         self._queue_size = queue_size
@@ -128,12 +162,14 @@ class RecordingSession:
         self._reminder = reminder
         self._log = log
         self._on_written = on_written
+        self._in_lockstep = in_lockstep
         self._clock = clock
         # A SimpleQueue (C, thread-safe): the writer sleeps in get() until a message comes or a flush is due.
         self._queue: SimpleQueue[tuple] = SimpleQueue()
         self.types: dict[str, str] = {}
         self.received: dict[str, int] = {}
         self.dropped: dict[str, int] = {}
+        self.transport: dict[str, int] = {}   # per topic: messages the transport declared lost
         self.loss = LossCounter()
         self._sequence: dict[str, int] = {}   # MCAP sequence number per topic (messages given to the writer)
         self.write_errors = 0                 # unexpected exceptions (not OSError: the bag handles those)
@@ -162,6 +198,14 @@ class RecordingSession:
             return False
         self._queue.put(("msg", topic, data, log_time, publish_time, stamp))
         return True
+
+    def transport_lost(self, topic: str, count: int) -> None:
+        """The transport declared ``count`` more messages of ``topic`` lost (any thread): counted and logged."""
+        if count <= 0:
+            return
+        self.transport[topic] = self.transport.get(topic, 0) + count
+        self._log(WARNING, f"{topic}: the transport declared {count} message(s) lost "
+                           f"({self.transport[topic]} so far): they will not reach the recording")
 
     def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
         """Add a metadata record to the current and every later file."""
@@ -223,6 +267,7 @@ class RecordingSession:
         """Write everything queued, finish the file and ``metadata.yaml``, stop the writer (idempotent)."""
         if self._thread is None:
             self.process()
+            self._write_loss_record()
             self._safely(self.bag.close)
             self._check_failure()
             return
@@ -250,6 +295,7 @@ class RecordingSession:
                         break
             if not self._handle_batch(batch):
                 break
+        self._write_loss_record()
         self._safely(self.bag.close)
         self._check_failure()
 
@@ -309,6 +355,8 @@ class RecordingSession:
         if self.types.get(topic) in BLOCK_TYPES:
             try:
                 first, count = block_span(data)
+                if topic not in self.loss.rate:   # its first block: the rate, for a late start
+                    self.loss.rate[topic] = float(read_block(data, self.types[topic], arrays=0).sample_rate)
                 missing = self.loss.observe(topic, first, count)
                 if missing:
                     self._log(WARNING, f"{topic}: {missing} samples missing before index {first}")
@@ -394,12 +442,25 @@ class RecordingSession:
 
     # -- reporting --------------------------------------------------------------------------------------------
     def loss_report(self) -> dict[str, TopicLoss]:
-        """Per topic: messages received, written, samples lost (first_index gaps), queue drops, not written."""
+        """Per topic: what was received, written and lost, whatever the cause (:class:`TopicLoss`)."""
         bag, loss = self.bag, self.loss
+        late = loss.missing_at_start() if self._in_lockstep is not None and self._in_lockstep() else {}
         return {topic: TopicLoss(self.received.get(topic, 0), bag.written.get(topic, 0),
                                  loss.lost_samples.get(topic, 0), loss.lost_blocks.get(topic, 0),
-                                 self.dropped.get(topic, 0), bag.not_written.get(topic, 0))
+                                 self.dropped.get(topic, 0), bag.not_written.get(topic, 0),
+                                 self.transport.get(topic, 0), late.get(topic, 0))
                 for topic in sorted(self.types)}
+
+    def _write_loss_record(self) -> None:
+        """Write what the file cannot show was lost into it (:data:`LOSS_METADATA`), if anything was."""
+        values = {}
+        for topic, r in self.loss_report().items():
+            if r.transport_lost:
+                values[f"{topic} transport_lost"] = str(r.transport_lost)
+            if r.missing_at_start:
+                values[f"{topic} missing_at_start"] = str(r.missing_at_start)
+        if values:
+            self._safely(self.bag.add_metadata, LOSS_METADATA, values)
 
     def summary(self) -> list[str]:
         """The lines printed when the recording ends: files, write failures, loss per topic."""
@@ -420,9 +481,11 @@ class RecordingSession:
                          f"{sum(self.cut_blocks.values())} block(s) cut there")
         cause = bag.failures[0].headline if bag.failures else "write error"
         for topic, r in self.loss_report().items():
+            parts = [f"{r.lost_samples} samples missing (first_index gaps)" if r.lost_samples else "",
+                     f"{r.queue_dropped} messages dropped (queue full)" if r.queue_dropped else "",
+                     f"{r.not_written} messages not written ({cause})" if r.not_written else "",
+                     f"{r.transport_lost} messages declared lost by the transport" if r.transport_lost else "",
+                     f"{r.missing_at_start} samples missing at the start (lockstep)" if r.missing_at_start else ""]
             lines.append(f"  {topic}: {r.written} messages written; "
-                         + (f"LOSS: {r.lost_samples} samples missing (first_index gaps), "
-                            f"{r.queue_dropped} messages dropped (queue full)"
-                            + (f", {r.not_written} messages not written ({cause})" if r.not_written else "")
-                            if r.lost else "no loss"))
+                         + ("LOSS: " + ", ".join(p for p in parts if p) if r.lost else "no loss"))
         return lines

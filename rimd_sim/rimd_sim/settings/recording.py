@@ -17,7 +17,7 @@ from typing import Any
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.params import BAD_REGEX_LISTS, Param, build, param, parameters, regex_list_problem
 
-__all__ = ["COMPRESSIONS", "PARAMETERS", "PROGRESS_STAMP_KEY", "STOP_METADATA", "RecorderConfigError",
+__all__ = ["COMPRESSIONS", "PARAMETERS", "LOSS_METADATA", "PROGRESS_STAMP_KEY", "STOP_METADATA", "RecorderConfigError",
            "RecorderSettings", "check_parameter", "check_recorder_parameters", "compile_patterns"]
 
 #: The key suffix of the recorder's /diagnostics values that say how far each topic is written: the value of
@@ -29,6 +29,12 @@ PROGRESS_STAMP_KEY = " last_stamp_ns"
 #: first stamp left out. The recorder writes it into the current and every later file when ``stop_at`` is set;
 #: the analysis of a recording ends its last step there (docs/recording.md).
 STOP_METADATA = "rimd_stop"
+
+#: The MCAP metadata record in which the recorder says, when it finishes, what it knows was lost that the file
+#: itself cannot show: per topic, ``<topic> transport_lost`` (messages the transport declared lost, DDS's
+#: sample-lost status) and ``<topic> missing_at_start`` (samples a lockstep consumer should have had before its
+#: first block of that topic). Only topics with a loss appear; the record is absent when nothing was lost.
+LOSS_METADATA = "rimd_loss"
 
 #: The MCAP chunk compressions the recorder writes (``recorder.compression``).
 COMPRESSIONS = ("zstd", "lz4", "none")

@@ -55,7 +55,7 @@ from rimd_sim.analysis.recordings.contact_pulse import PulseSamples, SpringDashp
 from rimd_sim.io.decode import topic_decoder
 from rimd_sim.io.msgdefs import MessageDefinitionError
 from rimd_sim.io.reader import Recording, open_recording
-from rimd_sim.settings.recording import STOP_METADATA
+from rimd_sim.settings.recording import LOSS_METADATA, STOP_METADATA
 
 FORCE = "/rig/impact/force"
 EVENTS = "/rig/impact/events"
@@ -124,8 +124,11 @@ class RecordedData:
         """What was lost: unreadable file tails, holes in the sampled channels, undecodable messages.
 
         ``wrong_type``: the topics recorded with another type than the rig's (recorded and expected type, the
-        messages left out).
+        messages left out). ``recorder``: what the recorder said was lost that the file cannot show (its
+        :data:`~rimd_sim.settings.recording.LOSS_METADATA` record: messages the transport declared lost, samples
+        missing at the start of a lockstep recording), ``"<topic> <what>": count``.
         """
+        reported = self.recording.metadata.get(LOSS_METADATA, {}) if self.recording is not None else {}
         return {
             "complete": self.recording.complete,
             "files": [r.describe() for r in self.recording.reports],
@@ -133,6 +136,7 @@ class RecordedData:
             "lost_blocks": {t: c.lost_blocks for t, c in self.channels.items() if c.lost_blocks},
             "undecodable_messages": dict(self.undecodable),
             "wrong_type": {t: dict(v) for t, v in self.wrong_type.items()},
+            "recorder": {k: int(v) for k, v in reported.items() if str(v).isdigit()},
         }
 
 
@@ -150,11 +154,13 @@ class Capture:
 def loss_text(loss: dict) -> str | None:
     """One line saying what :meth:`RecordedData.loss` found, or None when nothing was lost."""
     if loss["complete"] and not loss["lost_samples"] and not loss["undecodable_messages"] \
-            and not loss.get("wrong_type"):
+            and not loss.get("wrong_type") and not loss.get("recorder"):
         return None
     parts = list(loss["files"])
     if loss["lost_samples"]:
         parts.append(f"lost samples {loss['lost_samples']}")
+    if loss.get("recorder"):
+        parts.append(f"lost before the file, said by the recorder {loss['recorder']}")
     if loss["undecodable_messages"]:
         parts.append(f"undecodable {loss['undecodable_messages']}")
     parts += [f"{topic} has type {w['recorded_type']}, not {w['expected_type']}: its {w['messages']} messages "

@@ -3,7 +3,8 @@
 The steps are scheduled on exact stamps of the rig's own time base, so the same schedule gives the same data
 however late the requests travel (:mod:`rimd_sim.ros.clients.experiment`). Unless ``--no-record``, the verb starts
 its own recorder process (node ``rimd_experiment_recorder``, topics ``/rig/.*``, into ``OUT/recording``); a rig in
-lockstep that names it among its consumers waits for it, so nothing is lost however fast the rig runs. Once
+lockstep that names it among its consumers waits for it, however fast the rig runs (what the transport still
+loses on a heavily loaded machine is counted and printed on the ``LOSS:`` line, docs/recording.md). Once
 the recorder has written everything up to the end of the last step it is stopped with SIGINT and the
 recording is analysed into ``OUT`` with the same ``--settle`` (:mod:`rimd_sim.analysis.recordings.report`). The rig
 is never stopped: a refused setpoint ends the experiment with an error naming it, and the rig keeps running.

@@ -126,6 +126,11 @@ class DirectProgress:
         return self._ledger.joined
 
     @property
+    def ever_joined(self) -> bool:
+        """Whether it has joined a lockstep run at least once (it may have left since)."""
+        return self._ledger.joins > 0
+
+    @property
     def reports(self) -> int:
         """Reports sent so far."""
         return self._ledger.reports

@@ -12,6 +12,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from rimd_sim.ros.nodes.base import RimdNode
@@ -71,10 +72,22 @@ class PolledSubscriptions:
         self._hidden: set[int] = set()
         self.timer = node.create_timer(period, self.poll)
 
-    def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None]) -> Any:
-        """Create a raw subscription of the node whose messages go to ``handler(data, info)``."""
+    def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None],
+               lost: Callable[[int], None] | None = None) -> Any:
+        """Create a raw subscription of the node whose messages go to ``handler(data, info)``.
+
+        ``lost(count)``: called with the number of messages the transport newly declared lost (DDS's sample-lost
+        status, the subscription's ``message_lost`` event: a reliable reader told that samples are gone).
+        """
+        events = None
+        if lost is not None:
+            def on_lost(status: Any) -> None:   # rmw_message_lost_status_t (rclpy's stub names another type)
+                lost(int(status.total_count_change))
+
+            events = SubscriptionEventCallbacks(message_lost=on_lost)
         sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}),  # type: ignore[arg-type]
-                                             qos, raw=True)  # raw=True hands bytes, not the annotated message
+                                             qos, raw=True,  # raw=True hands bytes, not the annotated message
+                                             event_callbacks=events)
         self._hidden.add(id(sub))
         self._subs.append((sub, handler))
         return sub

@@ -40,6 +40,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import socket
@@ -157,7 +158,7 @@ class RecorderNode(PollingNode):
                         }})
         self._session = RecordingSession(bag, queue_size=p.queue_size, flush_interval=p.flush_interval,
                                          batch_delay=WRITER_BATCH_S, reminder=FAILURE_REMINDER_S, log=self._log,
-                                         on_written=self._on_written)
+                                         on_written=self._on_written, in_lockstep=lambda: self._progress.ever_joined)
         self._recording = True
         self._paused = p.start_paused
         self._subs: dict[str, Any] = {}
@@ -223,7 +224,8 @@ class RecorderNode(PollingNode):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self._session.add_topic(topic, type_name, offered)
             assert self._polled is not None   # made in __init__
-            self._subs[topic] = sub = self._polled.create(msg_type, topic, qos, self._make_handler(topic, type_name))
+            self._subs[topic] = sub = self._polled.create(msg_type, topic, qos, self._make_handler(topic, type_name),
+                                                          lost=functools.partial(self._session.transport_lost, topic))
             self._progress.add_subscription(sub)
             self.get_logger().info(f"recording {topic} ({type_name}, "
                                    f"{'reliable' if reliable else 'best effort'})")
