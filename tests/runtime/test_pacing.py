@@ -2,7 +2,8 @@
 
 Hypotheses: the schedule makes data time t due at ``anchor + t / factor`` and lets a late publisher catch up;
 factor 0 sets no limit; in lockstep a block ending at t goes only once every consumer has finished with
-t - window, never before every consumer has joined; a consumer caught up on a topic holds nothing (a hole in
+t - window, never before every consumer has joined, and after a join the lead grows from one block (slow
+start); a consumer caught up on a topic holds nothing (a hole in
 its data cannot stall the run); a restarted consumer joins where the run stands; reports from unknown
 consumers, from the future or going back are ignored with a reason; after ``timeout`` seconds of silence the
 ``drop`` policy goes on without the consumer and ``wait`` keeps holding; the cap never bursts after a hold.
@@ -61,14 +62,26 @@ def test_nothing_goes_before_every_consumer_joined_then_the_window_holds_each():
     assert pacer.lockstep.progress("recorder", 0).joined
     assert pacer.next(blocks(0)).waiting_for == ("daq",)
     pacer.lockstep.progress("daq", 0)
-    assert pacer.next(blocks(0)) == Go(5)          # window 50 ms: blocks ending at 10..50 ms
-    for end in blocks(0, 5):
-        pacer.published(end)
-    pacer.lockstep.progress("recorder", 40 * MS)
-    decision = pacer.next(blocks(50))
+    # Slow start: the first block alone, then as much again as both have confirmed since they joined (10, 20,
+    # 40 ms...), up to the window: a new reader gets the first blocks one by one, not a window's burst at once.
+    assert pacer.next(blocks(0)) == Go(1)
+    pacer.published(10 * MS)
+    assert isinstance(pacer.next(blocks(10)), Hold)            # until both have it
+    published = 10
+    for confirmed, allowed in ((10, 1), (20, 2), (40, 4), (80, 5)):   # lead 10, 20, 40 ms, then the 50 ms window
+        pacer.lockstep.progress("recorder", confirmed * MS)
+        pacer.lockstep.progress("daq", confirmed * MS)
+        assert pacer.next(blocks(published)) == Go(allowed), confirmed
+        for end in blocks(published, allowed):
+            pacer.published(end)
+        published += 10 * allowed
+    assert published == 130
+    pacer.lockstep.progress("recorder", 130 * MS)
+    pacer.lockstep.progress("daq", 80 * MS)
+    decision = pacer.next(blocks(130))
     assert isinstance(decision, Hold) and decision.waiting_for == ("daq",)   # the slowest holds the run
-    pacer.lockstep.progress("daq", 20 * MS)
-    assert pacer.next(blocks(50)) == Go(2)         # daq at 20 ms: up to 70 ms
+    pacer.lockstep.progress("daq", 100 * MS)
+    assert pacer.next(blocks(130)) == Go(2)        # daq at 100 ms plus the window: up to 150 ms
 
 
 def test_the_run_goes_as_fast_as_the_slowest_consumer():
@@ -134,7 +147,7 @@ def test_a_consumer_may_switch_from_one_report_to_reports_per_topic():
         pacer.published(end, "/b")
     pacer.lockstep.progress("daq", 0, topics={"/a": 30 * MS, "/b": 20 * MS})
     assert pacer.lockstep.consumers["daq"].done == {"/a": 30 * MS, "/b": 20 * MS}
-    assert pacer.next(blocks(30)) == Go(4)         # /b at 20 ms: up to 70 ms
+    assert pacer.next(blocks(30)) == Go(1)         # /b at 20 ms, 20 ms confirmed since the join: up to 40 ms
 
 
 def test_each_report_is_the_whole_state_a_topic_left_out_holds_nothing():
@@ -148,7 +161,7 @@ def test_each_report_is_the_whole_state_a_topic_left_out_holds_nothing():
         pacer.published(end, "/extra")
     assert pacer.lockstep.progress("daq", 0, topics={"/a": 30 * MS}).accepted
     assert pacer.lockstep.consumers["daq"].done == {"/a": 30 * MS}
-    assert pacer.next(blocks(30)) == Go(5)         # /a at 30 ms plus the 50 ms window: up to 80 ms
+    assert pacer.next(blocks(30)) == Go(3)         # /a at 30 ms, 30 ms confirmed since the join: up to 60 ms
 
 
 def test_a_restarted_consumer_joins_where_the_run_stands():
@@ -240,6 +253,7 @@ def test_the_cap_does_not_burst_after_a_hold():
     pacer.lockstep.progress("daq", 0)
     assert pacer.next(blocks(0)) == Go(1)      # the first block goes at once, the next at real time
     pacer.published(10 * MS)
+    pacer.lockstep.progress("daq", 10 * MS)
     assert pacer.next(blocks(10)) == Wait(pytest.approx(0.010))
 
 
@@ -271,3 +285,20 @@ def test_the_first_message_goes_whatever_its_stamp_then_the_window_holds():
     assert isinstance(pacer.next(ends[1:]), Hold)      # done through 0: it has not taken the first one
     assert pacer.lockstep.progress("daq", ends[0]).accepted
     assert pacer.next(ends[1:]) == Go(5)               # 10 ms blocks up to 50 ms past what it has done
+
+
+def test_the_slow_start_lets_the_next_block_go_whatever_was_published_at_the_join():
+    """The least lead is the next block: after a message stamped at the start (the rig's session), and for a
+    consumer that joins a run under way (it has nothing to confirm yet), the next block goes, and only it."""
+    pacer = Pacer(0.0, lockstep("rec", window=1.0), topics=["/session", "/a"], clock=FakeClock())
+    pacer.lockstep.progress("rec", 0, topics={"/session": 0, "/a": 0})
+    pacer.published(0, "/session")
+    assert pacer.next(blocks(0)) == Go(1)
+    for end in blocks(0, 50):
+        pacer.published(end, "/a")
+    assert pacer.lockstep.progress("rec", 0, topics={"/a": 0}, instance="restarted").joined   # at 500 ms
+    assert pacer.next(blocks(500)) == Go(1)
+    pacer.published(510 * MS, "/a")
+    assert isinstance(pacer.next(blocks(510)), Hold)
+    pacer.lockstep.progress("rec", 0, topics={"/a": 510 * MS}, instance="restarted")
+    assert pacer.next(blocks(510)) == Go(1)

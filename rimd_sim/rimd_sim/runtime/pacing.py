@@ -160,6 +160,7 @@ class ConsumerStatus:
         timed_out: Held the run ``timeout`` s without progress under the ``wait`` policy.
         held_since: Wall time since which it holds the run (None: it does not).
         joins: How many times it joined (a restart joins again).
+        joined_at: Data time the run had reached when it last joined (where its slow start counts from).
     """
 
     name: str
@@ -171,6 +172,7 @@ class ConsumerStatus:
     timed_out: bool = False
     held_since: float | None = None
     joins: int = 0
+    joined_at: int = 0
 
     @property
     def joined(self) -> bool:
@@ -235,6 +237,7 @@ class Lockstep:
         self.published_on: dict[str, int] = {}
         self.any_published = False
         self._origin = 0
+        self._step = 1   # how far the next candidate ends beyond the front: the least lead (one block)
         self._events: list[tuple[str, str]] = []
 
     def published(self, data_ns: int, topic: str = ALL_TOPICS) -> None:
@@ -300,6 +303,7 @@ class Lockstep:
                    "restarted (new instance)" if c.joined else "joined")
             # Data published before it joined can never reach it (volatile topics): counted as done.
             c.done = {t: max(v, self._published(t)) for t, v in report.items()}
+            c.joined_at = min(c.done.values())
             c.instance, c.last_heard, c.dropped, c.left, c.timed_out = instance, now, False, False, False
             c.joins += 1
             return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_s:.9f} s"
@@ -324,15 +328,16 @@ class Lockstep:
             return math.inf
         if not c.joined:
             return -math.inf
-        window = self.settings.window_ns
         # The front of the run: what was published; before anything, just short of the first candidate (a replay's
         # stamps may start anywhere, at a wall-clock epoch: the window counts from its first message).
         front = self.published_ns if self.any_published else self._origin
-        bound = math.inf
-        for topic, done in c.done.items():
-            # Caught up on a topic (it has everything published there, a hole or not): it is at the front.
-            bound = min(bound, (done if done < self._published(topic) else front) + window)
-        return bound
+        # Caught up on a topic (it has everything published there, a hole or not): it is at the front.
+        at = {topic: done if done < self._published(topic) else front for topic, done in c.done.items()}
+        # Slow start: the lead grows with what the consumer has confirmed since it joined (the next block, then
+        # two, four...) up to the window, so that its readers get the first blocks one by one instead of a window's
+        # burst at once (docs/rig.md, "Pacing: lockstep").
+        lead = min(self.settings.window_ns, max(self._step, min(at.values(), default=front) - c.joined_at))
+        return min((v + lead for v in at.values()), default=math.inf)
 
     def allowed(self, ends: Sequence[int]) -> tuple[int, tuple[str, ...]]:
         """How many of the blocks ending at ``ends`` the consumers allow now, and who holds the next one.
@@ -342,6 +347,7 @@ class Lockstep:
         now = self.clock()
         if not self.any_published:
             self._origin = max(0, ends[0] - 1)
+        self._step = max(1, ends[0] - (self.published_ns if self.any_published else self._origin))
         limits = {name: self.limit(c) for name, c in self.consumers.items()}
         bound = min(limits.values(), default=math.inf)
         count = 0
