@@ -302,3 +302,15 @@ def test_the_slow_start_lets_the_next_block_go_whatever_was_published_at_the_joi
     assert isinstance(pacer.next(blocks(510)), Hold)
     pacer.lockstep.progress("rec", 0, topics={"/a": 510 * MS}, instance="restarted")
     assert pacer.next(blocks(510)) == Go(1)
+
+
+def test_a_leave_says_where_the_consumer_stood_not_a_topic_that_never_had_a_message():
+    """The recorder reports /rig/faults at zero all run long (no fault, no message): it has everything there, so
+    its leave is logged where it stands on the topics with data, not at 0 s."""
+    pacer = Pacer(0.0, lockstep("rec"), topics=["/a", "/faults"], clock=FakeClock())
+    pacer.lockstep.progress("rec", 0, topics={"/a": 0, "/faults": 0})
+    for end in blocks(0, 3):
+        pacer.published(end, "/a")
+    pacer.lockstep.progress("rec", 0, topics={"/a": 20 * MS, "/faults": 0})
+    left = pacer.lockstep.progress("rec", 0, leaving=True)
+    assert left.accepted and "left at 0.020000000 s" in left.log, left.log

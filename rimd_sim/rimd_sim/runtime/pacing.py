@@ -274,7 +274,9 @@ class Lockstep:
             if c.left:
                 return ProgressVerdict(True)
             c.dropped, c.left, c.timed_out, c.held_since = True, True, False, None
-            where = f" at {c.done_s:.9f} s" if c.joined else " before joining"
+            # Where it stood (a topic it has everything of, one that never had a message included): not its
+            # lowest done, which is zero on a topic nothing was published on.
+            where = f" at {min(self._at(c).values()) / 1e9:.9f} s" if c.joined else " before joining"
             return ProgressVerdict(True, f"consumer '{consumer}' left{where} (it stopped cleanly): the run goes on "
                                          "without it until it reports again", "left")
         report = {ALL_TOPICS: int(done_ns)} if not topics else {t: int(v) for t, v in topics.items()}
@@ -322,17 +324,22 @@ class Lockstep:
             return ProgressVerdict(True, f"consumer '{consumer}' answers again at {c.done_s:.9f} s")
         return ProgressVerdict(True, note, "topics" if note else "")
 
+    def _at(self, c: ConsumerStatus) -> dict[str, int]:
+        """Per topic, where consumer ``c`` stands: its ``done``, or the front of the run where it is caught up."""
+        # The front of the run: what was published; before anything, just short of the first candidate (a replay's
+        # stamps may start anywhere, at a wall-clock epoch: the window counts from its first message).
+        front = self.published_ns if self.any_published else self._origin
+        # Caught up on a topic (it has everything published there, a hole or not): it is at the front.
+        return {topic: done if done < self._published(topic) else front for topic, done in c.done.items()}
+
     def limit(self, c: ConsumerStatus) -> float:
         """The data time up to which consumer ``c`` lets the publisher go (``inf``: no limit; ``-inf``: none)."""
         if c.dropped:
             return math.inf
         if not c.joined:
             return -math.inf
-        # The front of the run: what was published; before anything, just short of the first candidate (a replay's
-        # stamps may start anywhere, at a wall-clock epoch: the window counts from its first message).
+        at = self._at(c)
         front = self.published_ns if self.any_published else self._origin
-        # Caught up on a topic (it has everything published there, a hole or not): it is at the front.
-        at = {topic: done if done < self._published(topic) else front for topic, done in c.done.items()}
         # Slow start: the lead grows with what the consumer has confirmed since it joined (the next block, then
         # two, four...) up to the window, so that its readers get the first blocks one by one instead of a window's
         # burst at once (docs/rig.md, "Pacing: lockstep").
