@@ -324,11 +324,17 @@ class Lockstep:
             return ProgressVerdict(True, f"consumer '{consumer}' answers again at {c.done_s:.9f} s")
         return ProgressVerdict(True, note, "topics" if note else "")
 
+    @property
+    def _front(self) -> int:
+        """The front of the run: what was published; before anything, just short of the first candidate.
+
+        A replay's stamps may start anywhere, at a wall-clock epoch: the window counts from its first message.
+        """
+        return self.published_ns if self.any_published else self._origin
+
     def _at(self, c: ConsumerStatus) -> dict[str, int]:
         """Per topic, where consumer ``c`` stands: its ``done``, or the front of the run where it is caught up."""
-        # The front of the run: what was published; before anything, just short of the first candidate (a replay's
-        # stamps may start anywhere, at a wall-clock epoch: the window counts from its first message).
-        front = self.published_ns if self.any_published else self._origin
+        front = self._front
         # Caught up on a topic (it has everything published there, a hole or not): it is at the front.
         return {topic: done if done < self._published(topic) else front for topic, done in c.done.items()}
 
@@ -339,11 +345,10 @@ class Lockstep:
         if not c.joined:
             return -math.inf
         at = self._at(c)
-        front = self.published_ns if self.any_published else self._origin
         # Slow start: the lead grows with what the consumer has confirmed since it joined (the next block, then
         # two, four...) up to the window, so that its readers get the first blocks one by one instead of a window's
         # burst at once (docs/rig.md, "Pacing: lockstep").
-        lead = min(self.settings.window_ns, max(self._step, min(at.values(), default=front) - c.joined_at))
+        lead = min(self.settings.window_ns, max(self._step, min(at.values(), default=self._front) - c.joined_at))
         return min((v + lead for v in at.values()), default=math.inf)
 
     def allowed(self, ends: Sequence[int]) -> tuple[int, tuple[str, ...]]:
@@ -354,7 +359,7 @@ class Lockstep:
         now = self.clock()
         if not self.any_published:
             self._origin = max(0, ends[0] - 1)
-        self._step = max(1, ends[0] - (self.published_ns if self.any_published else self._origin))
+        self._step = max(1, ends[0] - self._front)
         limits = {name: self.limit(c) for name, c in self.consumers.items()}
         bound = min(limits.values(), default=math.inf)
         count = 0

@@ -13,7 +13,7 @@ import threading
 import time
 from typing import Any
 
-__all__ = ["PACING_STATUS", "PUBLISHED_KEY", "ProgressLedger", "stamp_ns"]
+__all__ = ["PACING_STATUS", "PUBLISHED_KEY", "LedgerState", "ProgressLedger", "stamp_ns"]
 
 #: The end of the name of a lockstep publisher's status on ``/diagnostics`` (``rimd_simulator: pacing``): what a
 #: consumer reads to learn what it publishes and whether it waits for it.
@@ -94,3 +94,24 @@ class ProgressLedger:
         with self.lock:
             joined, self.joined, self.left = self.joined, False, True
             return joined
+
+
+class LedgerState:
+    """What both reporters tell of their ledger (``self._ledger``): whether joined, ever, and the reports sent."""
+
+    _ledger: ProgressLedger
+
+    @property
+    def joined(self) -> bool:
+        """Whether it has told a lockstep publisher that it is there."""
+        return self._ledger.joined
+
+    @property
+    def ever_joined(self) -> bool:
+        """Whether it has joined a lockstep run at least once (it may have left since)."""
+        return self._ledger.joins > 0
+
+    @property
+    def reports(self) -> int:
+        """Reports sent so far."""
+        return self._ledger.reports

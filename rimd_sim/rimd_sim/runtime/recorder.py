@@ -71,7 +71,6 @@ class LossCounter:
     def __init__(self) -> None:
         self.expected: dict[str, int] = {}
         self.first: dict[str, int] = {}
-        self.rate: dict[str, float] = {}   # per topic: the sample rate of its first block (Hz)
         self.lost_samples: dict[str, int] = {}
         self.lost_blocks: dict[str, int] = {}
         self.restarts: dict[str, int] = {}
@@ -92,25 +91,16 @@ class LossCounter:
         return missing
 
     def missing_at_start(self) -> dict[str, int]:
-        """Per sampled topic: the samples between the earliest start of any topic and its own first block.
+        """Per sampled topic: the samples before its first block, when another topic starts at the run's start.
 
-        Sample indices count from the run's start on every channel, so ``first / rate`` is when a topic's first
-        block starts. Only when some topic starts at the run's start (index 0): then every topic should, for a
+        Sample indices count from the run's start on every channel, so a topic whose first block starts at index
+        ``n`` lacks ``n`` samples. Only when some topic starts at index 0: then every topic should, for a
         lockstep consumer (the rig waits for it before its first block). A consumer that joins a run under way
         may have subscribed to its topics a block apart: nothing is said then. Meaningful in lockstep only.
         """
-        starts = {t: self.first[t] / r for t, r in self.rate.items() if r > 0 and t in self.first}
-        if not starts:
+        if 0 not in self.first.values():
             return {}
-        earliest = min(starts.values())
-        if earliest != 0:
-            return {}
-        out = {}
-        for topic, start in starts.items():
-            missing = round((start - earliest) * self.rate[topic])
-            if missing > 0:
-                out[topic] = missing
-        return out
+        return {topic: first for topic, first in self.first.items() if first > 0}
 
 @dataclass(frozen=True)
 class TopicLoss:
@@ -355,8 +345,6 @@ class RecordingSession:
         if self.types.get(topic) in BLOCK_TYPES:
             try:
                 first, count = block_span(data)
-                if topic not in self.loss.rate:   # its first block: the rate, for a late start
-                    self.loss.rate[topic] = float(read_block(data, self.types[topic], arrays=0).sample_rate)
                 missing = self.loss.observe(topic, first, count)
                 if missing:
                     self._log(WARNING, f"{topic}: {missing} samples missing before index {first}")

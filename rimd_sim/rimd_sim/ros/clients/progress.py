@@ -48,7 +48,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
-from rimd_sim.runtime.progress import ProgressLedger, stamp_ns
+from rimd_sim.runtime.progress import LedgerState, ProgressLedger, stamp_ns
 
 __all__ = ["PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter"]
 
@@ -127,7 +127,7 @@ def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str
     return w.message()
 
 
-class ProgressReporter:
+class ProgressReporter(LedgerState):
     """Reports how far a consumer has finished, for rigs and replays in lockstep (see the module docstring).
 
     Thread-safe: :meth:`done` may be called from any thread (the recorder calls it from its writer thread).
@@ -158,21 +158,6 @@ class ProgressReporter:
         self._pub = node.create_publisher(ConsumerProgress, topic, PROGRESS_QOS)
         node.create_subscription(RigSession, SESSION_TOPIC, self._on_session, SESSION_QOS)
         self._timer = node.create_timer(0.02, self._tick)
-
-    @property
-    def joined(self) -> bool:
-        """Whether it has told a lockstep publisher that it is there."""
-        return self._ledger.joined
-
-    @property
-    def ever_joined(self) -> bool:
-        """Whether it has joined a lockstep run at least once (it may have left since)."""
-        return self._ledger.joins > 0
-
-    @property
-    def reports(self) -> int:
-        """Reports sent so far."""
-        return self._ledger.reports
 
     def add_subscription(self, subscription: Any) -> None:
         """Take one more subscription into account (before the join: it must match a publisher first)."""

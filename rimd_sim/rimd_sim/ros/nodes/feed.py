@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from rimd_sim.ros.nodes.polling import LocalSubscription
-from rimd_sim.runtime.progress import ProgressLedger, stamp_ns
+from rimd_sim.runtime.progress import LedgerState, ProgressLedger, stamp_ns
 
 __all__ = ["DirectProgress", "FedTopic", "InProcessFeed"]
 
@@ -106,7 +106,7 @@ class InProcessFeed:
                      topics_done_ns=[topics[n] for n in names], leaving=leaving)
 
 
-class DirectProgress:
+class DirectProgress(LedgerState):
     """A consumer's lockstep progress, reported in the process: what the nodes use of ``ProgressReporter``.
 
     Thread-safe (the recorder reports from its writer thread). Reports at most every ``min_interval`` seconds
@@ -119,21 +119,6 @@ class DirectProgress:
         self._feed = feed
         self._ledger = ProgressLedger(min_interval)
         self._topics: list[str] = []
-
-    @property
-    def joined(self) -> bool:
-        """Whether it has joined the lockstep."""
-        return self._ledger.joined
-
-    @property
-    def ever_joined(self) -> bool:
-        """Whether it has joined a lockstep run at least once (it may have left since)."""
-        return self._ledger.joins > 0
-
-    @property
-    def reports(self) -> int:
-        """Reports sent so far."""
-        return self._ledger.reports
 
     def add_subscription(self, subscription: Any) -> None:
         """A topic it takes: named, done through 0, in its join."""
