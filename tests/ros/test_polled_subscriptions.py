@@ -55,3 +55,66 @@ def test_every_message_reaches_the_handler_once_with_its_info_and_never_through_
         executor.shutdown()
         node.destroy_node()
         sender.destroy_node()
+
+
+def test_the_poll_period_follows_the_traffic():
+    """A poll that finds a batch keeps the short period; slow traffic stretches it to the longest, never beyond."""
+    from rimd_sim.ros.nodes.polling import PollPeriod
+
+    pace = PollPeriod(0.01, 0.05, aim=40)
+    assert pace.period == 0.01
+    assert pace.after(taken=140, elapsed=0.01) == 0.01          # 14,000 messages/s (lockstep): as short as allowed
+    assert pace.after(taken=7, elapsed=0.01) == 0.05            # 700 messages/s (real time): as long as allowed
+    assert pace.after(taken=80, elapsed=0.05) == pytest.approx(0.025)   # 1,600 messages/s: 40 messages a poll
+    assert pace.after(taken=0, elapsed=0.05) == 0.05            # nothing came (a paused rig)
+    assert pace.after(taken=500, elapsed=0.05) == 0.01          # a burst after a quiet spell: short again at once
+    assert PollPeriod(0.02).after(taken=1, elapsed=1.0) == 0.02   # without a longest period: fixed
+    for bad in ((0.0, 0.05), (0.05, 0.01)):
+        with pytest.raises(ValueError, match="poll periods"):
+            PollPeriod(*bad)
+    with pytest.raises(ValueError, match="aim"):
+        PollPeriod(0.01, 0.05, aim=0)
+
+
+def test_slow_traffic_is_polled_less_often_and_a_burst_brings_the_short_period_back(rclpy_context):
+    """The timer's period itself changes (under the events executor), and ``after`` runs after each timer poll."""
+    from rclpy.experimental import EventsExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import UInt32
+
+    class Polling(PollingNode):
+        def __init__(self) -> None:
+            super().__init__("adaptive", context=rclpy_context)
+            self.got: list[bytes] = []
+            self.periods: list[int] = []   # the timer's period at each poll
+            self._polled = PolledSubscriptions(self, 0.01, longest=0.08, aim=40)
+            self._polled.after = self._after
+            qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+            self._polled.create(UInt32, "/adaptive", qos, lambda data, info: self.got.append(data))
+
+        def _after(self) -> None:
+            self.periods.append(self._polled.timer.timer_period_ns)
+
+    node = Polling()
+    sender = Node("adaptive_sender", context=rclpy_context)
+    pub = sender.create_publisher(UInt32, "/adaptive", QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE))
+    executor = EventsExecutor(context=rclpy_context)
+    executor.add_node(node)
+    timer = node._polled.timer
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() == 1, timeout=10)
+        assert spin_until(executor, lambda: timer.timer_period_ns == 80_000_000, timeout=10)   # nothing comes
+        quiet = len(node.periods)
+        assert quiet > 0   # ``after`` ran after each poll
+        for i in range(2000):
+            pub.publish(UInt32(data=i))
+        assert spin_until(executor, lambda: len(node.got) == 2000, timeout=20), len(node.got)
+        # Hundreds of messages in a poll 80 ms after the one before: the period shortens at once (to 10 ms when
+        # one poll takes them all; at most 40 ms even if the transport spread them over several polls).
+        assert spin_until(executor, lambda: len(node.periods) > quiet + 2, timeout=10)
+        assert min(node.periods[quiet:]) <= 40_000_000, node.periods[quiet:]
+        assert spin_until(executor, lambda: timer.timer_period_ns == 80_000_000, timeout=10)   # quiet again
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        sender.destroy_node()

@@ -42,8 +42,9 @@ from rimd_sim.ros.nodes.simulator import SimulatorNode
 __all__ = ["ComposedRig", "main", "parse_arguments"]
 
 NAME = "rimd_composed"
-#: Period of the timer that sends the in-process consumers' last lockstep progress (s).
-PROGRESS_PERIOD_S = 0.02
+#: Period of the timer that sends the in-process consumers' last lockstep progress (s): a backstop, each consumer
+#: sends its last progress after its own batch (the bridge after each poll, the recorder after each write).
+PROGRESS_PERIOD_S = 0.25
 
 
 class PartRefused(InputError):

@@ -110,7 +110,8 @@ class DirectProgress(LedgerState):
     """A consumer's lockstep progress, reported in the process: what the nodes use of ``ProgressReporter``.
 
     Thread-safe (the recorder reports from its writer thread). Reports at most every ``min_interval`` seconds
-    from :meth:`done`; :meth:`InProcessFeed.flush` (a timer) sends the last one.
+    from :meth:`done`; the consumer's :meth:`flush` after each of its batches (the bridge's poll, the recorder's
+    write) sends the last one, and :meth:`InProcessFeed.flush` (a slow timer) whatever is left.
     """
 
     def __init__(self, feed: InProcessFeed, name: str, min_interval: float = 0.005) -> None:

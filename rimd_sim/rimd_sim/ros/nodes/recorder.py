@@ -83,8 +83,11 @@ STAMPED_TYPES = HEADER_FIRST_TYPES
 
 
 NODE_NAME = "rimd_recorder"
-#: Period of the takes from the subscriptions (s): the messages of one period are taken at once.
+#: Period of the takes from the subscriptions (s): the messages of one period are taken at once. It follows the
+#: traffic (:class:`~rimd_sim.ros.nodes.polling.PollPeriod`): POLL_PERIOD_S when messages come fast (lockstep, a
+#: rig faster than real time), up to POLL_LONGEST_S when they come slowly (a rig at real time).
 POLL_PERIOD_S = 0.01
+POLL_LONGEST_S = 0.05
 #: The writer thread sleeps this long after the first message of a batch, then writes all that came (s).
 WRITER_BATCH_S = 0.01
 #: History of each subscription (messages): what may wait between two takes.
@@ -164,7 +167,7 @@ class RecorderNode(PollingNode):
         self._subs: dict[str, Any] = {}
         self._handlers: dict[str, Any] = {}
         # The subscriptions are taken by a timer, every message waiting at once (nodes.polling.PolledSubscriptions).
-        self._polled = PolledSubscriptions(self, POLL_PERIOD_S)
+        self._polled = PolledSubscriptions(self, POLL_PERIOD_S, longest=POLL_LONGEST_S)
         self._last_stamp: dict[str, int] = {}   # header stamp (ns) of the last message received per topic
         self._written_stamp: dict[str, int] = {}   # and written (writer thread)
         self._skipped_paused = 0
@@ -290,6 +293,8 @@ class RecorderNode(PollingNode):
         self._written_stamp.update(stamps)
         for topic, stamp in stamps.items():
             self._progress.done(stamp, topic=topic)
+        if isinstance(self._progress, DirectProgress):   # in the composed rig: the batch's last progress now
+            self._progress.flush()
 
     def _fetch_rig_parameters(self) -> None:
         """Ask ``rig_node`` for its parameters (list, then get), one step per discovery tick, never blocking."""

@@ -35,8 +35,10 @@ from rimd_sim.viz.sinks import RerunStream, SinkError, spec_from_parameters
 __all__ = ["RerunBridgeNode", "main"]
 
 NODE_NAME = "rimd_rerun"
-#: Period of the takes from the block subscriptions (s); their history (500 blocks) holds seconds of it.
+#: Period of the takes from the block subscriptions (s); their history (500 blocks) holds seconds of it. It follows
+#: the traffic (:class:`~rimd_sim.ros.nodes.polling.PollPeriod`), from POLL_PERIOD_S (fast) to POLL_LONGEST_S (slow).
 POLL_PERIOD_S = 0.01
+POLL_LONGEST_S = 0.05
 SAMPLE_BLOCK, RIG_STATE = "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 DEFAULT_NAMESPACE = "rig"
 
@@ -71,7 +73,7 @@ class RerunBridgeNode(PollingNode):
         # PolledSubscriptions): one wake-up per period instead of one dispatch per message.
         # With Foxglove on, the same raw messages go to it too (one subscription per topic); the impact events
         # then arrive raw as well and are deserialised for Rerun only.
-        self._polled = PolledSubscriptions(self, POLL_PERIOD_S)
+        self._polled = PolledSubscriptions(self, POLL_PERIOD_S, longest=POLL_LONGEST_S)
         ns = self.get_namespace().rstrip("/")
         if p["foxglove.enabled"]:   # first: a refused address or a taken port starts no Rerun viewer
             from rimd_sim.ros.nodes._foxglove import FoxgloveRelay
@@ -127,6 +129,8 @@ class RerunBridgeNode(PollingNode):
                                                      events_qos))
         for sub in subs:
             self._progress.add_subscription(sub)
+        if feed is not None:   # in the composed rig the poll's last progress goes at its end, not on a timer
+            self._polled.after = self._progress.flush
         if self.mapper is not None:
             self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
         if p["status_period"] > 0:
