@@ -58,17 +58,29 @@ def test_every_message_reaches_the_handler_once_with_its_info_and_never_through_
 
 
 def test_the_poll_period_follows_the_traffic():
-    """A poll that finds a batch keeps the short period; slow traffic stretches it to the longest, never beyond."""
+    """Steady fast traffic keeps the short period, even across lockstep's short holds; slow traffic stretches it to
+    the longest, never beyond; a burst after a quiet spell brings the short period back at once."""
     from rimd_sim.ros.nodes.polling import PollPeriod
 
+    def steady(pace: PollPeriod, per_second: float, seconds: float = 1.0) -> float:
+        for _ in range(round(seconds / pace.period)):
+            period = pace.period
+            pace.after(round(per_second * period), period)
+        return pace.period
+
+    assert PollPeriod(0.01, 0.05).period == 0.01
+    assert steady(PollPeriod(0.01, 0.05, aim=40), 700) == 0.05          # the rig at real time: the longest
+    assert steady(PollPeriod(0.01, 0.05, aim=40), 14_000) == 0.01       # lockstep at 20x: the shortest
+    assert steady(PollPeriod(0.01, 0.05, aim=40), 1_600) == pytest.approx(0.025, rel=0.05)   # 40 a poll
     pace = PollPeriod(0.01, 0.05, aim=40)
-    assert pace.period == 0.01
-    assert pace.after(taken=140, elapsed=0.01) == 0.01          # 14,000 messages/s (lockstep): as short as allowed
-    assert pace.after(taken=7, elapsed=0.01) == 0.05            # 700 messages/s (real time): as long as allowed
-    assert pace.after(taken=80, elapsed=0.05) == pytest.approx(0.025)   # 1,600 messages/s: 40 messages a poll
-    assert pace.after(taken=0, elapsed=0.05) == 0.05            # nothing came (a paused rig)
-    assert pace.after(taken=500, elapsed=0.05) == 0.01          # a burst after a quiet spell: short again at once
-    assert PollPeriod(0.02).after(taken=1, elapsed=1.0) == 0.02   # without a longest period: fixed
+    steady(pace, 14_000)
+    for _ in range(5):                     # lockstep: a window's burst, then three empty polls while the rig holds
+        assert pace.after(400, 0.01) == 0.01
+        assert max(pace.after(0, 0.01) for _ in range(3)) <= 0.02
+    quiet = PollPeriod(0.01, 0.05, aim=40)
+    assert steady(quiet, 0) == 0.05                                    # nothing comes (a paused rig)
+    assert quiet.after(taken=500, elapsed=0.05) == 0.01                # a burst: short again at once
+    assert PollPeriod(0.02).after(taken=1, elapsed=1.0) == 0.02        # without a longest period: fixed
     for bad in ((0.0, 0.05), (0.05, 0.01)):
         with pytest.raises(ValueError, match="poll periods"):
             PollPeriod(*bad)
@@ -114,6 +126,48 @@ def test_slow_traffic_is_polled_less_often_and_a_burst_brings_the_short_period_b
         assert spin_until(executor, lambda: len(node.periods) > quiet + 2, timeout=10)
         assert min(node.periods[quiet:]) <= 40_000_000, node.periods[quiet:]
         assert spin_until(executor, lambda: timer.timer_period_ns == 80_000_000, timeout=10)   # quiet again
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        sender.destroy_node()
+
+
+def test_the_transports_losses_are_read_by_the_poll_never_dispatched_by_the_executor(rclpy_context):
+    """The sample-lost status is read by the node's own poll: no waitable of it reaches the executor (as executor
+    events, a reader falling behind got so many that the recorder stopped taking messages and ignored SIGINT)."""
+    from rclpy.experimental import EventsExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import UInt32
+
+    class Polling(PollingNode):
+        def __init__(self) -> None:
+            super().__init__("lossy", context=rclpy_context)
+            self.got = 0
+            self.lost: list[int] = []
+            self._polled = PolledSubscriptions(self, 0.01)
+            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+            before = len(list(self.waitables))
+            self._polled.create(UInt32, "/lossless", qos, self._on)
+            self.waitables_plain = len(list(self.waitables)) - before   # rclpy's own (incompatible QoS, type)
+            before = len(list(self.waitables))
+            self._polled.create(UInt32, "/lossy", qos, self._on, lost=self.lost.append)
+            self.waitables_lost = len(list(self.waitables)) - before
+
+        def _on(self, data: bytes, info: dict) -> None:
+            self.got += 1
+
+    node = Polling()
+    assert node.waitables_lost == node.waitables_plain   # the lost status adds nothing for the executor
+    sender = Node("lossy_sender", context=rclpy_context)
+    pub = sender.create_publisher(UInt32, "/lossy", QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    executor = EventsExecutor(context=rclpy_context)
+    executor.add_node(node)
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() == 1, timeout=10)
+        for i in range(50):
+            pub.publish(UInt32(data=i))
+        assert spin_until(executor, lambda: node.got == 50, timeout=20), node.got
+        assert node.lost == []   # read at every poll, and nothing was lost
     finally:
         executor.shutdown()
         node.destroy_node()

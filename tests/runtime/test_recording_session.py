@@ -86,8 +86,8 @@ def session(tmp_path: Path, disk: FakeDisk | None = None, **kwargs):
     log: list[tuple[str, str]] = []
     written: list[dict[str, int]] = []
     bag = BagWriter(tmp_path / "rec", chunk_size=8192, opener=disk.opener if disk else None)
-    s = RecordingSession(bag, log=lambda level, line: log.append((level, line)), on_written=written.append,
-                         clock=FakeClock(), **kwargs)
+    kwargs.setdefault("clock", FakeClock())
+    s = RecordingSession(bag, log=lambda level, line: log.append((level, line)), on_written=written.append, **kwargs)
     s.add_topic(TOPIC, BLOCK, [qos_profile_dict(depth=100)])
     return s, log, written
 
@@ -233,6 +233,28 @@ def test_a_stop_stamp_cuts_every_topic_there_and_the_file_stays_standard(tmp_pat
 def _blocks_from(first_block: int, count: int, rate: float, n: int) -> list[bytes]:
     return [serialize_message(SampleBlock(first_index=(first_block + i) * n, sample_rate=rate, unit="m",
                                           samples=[0.0] * n)) for i in range(count)]
+
+
+def test_declared_losses_are_all_counted_but_said_at_most_every_few_seconds(tmp_path):
+    """An overloaded reader gets the transport's loss status many times a second: each is counted, the log says
+    the first at once and then what came since, at most every LOSS_LOG_INTERVAL_S per topic."""
+    from rimd_sim.runtime.recorder import LOSS_LOG_INTERVAL_S
+
+    clock = FakeClock()
+    s, log, _ = session(tmp_path, clock=clock)
+    for _ in range(100):
+        s.transport_lost(TOPIC, 2)
+        clock.advance(0.01)
+    s.transport_lost("/clock", 1)
+    lines = [line for _, line in log if "declared" in line]
+    assert s.transport[TOPIC] == 200 and s.transport["/clock"] == 1
+    assert lines == [f"{TOPIC}: the transport declared 2 message(s) lost (2 so far): they will not reach the "
+                     "recording", "/clock: the transport declared 1 message(s) lost (1 so far): they will not reach "
+                     "the recording"]
+    clock.advance(LOSS_LOG_INTERVAL_S)
+    s.transport_lost(TOPIC, 5)
+    assert log[-1][1].startswith(f"{TOPIC}: the transport declared 203 message(s) lost in the last 6 s (205 so far)")
+    s.close()
 
 
 def test_loss_the_file_cannot_show_is_counted_said_and_written_into_it(tmp_path):

@@ -58,6 +58,8 @@ class StopRefused(CommandError):
 
 #: Log levels of the session's lines.
 INFO, WARNING, ERROR = "info", "warning", "error"
+#: The transport's declared losses of one topic are said at most this often (s); every one is counted.
+LOSS_LOG_INTERVAL_S = 5.0
 
 
 class LossCounter:
@@ -160,6 +162,7 @@ class RecordingSession:
         self.received: dict[str, int] = {}
         self.dropped: dict[str, int] = {}
         self.transport: dict[str, int] = {}   # per topic: messages the transport declared lost
+        self._lost_said: dict[str, tuple[float, int]] = {}   # per topic: when the log last said so, the total then
         self.loss = LossCounter()
         self._sequence: dict[str, int] = {}   # MCAP sequence number per topic (messages given to the writer)
         self.write_errors = 0                 # unexpected exceptions (not OSError: the bag handles those)
@@ -190,12 +193,23 @@ class RecordingSession:
         return True
 
     def transport_lost(self, topic: str, count: int) -> None:
-        """The transport declared ``count`` more messages of ``topic`` lost (any thread): counted and logged."""
+        """The transport declared ``count`` more messages of ``topic`` lost (any thread): counted and logged.
+
+        Every loss is counted; the log says the first at once, then what came since at most every
+        ``LOSS_LOG_INTERVAL_S`` per topic (an overloaded reader gets such a status many times a second).
+        """
         if count <= 0:
             return
-        self.transport[topic] = self.transport.get(topic, 0) + count
-        self._log(WARNING, f"{topic}: the transport declared {count} message(s) lost "
-                           f"({self.transport[topic]} so far): they will not reach the recording")
+        total = self.transport[topic] = self.transport.get(topic, 0) + count
+        now = self._clock()
+        said = self._lost_said.get(topic)
+        if said is not None and now - said[0] < LOSS_LOG_INTERVAL_S:
+            return
+        since = f"{total - said[1]} message(s) lost in the last {now - said[0]:.0f} s" if said else \
+            f"{count} message(s) lost"
+        self._lost_said[topic] = (now, total)
+        self._log(WARNING, f"{topic}: the transport declared {since} ({total} so far): they will not reach the "
+                           "recording")
 
     def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
         """Add a metadata record to the current and every later file."""

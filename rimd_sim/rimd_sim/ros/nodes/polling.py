@@ -7,12 +7,13 @@ message handling").
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import EventHandler, QoSSubscriptionEventType
 from rclpy.node import Node
 
 from rimd_sim.ros.nodes.base import RimdNode
@@ -59,28 +60,52 @@ class PollPeriod:
 
     Each wake-up of a mostly idle thread costs far more than its work suggests (measured on the rig's 2-core
     machine: the simulator's pass for one block costs 4.7 times as much CPU when it runs every 10 ms as back to
-    back); so a poll should find a worthwhile batch. After each poll the next period is the time in which
-    ``aim`` messages come at the rate of the last period, within ``[shortest, longest]``: a rig at real time is
-    taken every ``longest`` s, a fast one (lockstep, a replay at speed) every ``shortest`` s, and a burst after a
-    quiet spell brings the short period back at the next poll.
+    back); so a poll should find a worthwhile batch. The next period is the time in which ``aim`` messages come,
+    within ``[shortest, longest]``, at the faster of the last period's rate and the rate averaged over about
+    ``memory`` s: a rig at real time is taken every ``longest`` s, a fast one (lockstep, a replay at speed) every
+    ``shortest`` s even across the short pauses of lockstep's holds, and a burst after a quiet spell brings the
+    short period back at the next poll.
     """
 
-    def __init__(self, shortest: float, longest: float | None = None, aim: int = 40) -> None:
+    def __init__(self, shortest: float, longest: float | None = None, aim: int = 40, memory: float = 0.25) -> None:
         longest = shortest if longest is None else longest
         if not 0 < shortest <= longest:
             raise ValueError(f"poll periods must satisfy 0 < shortest ({shortest}) <= longest ({longest})")
         if aim < 1:
             raise ValueError(f"aim {aim} must be >= 1")
-        self.shortest, self.longest, self.aim = shortest, longest, aim
+        self.shortest, self.longest, self.aim, self.memory = shortest, longest, aim, memory
         self.period = shortest
+        self.rate = 0.0   # messages per second, averaged over about ``memory`` s
 
     def after(self, taken: int, elapsed: float) -> float:
         """The next period after a poll that took ``taken`` messages ``elapsed`` s after the one before."""
-        if taken <= 0 or elapsed <= 0:
-            self.period = self.longest
-        else:
-            self.period = min(self.longest, max(self.shortest, self.aim * elapsed / taken))
+        now = taken / elapsed if elapsed > 0 else 0.0
+        self.rate += (1.0 - math.exp(-max(elapsed, 0.0) / self.memory)) * (now - self.rate)
+        rate = max(now, self.rate)
+        self.period = self.longest if rate <= 0 else min(self.longest, max(self.shortest, self.aim / rate))
         return self.period
+
+
+class _LostStatus:
+    """A subscription's sample-lost status (DDS's SAMPLE_LOST), read on demand, never dispatched by an executor.
+
+    rclpy's :class:`~rclpy.event_handler.EventHandler` over the subscription, which this node does not register
+    as a waitable: :meth:`take` reads the status (and resets its change) from the caller's thread.
+    """
+
+    def __init__(self, node: Node, sub: Any) -> None:
+        self._event = EventHandler(callback_group=node.default_callback_group, callback=lambda status: None,
+                                   event_type=QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST,
+                                   parent_impl=sub.handle)
+
+    def take(self) -> int:
+        """Messages newly declared lost since the last take (0 when the subscription is gone)."""
+        self._event._ready_to_take_data = True   # rclpy's flag that a wait set saw it ready: asked directly here
+        try:
+            status = self._event.take_data()
+        except Exception:  # noqa: BLE001 - the subscription is being destroyed
+            return 0
+        return int(status.total_count_change) if status is not None else 0
 
 
 class PolledSubscriptions:
@@ -102,10 +127,12 @@ class PolledSubscriptions:
     def __init__(self, node: Node, period: float, *, longest: float | None = None, aim: int = 40) -> None:
         self._node = node
         self._subs: list[tuple[Any, Callable[[bytes, dict], None]]] = []
+        self._lost: list[tuple[_LostStatus, Callable[[int], None]]] = []
         self._hidden: set[int] = set()
         self.pace = PollPeriod(period, longest, aim)
         self.after: Callable[[], None] | None = None
         self._last = time.monotonic()
+        self._period_ns = round(period * 1e9)
         self.timer = node.create_timer(period, self._on_timer)
 
     def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None],
@@ -115,17 +142,12 @@ class PolledSubscriptions:
         ``lost(count)``: called with the number of messages the transport newly declared lost (DDS's sample-lost
         status, the subscription's ``message_lost`` event: a reliable reader told that samples are gone).
         """
-        events = None
-        if lost is not None:
-            def on_lost(status: Any) -> None:   # rmw_message_lost_status_t (rclpy's stub names another type)
-                lost(int(status.total_count_change))
-
-            events = SubscriptionEventCallbacks(message_lost=on_lost)
         sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}),  # type: ignore[arg-type]
-                                             qos, raw=True,  # raw=True hands bytes, not the annotated message
-                                             event_callbacks=events)
+                                             qos, raw=True)  # raw=True hands bytes, not the annotated message
         self._hidden.add(id(sub))
         self._subs.append((sub, handler))
+        if lost is not None:
+            self._lost.append((_LostStatus(self._node, sub), lost))
         return sub
 
     def attach(self, sub: LocalSubscription, handler: Callable[[bytes, dict], None]) -> LocalSubscription:
@@ -155,8 +177,18 @@ class PolledSubscriptions:
         return limit
 
     def poll(self) -> int:
-        """Take every message waiting in every polled subscription; return how many."""
-        return sum(self.take(sub, handler) for sub, handler in self._subs)
+        """Take every message waiting in every polled subscription; return how many.
+
+        Then the transport's new sample-lost counts go to the ``lost`` callbacks, read here rather than
+        dispatched as events: a reader falling behind gets that status many times a second, and as executor
+        events they kept the node from taking its messages, and from stopping on SIGINT.
+        """
+        taken = sum(self.take(sub, handler) for sub, handler in self._subs)
+        for status, lost in self._lost:
+            count = status.take()
+            if count:
+                lost(count)
+        return taken
 
     def _on_timer(self) -> None:
         """The timer's poll; then ``after``, and the next period from the traffic."""
@@ -168,12 +200,9 @@ class PolledSubscriptions:
         pace = self.pace
         if pace.longest == pace.shortest:
             return
-        before = pace.period
-        period = pace.after(taken, elapsed)
-        if abs(period - before) > 0.2 * before:   # a timer change is a C call: only when it matters
-            self.timer.timer_period_ns = round(period * 1e9)
-        else:
-            pace.period = before
+        period_ns = round(pace.after(taken, elapsed) * 1e9)
+        if abs(period_ns - self._period_ns) > 0.2 * self._period_ns:   # a C call: only when it matters
+            self.timer.timer_period_ns = self._period_ns = period_ns
 
 
 class PollingNode(RimdNode):
