@@ -10,6 +10,8 @@ Hypotheses:
 * ``cut_block`` (the recorder cuts the block that straddles its ``stop_at``) gives the block rosbags serializes
   from the same fields with every array cut, byte for byte in either byte order (rclpy reads it back as that
   message), and ``samples_before`` counts the samples strictly before a stamp on the block's exact grid;
+* the simulator's packed encoders of every block's truth and motor state give the bytes rosbags serializes from
+  the same fields, for any values and truth lengths (0 included);
 * both byte orders: what rosbags (an independent serializer, the one that writes big-endian CDR) writes either
   way reads back field for field (span, arrays, stamp, restamp), and the encoder writes each order byte for
   byte as rosbags does.
@@ -115,7 +117,7 @@ def _rosbags_typestore():
     store = get_typestore(Stores.ROS2_JAZZY)
     msg_dir = Path(__file__).resolve().parents[2] / "rimd_msgs" / "msg"
     types = {}
-    for name in ("SampleBlock", "RigState"):
+    for name in ("SampleBlock", "RigState", "MotorState"):
         types.update(get_types_from_msg((msg_dir / f"{name}.msg").read_text(), f"rimd_msgs/msg/{name}"))
     store.register(types)
     return store
@@ -237,3 +239,29 @@ def test_samples_before_counts_on_the_exact_grid():
     assert samples_before(10**9, 20000.0, 200, 2 * 10**9) == 200
     assert samples_before(10**9, 3.0, 5, 10**9 + 666_666_667) == 3   # 2/3 s lies before ...667 ns, not on it
     assert samples_before(10**9, 3.0, 5, 10**9 + 666_666_666) == 2
+
+
+@SETTINGS
+@given(first=st.integers(0, 2**64 - 1), rate=FLOATS, stamp=st.integers(0, 2**31 * 10**9 - 1),
+       size=st.integers(0, 40), seed=st.integers(0, 2**32 - 1), motor=st.lists(FLOATS, min_size=5, max_size=5),
+       cycle=st.integers(-3, 2**63 - 1))
+def test_the_truth_and_motor_encoders_give_what_rosbags_serializes(first, rate, stamp, size, seed, motor, cycle):
+    from types import SimpleNamespace
+
+    from rimd_sim.runtime.simulator import TRUTH_ARRAY_FIELDS, encode_motor, encode_truth
+
+    rng = np.random.default_rng(seed)
+    rows = rng.normal(size=(len(TRUTH_ARRAY_FIELDS) + 1, size))
+    rows[-1] = rng.integers(0, 2, size)   # in_contact
+    sec, nanosec = divmod(stamp, 1_000_000_000)
+    Time, Header = STORE.types["builtin_interfaces/msg/Time"], STORE.types["std_msgs/msg/Header"]
+    truth = STORE.types["rimd_msgs/msg/RigState"](
+        header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id="truth"), first_index=first, sample_rate=rate,
+        **{name: rows[i] for i, name in enumerate(TRUTH_ARRAY_FIELDS)}, in_contact=rows[-1] != 0.0)
+    assert encode_truth(stamp, first, rate, rows) == bytes(STORE.serialize_cdr(truth, "rimd_msgs/msg/RigState"))
+    m = SimpleNamespace(frequency_setpoint=motor[0], frequency=motor[1], phase=motor[2], cycle_index=cycle,
+                        ramp_rate=motor[3], cart_position=motor[4])
+    state = STORE.types["rimd_msgs/msg/MotorState"](
+        header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id="motor"), frequency_setpoint=motor[0],
+        frequency=motor[1], phase=motor[2], cycle_index=max(cycle, 0), ramp_rate=motor[3], cart_position=motor[4])
+    assert encode_motor(stamp, m) == bytes(STORE.serialize_cdr(state, "rimd_msgs/msg/MotorState"))

@@ -30,6 +30,8 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from harness.clock import FakeClock
 from rimd_sim.errors import ConfigError
@@ -574,3 +576,16 @@ def test_every_message_is_what_the_node_built_field_by_field_before():
             reason, sequence, 3, "/rig/rimd_simulator", "simulation", "rimd_virtual_rig")
         assert s.header.stamp == s.start_stamp and s.simulation_time == (s.start_stamp.nanosec / 1e9)
     assert np.isfinite([read_block(d, "rimd_msgs/msg/RigState").theta[0] for d in rig.on("truth")]).all()
+
+
+@settings(max_examples=300, deadline=None)
+@given(t0=st.integers(0, 2**62), first=st.integers(0, 10**12), count=st.integers(1, 12),
+       num=st.integers(1, 4 * 10**9), den=st.integers(1, 1000))
+def test_block_end_stamps_are_the_rounded_exact_boundaries(t0, first, count, num, den):
+    """The pacing's integer boundaries are ``stamp_ns`` of the exact Fractions, ties rounded to even included."""
+    from rimd_sim.runtime.simulator import block_end_stamps, stamp_ns
+
+    rate = Fraction(num, den)
+    assert block_end_stamps(t0, first, count, rate) == [stamp_ns(t0, Fraction(k) / rate)
+                                                        for k in range(first, first + count)]
+    assert block_end_stamps(0, 1, 3, Fraction(2 * 10**9)) == [0, 1, 2]   # 0.5, 1, 1.5 ns: half to even

@@ -411,11 +411,19 @@ class SampleBlockEncoder:
         p = _PRIMITIVES[self.order]
         self._time, self._u64, self._u32 = _TIME[self.order], p["Q"], p["I"]
         self._rate = p["d"].pack(sample_rate)
-        CdrWriter(self.order).string(unit)          # refuses a NUL now, not at the first block
+        # After a non-empty samples array the position is 8-aligned: what follows up to the saturated count
+        # (unit, range) is then the same bytes in every block. Refuses a NUL in the unit now, not at the first block.
+        self._after = CdrWriter(self.order).string(unit).f64(range_min).f64(range_max).body()
         self._unit, self._range = unit, (range_min, range_max)
 
     def encode(self, sec: int, nanosec: int, first_index: int, samples: np.ndarray, saturated_count: int) -> bytes:
         """The serialized message of one block (``samples``: float64, any byte order)."""
+        count = len(samples)
+        if count:   # the samples' count, 4 bytes of padding, the samples, then the fields after them (8-aligned)
+            return b"".join((ENCAPSULATION[self.order], self._time.pack(sec, nanosec), self._frame, self._pad_index,
+                             self._u64.pack(first_index), self._rate, self._u32.pack(count), b"\0\0\0\0",
+                             np.ascontiguousarray(samples, dtype=_F8[self.order]).tobytes(), self._after,
+                             self._u32.pack(saturated_count)))
         tail = CdrWriter(self.order, at=self._index_at + 16)   # from the samples' count on
         tail.f64_array(samples).string(self._unit).f64(self._range[0]).f64(self._range[1]).u32(saturated_count)
         return b"".join((ENCAPSULATION[self.order], self._time.pack(sec, nanosec), self._frame, self._pad_index,

@@ -36,6 +36,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import struct
 import threading
 import time
 import uuid
@@ -95,6 +96,22 @@ OK, WARN, ERROR = 0, 1, 2
 def stamp_ns(t0_ns: int, t: Fraction) -> int:
     """ROS time in integer nanoseconds of simulation time ``t`` (exact, rounded to the nearest ns)."""
     return t0_ns + round(t * 1_000_000_000)
+
+
+def block_end_stamps(t0_ns: int, first: int, count: int, rate: Fraction) -> list[int]:
+    """``stamp_ns(t0_ns, k / rate)`` for the ``count`` block boundaries ``k = first, first + 1, ...``.
+
+    In integers, rounded half to even as ``round`` rounds a Fraction: the pacing asks for them at every pass,
+    and a Fraction per boundary cost more than the pass's other pacing work.
+    """
+    num, den = rate.numerator, rate.denominator
+    ends = []
+    for k in range(first, first + count):
+        q, r = divmod(k * 1_000_000_000 * den, num)
+        if 2 * r > num or (2 * r == num and q & 1):
+            q += 1
+        ends.append(t0_ns + q)
+    return ends
 
 
 def sample_stamp_ns(t0_ns: int, n: int, rate: Fraction) -> int:
@@ -217,19 +234,45 @@ def _bools(w: CdrWriter, values: np.ndarray) -> CdrWriter:
     return w
 
 
+def _frame(frame_id: str) -> bytes:
+    """A header's ``frame_id`` as it follows the 8-byte stamp, padded so that an 8-byte field comes next."""
+    w = CdrWriter(at=8).string(frame_id)
+    w.f64(0.0)
+    return w.body()[:-8]
+
+
+# Each block sends a motor state and a truth block: their layouts are fixed, so they are packed at once rather
+# than field by field (the same bytes; tests/runtime/test_simulator_runtime.py compares them with CdrWriter's).
+_STAMP, _U32 = struct.Struct("<iI"), struct.Struct("<I")
+_MOTOR_FRAME, _MOTOR = _frame("motor"), struct.Struct("<dddQdd")
+_TRUTH_FRAME, _TRUTH_HEAD = _frame("truth"), struct.Struct("<Qd")
+_ENCAPSULATION = CdrWriter().message()
+
+
 def encode_motor(stamp: int, m: Any) -> bytes:
     """``rimd_msgs/msg/MotorState`` of the core's motor state ``m``."""
-    w = _header(CdrWriter(), stamp, "motor")
-    w.f64(m.frequency_setpoint).f64(m.frequency).f64(m.phase).u64(max(m.cycle_index, 0)).f64(m.ramp_rate)
-    return w.f64(m.cart_position).message()
+    return b"".join((_ENCAPSULATION, _STAMP.pack(*divmod(stamp, 1_000_000_000)), _MOTOR_FRAME,
+                     _MOTOR.pack(m.frequency_setpoint, m.frequency, m.phase, max(m.cycle_index, 0), m.ramp_rate,
+                                 m.cart_position)))
 
 
 def encode_truth(stamp: int, first_index: int, sample_rate: float, rows: np.ndarray) -> bytes:
     """``rimd_msgs/msg/RigState`` of the core's truth rows (10 float rows, then in_contact)."""
-    w = _header(CdrWriter(), stamp, "truth").u64(first_index).f64(sample_rate)
-    for i in range(len(TRUTH_ARRAY_FIELDS)):
-        w.f64_array(rows[i])
-    return _bools(w, rows[10] != 0.0).message()
+    k, n = len(TRUTH_ARRAY_FIELDS), rows.shape[1]
+    if n == 0:
+        w = _header(CdrWriter(), stamp, "truth").u64(first_index).f64(sample_rate)
+        for i in range(k):
+            w.f64_array(rows[i])
+        return _bools(w, rows[k] != 0.0).message()
+    # From the 8-aligned first array on, each float64[] is its count, 4 bytes of padding and its values: one
+    # row of n + 1 float64 slots whose first slot holds the count and the padding.
+    arrays = np.empty((k, n + 1), dtype="<f8")
+    arrays[:, 1:] = rows[:k]
+    head = arrays.view(np.uint32)
+    head[:, 0], head[:, 1] = n, 0
+    return b"".join((_ENCAPSULATION, _STAMP.pack(*divmod(stamp, 1_000_000_000)), _TRUTH_FRAME,
+                     _TRUTH_HEAD.pack(first_index, sample_rate), arrays.tobytes(), _U32.pack(n),
+                     (rows[k] != 0.0).astype(np.uint8).tobytes()))
 
 
 def encode_impact(stamp: int, imp: Any) -> bytes:
@@ -375,6 +418,8 @@ class SimulatorRuntime:
         self._block = 0  # blocks published (at the current block rate)
         self._rtf = config.real_time_factor
         self._block_rate = Fraction(repr(config.block_rate))
+        self._ends: list[int] = []
+        self._ends_for: tuple[int, Fraction, int] | None = None   # (block, block_rate, t0_ns) of _ends
         self._wall_clock = wall_clock_stamps(config, settings)
         self._t0_ns = 0
         self._paused = settings.start_paused
@@ -511,8 +556,7 @@ class SimulatorRuntime:
         """One pass of the pacing loop: send the blocks that may go now, or say how long to wait."""
         if self._paused:
             return Step(IDLE_S)
-        bounds = [Fraction(self._block + i + 1) / self._block_rate for i in range(MAX_BATCH)]
-        ends = [stamp_ns(self._t0_ns, b) for b in bounds]
+        ends = self._candidate_ends()
         with self._pace_lock:
             decision = self._pacer.next(ends)
             events = self._pacer.lockstep.take_events() if self._pacer.lockstep is not None else []
@@ -531,7 +575,8 @@ class SimulatorRuntime:
             with self._lock:
                 if self._paused:   # paused while the caller waited for the lock: nothing more
                     return Step()
-                blocks = self._sim.advance_blocks(bounds[:count])
+                blocks = self._sim.advance_blocks([Fraction(self._block + i + 1) / self._block_rate
+                                                   for i in range(count)])
                 self._block += count
         except IntegrationError as exc:  # the model cannot continue: say why, keep the services alive
             self._last_error = str(exc)
@@ -542,6 +587,14 @@ class SimulatorRuntime:
                 return Step(stopped=True)
             self._publish(block)
         return Step()
+
+    def _candidate_ends(self) -> list[int]:
+        """The stamps (ns) at which the next MAX_BATCH blocks end, kept until a block goes (asked twice a block)."""
+        key = (self._block, self._block_rate, self._t0_ns)
+        if self._ends_for != key:
+            self._ends = block_end_stamps(self._t0_ns, self._block + 1, MAX_BATCH, self._block_rate)
+            self._ends_for = key
+        return self._ends
 
     def _hold_report(self, hold: Hold) -> bool:
         """Say which consumers hold the run and since when: once it has lasted HOLD_REPORT_S, then every REPEAT s."""
