@@ -116,6 +116,19 @@ def _arange(count: int) -> np.ndarray:
     return _ARANGE[:count]
 
 
+def _block_times(blocks: list[tuple[int, float, int]]) -> np.ndarray:
+    """The sample times (int64 ns) of consecutive blocks ``(first_index, rate, count)``, concatenated.
+
+    Blocks that follow each other at one rate (the usual case) take one :func:`sample_times_ns` call together.
+    """
+    first, rate, total = blocks[0]
+    for f, r, n in blocks[1:]:
+        if f != first + total or r != rate:
+            return np.concatenate([sample_times_ns(f, n, r) for f, r, n in blocks])
+        total += n
+    return sample_times_ns(first, total, rate)
+
+
 def _array(values: Any) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)
 
@@ -178,8 +191,9 @@ class RigMapper:
         self.batch = batch
         self.min_interval = min_interval
         self._last_send: dict[str, float] = {}
-        self._blocks: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-        self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]] = []
+        self._blocks: dict[str, list[tuple[int, float, np.ndarray]]] = {}   # first index, rate, samples
+        # (first index, rate, count), x, v, motor phase, motor frequency of each truth block not sent yet
+        self._truth: list[tuple[tuple[int, float, int], np.ndarray, np.ndarray, np.ndarray, float]] = []
         self.omega_n = 2.0 * math.pi * natural_frequency
         self.origin_ns: int | None = None
         self._next_index: dict[str, int] = {}
@@ -250,7 +264,7 @@ class RigMapper:
         if samples.size == 0:
             return
         pending = self._blocks.setdefault(channel.name, [])
-        pending.append((sample_times_ns(first, samples.size, rate), samples))
+        pending.append((first, rate, samples))
         self.stats.samples[channel.name] = self.stats.samples.get(channel.name, 0) + samples.size
         self.stats.blocks[channel.name] = self.stats.blocks.get(channel.name, 0) + 1
         if len(pending) >= self.batch and self._due(channel.name):
@@ -271,8 +285,8 @@ class RigMapper:
         if not pending:
             return
         rr = self._rr
-        times = pending[0][0] if len(pending) == 1 else np.concatenate([t for t, _ in pending])
-        values = pending[0][1] if len(pending) == 1 else np.concatenate([v for _, v in pending])
+        times = _block_times([(first, rate, values.size) for first, rate, values in pending])
+        values = pending[0][2] if len(pending) == 1 else np.concatenate([v for _, _, v in pending])
         rr.send_columns(channel.entity, indexes=[rr.TimeColumn(TIMELINE, duration=times.view("timedelta64[ns]"))],
                         columns=rr.Scalars.columns(scalars=values), recording=self.rec)
 
@@ -318,8 +332,7 @@ class RigMapper:
         cart_v = np.gradient(cart, 1.0 / rate, edge_order=2) if n >= 3 else np.zeros(n)
         x_mm = (_array(msg.rimd_position) - cart) * 1e3
         y_mm = (_array(msg.rimd_velocity) - cart_v) / self.omega_n * 1e3
-        times = sample_times_ns(first, n, rate)
-        self._truth.append((times, x_mm, y_mm, _array(msg.motor_phase), float(msg.motor_frequency[-1])))
+        self._truth.append(((first, rate, n), x_mm, y_mm, _array(msg.motor_phase), float(msg.motor_frequency[-1])))
         self.stats.truth_blocks += 1
         if len(self._truth) >= self.batch and self._due(TRUTH_TOPIC):
             self._send_truth()
@@ -329,7 +342,7 @@ class RigMapper:
             return
         rr = self._rr
         batch, self._truth = self._truth, []
-        times = np.concatenate([b[0] for b in batch])
+        times = _block_times([b[0] for b in batch])
         xs = np.concatenate([b[1] for b in batch])
         ys = np.concatenate([b[2] for b in batch])
         ph = np.concatenate([b[3] for b in batch])
@@ -339,7 +352,7 @@ class RigMapper:
             xs, ys, ph = np.r_[prev.x, xs], np.r_[prev.v, ys], np.r_[prev.phase, ph]
             times = np.r_[np.int64(prev.t_ns), times]
         # One line segment per block (from the last sample of the previous one), at the block's last sample.
-        ends = np.cumsum([b[0].size for b in batch]) + (xs.size - sum(b[0].size for b in batch)) - 1
+        ends = np.cumsum([b[0][2] for b in batch]) + (xs.size - sum(b[0][2] for b in batch)) - 1
         starts = np.r_[0, ends[:-1]]
         strips = [np.column_stack((xs[a:b + 1], ys[a:b + 1])) for a, b in zip(starts, ends, strict=True)]
         index = [rr.TimeColumn(TIMELINE, duration=times[ends].view("timedelta64[ns]"))]
