@@ -98,6 +98,10 @@ class _LostStatus:
                                    event_type=QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST,
                                    parent_impl=sub.handle)
 
+    def destroy(self) -> None:
+        """Release the status (before its subscription and node go)."""
+        self._event.destroy()
+
     def take(self) -> int:
         """Messages newly declared lost since the last take (0 when the subscription is gone)."""
         self._event._ready_to_take_data = True   # rclpy's flag that a wait set saw it ready: asked directly here
@@ -140,7 +144,7 @@ class PolledSubscriptions:
         """Create a raw subscription of the node whose messages go to ``handler(data, info)``.
 
         ``lost(count)``: called with the number of messages the transport newly declared lost (DDS's sample-lost
-        status, the subscription's ``message_lost`` event: a reliable reader told that samples are gone).
+        status: a reliable reader told that samples are gone), read at each :meth:`poll`.
         """
         sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}),  # type: ignore[arg-type]
                                              qos, raw=True)  # raw=True hands bytes, not the annotated message
@@ -190,6 +194,12 @@ class PolledSubscriptions:
                 lost(count)
         return taken
 
+    def close(self) -> None:
+        """Release what the subscriptions' lost statuses hold (the node is being destroyed)."""
+        for status, _ in self._lost:
+            status.destroy()
+        self._lost.clear()
+
     def _on_timer(self) -> None:
         """The timer's poll; then ``after``, and the next period from the traffic."""
         taken = self.poll()
@@ -219,3 +229,9 @@ class PollingNode(RimdNode):
         """The subscriptions the executor takes: all but the polled ones."""
         subs = super().subscriptions
         return list(subs) if self._polled is None else self._polled.visible(subs)
+
+    def destroy_node(self) -> None:
+        """Release the polled subscriptions' lost statuses, then destroy the node as rclpy does."""
+        if self._polled is not None:
+            self._polled.close()
+        super().destroy_node()
