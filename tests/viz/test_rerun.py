@@ -336,3 +336,18 @@ def test_mapping_and_offline_path_import_without_ros():
             "import rimd_sim.cli.verbs.rerun\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
+
+
+def test_a_batch_of_blocks_gets_the_times_each_block_would_get_alone():
+    """The bridge times a batch of consecutive blocks in one call; across a hole or a rate change, block by block:
+    the same times either way."""
+    from rimd_sim.viz.rerun_map import _block_times
+
+    def alone(blocks):
+        return np.concatenate([sample_times_ns(f, n, r) for f, r, n in blocks])
+
+    for blocks in ([(0, 2000.0, 20)], [(40, 2000.0, 20), (60, 2000.0, 20), (80, 2000.0, 7)],
+                   [(0, 3.0, 5), (5, 3.0, 5)],            # a rate whose sample times round
+                   [(0, 2000.0, 20), (40, 2000.0, 20)],   # a hole (a dropped block)
+                   [(0, 2000.0, 20), (20, 1000.0, 10)]):  # another rate
+        assert np.array_equal(_block_times(blocks), alone(blocks)), blocks

@@ -51,7 +51,7 @@ import numpy as np
 from rimd_sim.errors import CommandError, ConfigError, IntegrationError
 from rimd_sim.instruments.faults import parse_fault_entry
 from rimd_sim.instruments.rig_simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
-from rimd_sim.io.cdr import BLOCK_ARRAYS, CdrWriter, SampleBlockEncoder
+from rimd_sim.io.cdr import BLOCK_ARRAYS, ENCAPSULATION, CdrWriter, SampleBlockEncoder
 from rimd_sim.runtime.pacing import Go, Hold, Pacer, Wait
 from rimd_sim.runtime.progress import PACING_STATUS, PUBLISHED_KEY
 from rimd_sim.settings.config import (
@@ -242,11 +242,11 @@ def _frame(frame_id: str) -> bytes:
 
 
 # Each block sends a motor state and a truth block: their layouts are fixed, so they are packed at once rather
-# than field by field (the same bytes; tests/runtime/test_simulator_runtime.py compares them with CdrWriter's).
+# than field by field (the bytes rosbags serializes from the same fields: tests/io/test_cdr_blocks.py).
 _STAMP, _U32 = struct.Struct("<iI"), struct.Struct("<I")
 _MOTOR_FRAME, _MOTOR = _frame("motor"), struct.Struct("<dddQdd")
 _TRUTH_FRAME, _TRUTH_HEAD = _frame("truth"), struct.Struct("<Qd")
-_ENCAPSULATION = CdrWriter().message()
+_ENCAPSULATION = ENCAPSULATION["<"]
 
 
 def encode_motor(stamp: int, m: Any) -> bytes:
