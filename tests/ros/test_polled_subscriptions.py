@@ -81,6 +81,14 @@ def test_the_poll_period_follows_the_traffic():
     assert steady(quiet, 0) == 0.05                                    # nothing comes (a paused rig)
     assert quiet.after(taken=500, elapsed=0.05) == 0.01                # a burst: short again at once
     assert PollPeriod(0.02).after(taken=1, elapsed=1.0) == 0.02        # without a longest period: fixed
+    # The timer follows when the period moves by more than a fifth, and always to a bound: a period that crept up
+    # to 70 ms in small steps still reaches the longest (80 ms), though that is within a fifth of it.
+    creep = PollPeriod(0.01, 0.08, aim=40)
+    assert creep.after(taken=0, elapsed=1.0) == 0.08
+    assert creep.worth_setting(70_000_000) and creep.worth_setting(10_000_000)
+    assert not creep.worth_setting(80_000_000)
+    creep.after(taken=600, elapsed=1.0)                                 # 600 messages/s: 66.7 ms
+    assert not creep.worth_setting(70_000_000) and creep.worth_setting(50_000_000)
     for bad in ((0.0, 0.05), (0.05, 0.01)):
         with pytest.raises(ValueError, match="poll periods"):
             PollPeriod(*bad)

@@ -85,6 +85,16 @@ class PollPeriod:
         self.period = self.longest if rate <= 0 else min(self.longest, max(self.shortest, self.aim / rate))
         return self.period
 
+    def worth_setting(self, timer_ns: int) -> bool:
+        """Whether a timer running at ``timer_ns`` should take :attr:`period` (changing it is a C call).
+
+        When the period has moved by more than a fifth, or has reached a bound and the timer is not there (a
+        period that creeps up in small steps would otherwise stop short of the longest).
+        """
+        period_ns = round(self.period * 1e9)
+        return period_ns != timer_ns and (abs(period_ns - timer_ns) > 0.2 * timer_ns
+                                          or self.period in (self.shortest, self.longest))
+
 
 class _LostStatus:
     """A subscription's sample-lost status (DDS's SAMPLE_LOST), read on demand, never dispatched by an executor.
@@ -210,9 +220,9 @@ class PolledSubscriptions:
         pace = self.pace
         if pace.longest == pace.shortest:
             return
-        period_ns = round(pace.after(taken, elapsed) * 1e9)
-        if abs(period_ns - self._period_ns) > 0.2 * self._period_ns:   # a C call: only when it matters
-            self.timer.timer_period_ns = self._period_ns = period_ns
+        pace.after(taken, elapsed)
+        if pace.worth_setting(self._period_ns):
+            self.timer.timer_period_ns = self._period_ns = round(pace.period * 1e9)
 
 
 class PollingNode(RimdNode):
