@@ -126,7 +126,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "rimd = rimd_sim.cli:main",
+            "rimd = rimd_sim.cli:entry",
             *NODE_EXECUTABLES,
         ],
         # The rimd_rig fixture for users' own test suites (rimd_sim/ros/testing.py, docs/testing.md).

@@ -268,7 +268,7 @@ def sim_wheel_problems(path: Path, version: str) -> list[str]:
             problems.append(f"missing {data}{name}")
     (entry_points,) = [n for n in files if n.endswith(".dist-info/entry_points.txt")]
     text = files[entry_points].decode()
-    if "rimd = rimd_sim.cli:main" not in text or "[pytest11]" not in text:
+    if "rimd = rimd_sim.cli:entry" not in text or "[pytest11]" not in text:
         problems.append("entry_points.txt: no rimd command or no pytest11 plugin")
     problems += [f"unexpected {n}" for n in files if "__pycache__" in n or n.endswith((".nbi", ".nbc"))]
     return problems

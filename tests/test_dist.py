@@ -124,7 +124,7 @@ def _sim_wheel(tmp_path: Path, requires: list[str]) -> Path:
                           *(f"Requires-Dist: {r}" for r in requires)]) + "\n"
     build_dist.write_wheel(wheel, files, {
         f"{dist_info}/METADATA": metadata,
-        f"{dist_info}/entry_points.txt": "[console_scripts]\nrimd = rimd_sim.cli:main\n\n[pytest11]\nrimd_sim = x\n"})
+        f"{dist_info}/entry_points.txt": "[console_scripts]\nrimd = rimd_sim.cli:entry\n\n[pytest11]\nrimd_sim = x\n"})
     return wheel
 
 

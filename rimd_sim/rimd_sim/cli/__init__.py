@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import cast
 
 from rimd_sim import __version__
+from rimd_sim.runtime import collector
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -267,5 +268,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+def entry() -> int:
+    """The ``rimd`` executable: :func:`main` in a process of its own, its cycle collector set for one.
+
+    (:mod:`rimd_sim.runtime.collector`: young objects collected less often, what the process has built frozen at
+    the end so that its exit does not walk it again.) A program that calls :func:`main` keeps its own collector.
+    """
+    collector.configure()
+    try:
+        return main()
+    finally:
+        collector.keep_what_exists()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

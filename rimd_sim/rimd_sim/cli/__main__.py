@@ -2,7 +2,7 @@
 
 import sys
 
-from rimd_sim.cli import main
+from rimd_sim.cli import entry
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())
