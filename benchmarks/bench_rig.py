@@ -24,8 +24,14 @@ Printed for each layout (and written as JSON with --json):
     light-rig changes (docs/benchmarks.md: simulator <= 5 %, recorder <= 10 %, Rerun bridge <= 10 %, the whole
     rig <= 25 %), each with "met" or "NOT met"; and the composed rig's CPU against the separate rig's.
 
+With ``--compare DIR`` (another checkout, set up: a worktree of an older commit), the rig of --only's layout
+(default composed) of this tree and of DIR's package run alternately, --rounds times each, in one run, and the
+whole rig's CPU is printed per run, as medians and as the median ratio DIR / this: on a shared machine whose speed
+drifts within hours, a before/after figure that means something.
+
 Run (after ``source env.sh``, from the repository root; the machine otherwise idle):
     python benchmarks/bench_rig.py [--seconds 120] [--json rig.json] [--keep] [--only composed|separate]
+                                   [--compare DIR [--rounds 3]]
 The exit status is 0 whenever the rigs ran and were measured, whatever the verdicts.
 """
 
@@ -33,6 +39,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import statistics
 import subprocess
 import sys
 import time
@@ -169,17 +177,21 @@ def report(result: dict) -> None:
         print(f"  {goal['goal']}: {soak._verdict(goal['met'])} ({goal['detail']})")
 
 
-def measure(layout: str, args: argparse.Namespace, block_rate: float) -> dict:
-    """One rig of ``layout`` (composed or separate) with the external subscriber, measured; its figures."""
+def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path | None = None) -> dict:
+    """One rig of ``layout`` (composed or separate) with the external subscriber, measured; its figures.
+
+    ``tree``: the checkout whose package runs (default this one; :func:`bench_soak.start_rig`).
+    """
     from rimd_sim.io.reader import RecordingError
 
     with soak.RigRun.open(f"bench_rig_{layout}_", args.keep) as run:
         tmp = run.tmp
-        print(f"bench_rig: `rimd rig {' '.join(LAYOUTS[layout])}` ({layout}) in {tmp}, ROS_DOMAIN_ID "
+        print(f"bench_rig: `rimd rig {' '.join(LAYOUTS[layout])}` ({layout}{', ' + str(tree) if tree else ''}) "
+              f"in {tmp}, ROS_DOMAIN_ID "
               f"{run.domain_id}; {args.warmup:g} s warm-up, then {args.seconds:g} s measured", flush=True)
         external = start_external(tmp, run.domain_id)
         try:
-            from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout, LAYOUTS[layout])
+            from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout, LAYOUTS[layout], tree)
             procs[EXTERNAL] = external.pid
             started = time.monotonic()
             expected = [soak.COMPOSED] if layout == "composed" else list(soak.NODES.values())
@@ -213,19 +225,52 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float) -> dict:
         return result
 
 
+def compare(args: argparse.Namespace, block_rate: float) -> dict:
+    """This tree's rig and ``args.compare``'s, alternately, ``args.rounds`` times each; the whole rig's CPU."""
+    layout = args.only or "composed"
+    trees = {"this": None, "compare": args.compare.resolve()}
+    runs: dict[str, list[dict]] = {name: [] for name in trees}
+    for round_ in range(args.rounds):
+        for name, tree in trees.items():
+            print(f"\nbench_rig: round {round_ + 1}/{args.rounds}, {name} ({tree or soak.REPO}), load "
+                  f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+            runs[name].append(measure(layout, args, block_rate, tree))
+    totals = {name: [rig_total(r["processes"])[0] for r in results] for name, results in runs.items()}
+    lost = {name: [not (r["goals"]["nothing_lost"]["met"] and r["goals"]["nothing_lost_external"]["met"])
+                   for r in results] for name, results in runs.items()}
+    print(f"\nthe whole rig ({layout}) at real time, % of one core, alternately in this run "
+          f"(load after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}):")
+    for name, tree in trees.items():
+        values = ", ".join(f"{t:.1f}{' (LOSS)' if bad else ''}"
+                           for t, bad in zip(totals[name], lost[name], strict=True))
+        print(f"  {name:<8} {statistics.median(totals[name]):6.1f} median  ({values})  {tree or soak.REPO}")
+    ratios = [c / t for t, c in zip(totals["this"], totals["compare"], strict=True)]
+    print(f"  ratio compare/this: median {statistics.median(ratios):.2f} (per round: "
+          f"{', '.join(f'{r:.2f}' for r in ratios)}; > 1: this tree costs less)")
+    return {"layout": layout, "runs": runs, "totals": totals, "ratios": ratios}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=120.0, help="measured wall time per rig (default 120)")
     parser.add_argument("--warmup", type=float, default=10.0, help="s run before measuring (default 10)")
     parser.add_argument("--only", choices=tuple(LAYOUTS), default=None, help="measure one layout only")
+    parser.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                        help="alternate the rig of --only's layout (default composed) with DIR's (another checkout)")
+    parser.add_argument("--rounds", type=int, default=3, help="with --compare: runs of each tree (default 3)")
     soak.add_rig_arguments(parser)
     args = parser.parse_args()
-    if args.seconds <= 0 or args.period <= 0 or args.warmup < 0:
-        parser.error("--seconds and --period must be positive, --warmup not negative")
+    if args.seconds <= 0 or args.period <= 0 or args.warmup < 0 or args.rounds < 1:
+        parser.error("--seconds, --period and --rounds must be positive, --warmup not negative")
+    if args.compare is not None and not (args.compare / "rimd_sim" / "rimd_sim" / "__init__.py").is_file():
+        parser.error(f"--compare {args.compare}: not a checkout of the project (no rimd_sim/rimd_sim)")
 
     from rimd_sim.settings.config import find_config_file, load_config
 
     block_rate = load_config(find_config_file("rimd.yaml")).block_rate
+    if args.compare is not None:
+        soak.write_json(compare(args, block_rate), args.json)
+        return
     results = {layout: measure(layout, args, block_rate) for layout in LAYOUTS if args.only in (None, layout)}
     if len(results) == 2:
         composed, separate = (rig_total(results[n]["processes"])[0] for n in ("composed", "separate"))

@@ -243,16 +243,28 @@ def lease_domain():  # harness.domains.DomainLease
     return lease_domain_id()
 
 
-def start_rig(tmp: Path, domain_id: int, seconds: float, options: tuple[str, ...] = ()) -> subprocess.Popen:
-    rimd = shutil.which("rimd")
-    if rimd is None:
-        raise SystemExit("rimd not on PATH: run `source env.sh` first")
+def start_rig(tmp: Path, domain_id: int, seconds: float, options: tuple[str, ...] = (),
+              tree: Path | None = None) -> subprocess.Popen:
+    """``rimd rig OPTIONS`` recording into ``tmp/rec``, its output in ``tmp/rig.log``.
+
+    ``tree``: another checkout of the project (set up, e.g. a worktree of an older commit) whose package runs
+    instead, as ``python -m rimd_sim.cli`` with that tree's package first on the import path (its nodes are
+    started the same way: they inherit the path).
+    """
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
     env.pop("ROS_STATIC_PEERS", None)
+    if tree is None:
+        rimd = shutil.which("rimd")
+        if rimd is None:
+            raise SystemExit("rimd not on PATH: run `source env.sh` first")
+        command = [rimd]
+    else:
+        env["PYTHONPATH"] = os.pathsep.join([str(tree / "rimd_sim"), env.get("PYTHONPATH", "")])
+        command = [sys.executable, "-m", "rimd_sim.cli"]
     # --duration is only a backstop (the bench stops the rig with SIGINT after --minutes): should the bench
     # die, the rig stops by itself 5 minutes later.
-    cmd = [rimd, "rig", "--output-dir", str(tmp / "rec"), "--duration", f"{seconds + 300:.0f}", *options]
+    cmd = [*command, "rig", "--output-dir", str(tmp / "rec"), "--duration", f"{seconds + 300:.0f}", *options]
     log = (tmp / "rig.log").open("wb")
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                             cwd=tmp, start_new_session=True)
@@ -311,10 +323,13 @@ class RigRun:
     def domain_id(self) -> int:
         return self.lease.domain_id
 
-    def start(self, seconds: float, startup_timeout: float,
-              options: tuple[str, ...] = ()) -> tuple[bool, dict[str, int]]:
-        """Start ``rimd rig OPTIONS`` for ``seconds``; wait until it runs: (from sample 0, its processes)."""
-        self.rig = start_rig(self.tmp, self.domain_id, seconds, options)
+    def start(self, seconds: float, startup_timeout: float, options: tuple[str, ...] = (),
+              tree: Path | None = None) -> tuple[bool, dict[str, int]]:
+        """Start ``rimd rig OPTIONS`` for ``seconds``; wait until it runs: (from sample 0, its processes).
+
+        ``tree``: another checkout whose package runs (:func:`start_rig`).
+        """
+        self.rig = start_rig(self.tmp, self.domain_id, seconds, options, tree)
         from_sample_0 = wait_running(self.rig, self.tmp / "rig.log", startup_timeout)
         return from_sample_0, rig_processes(self.rig.pid)
 

@@ -30,6 +30,7 @@ import pytest
 from harness.domains import lease_domain_id
 from harness.processes import ProcessManager
 from rimd_sim.ros.testing import configured_domain_range
+from rimd_sim.runtime import collector
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -55,6 +56,20 @@ def _test_failed(request: pytest.FixtureRequest) -> bool:
 
 #: Set by ``make test-fast``: the quick target runs only tests that start no process, and holds them to it.
 FAST = os.environ.get("RIMD_TEST_FAST") == "1"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The test session sets its cycle collector as the package's own processes do (rimd_sim.runtime.collector):
+    young objects collected every 10,000 allocations. Measured on the in-process tests of five directories, one
+    worker, alternately: 6 % less wall time with the collection's modules frozen too."""
+    del config
+    collector.configure()
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """What the collection imported (numba, rclpy, matplotlib, the package) lives as long as the session: frozen."""
+    del session
+    collector.keep_what_exists()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
