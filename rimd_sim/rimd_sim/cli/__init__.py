@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import cast
 
 from rimd_sim import __version__
+from rimd_sim.analysis import figures
 from rimd_sim.runtime import collector
 
 EXIT_OK = 0
@@ -269,12 +270,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def entry() -> int:
-    """The ``rimd`` executable: :func:`main` in a process of its own, its cycle collector set for one.
+    """The ``rimd`` executable: :func:`main` in a process of its own, set for one.
 
-    (:mod:`rimd_sim.runtime.collector`: young objects collected less often, what the process has built frozen at
-    the end so that its exit does not walk it again.) A program that calls :func:`main` keeps its own collector.
+    Its cycle collector (:mod:`rimd_sim.runtime.collector`: young objects collected less often, what the process
+    has built frozen at the end so that its exit does not walk it again), and its figures drawn in a worker
+    process started before the computation (:mod:`rimd_sim.analysis.figures`). A program that calls :func:`main`
+    keeps its own collector and draws in its own process.
     """
     collector.configure()
+    figures.use_own_process()
     try:
         return main()
     finally:

@@ -1,0 +1,112 @@
+"""A command's figures: drawn here by default, or in a worker process started before the computation."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rimd_sim.analysis import figures
+from rimd_sim.analysis.dynamics.sweep import sweep
+from rimd_sim.analysis.figures import Figures
+from rimd_sim.settings.config import load_config
+
+
+@pytest.fixture(scope="module")
+def one_point():
+    """One sweep point (gap 0, 3 Hz, a short run): something to plot."""
+    return sweep(load_config(), np.array([3.0]), "rest", cycles=20, measure_cycles=10, workers=1)
+
+
+def test_by_default_a_figure_is_drawn_here_at_the_call(tmp_path, one_point):
+    assert not figures.own_process()
+    path = tmp_path / "sweep.png"
+    with Figures() as figs:
+        assert not figs.in_own_process
+        figs.draw("plot_sweep", [one_point], path, "title", caption="caption")
+        assert path.is_file()   # at once, before the block ends
+    assert figs.results == [path]
+
+
+@pytest.mark.process
+def test_a_worker_draws_the_same_png_and_the_block_waits_for_it(tmp_path, one_point):
+    here, there = tmp_path / "here.png", tmp_path / "there.png"
+    with Figures(own=False) as figs:
+        figs.draw("plot_sweep", [one_point], here, "title", caption="caption")
+    with Figures(own=True) as figs:
+        assert figs.in_own_process
+        figs.draw("plot_sweep", [one_point], there, "title", caption="caption")
+    assert figs.results == [there]
+    assert there.read_bytes() == here.read_bytes()
+
+
+@pytest.mark.process
+def test_a_failure_in_the_worker_is_raised_when_the_block_ends(tmp_path, one_point):
+    with pytest.raises(AttributeError, match="no_such_plot"):
+        with Figures(own=True) as figs:
+            figs.draw("no_such_plot", [one_point], tmp_path / "x.png")
+    with pytest.raises(TypeError):
+        with Figures(own=True) as figs:
+            figs.draw("plot_sweep", [one_point], tmp_path / "y.png", no_such_keyword=1)
+    assert not (tmp_path / "y.png").exists()
+
+
+@pytest.mark.process
+def test_an_error_in_the_block_goes_through_not_a_figures(tmp_path, one_point):
+    # The block does not wait for its figures then: the computation's error is the one raised.
+    with pytest.raises(ValueError, match="the computation failed"):
+        with Figures(own=True) as figs:
+            figs.draw("no_such_plot", [one_point], tmp_path / "x.png")
+            raise ValueError("the computation failed")
+
+
+def test_a_process_with_other_threads_starts_its_worker_by_spawn_not_fork():
+    assert figures._start_method(["fork", "spawn"]) in {"fork", "spawn"}
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, daemon=True)
+    other.start()
+    try:
+        assert figures._start_method(["fork", "spawn", "forkserver"]) == "spawn"
+    finally:
+        stop.set()
+        other.join(5)
+    assert figures._start_method(["spawn"]) == "spawn"
+
+
+def test_use_own_process_sets_what_a_new_block_does():
+    try:
+        figures.use_own_process(True)
+        assert figures.own_process()
+    finally:
+        figures.use_own_process(False)
+    assert not figures.own_process()
+
+
+@pytest.mark.process
+def test_the_rimd_executable_draws_a_sweeps_figure_in_a_worker(tmp_path):
+    # entry() turns the worker on: the process that runs ``rimd sweep`` has a child while it computes, and the
+    # files are all there when it returns.
+    code = ("import sys, multiprocessing\n"
+            "from rimd_sim import cli\n"
+            "from rimd_sim.analysis import figures\n"
+            "seen = []\n"
+            "made = figures.Figures.__init__\n"
+            "def spy(self, own=None):\n"
+            "    made(self, own)\n"
+            "    seen.append(self.in_own_process)\n"
+            "figures.Figures.__init__ = spy\n"
+            f"sys.argv = ['rimd', 'sweep', '--f-min', '3', '--f-max', '3', '--cycles', '20', '--measure-cycles', '10',"
+            f" '--out', {str(tmp_path / 'out')!r}]\n"
+            "status = cli.entry()\n"
+            "print(status, seen)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                            stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split("\n")[-2] == "0 [True]"
+    out = Path(tmp_path / "out")
+    assert {p.name for p in out.iterdir()} == {"summary.json", "sweep.csv", "sweep.png"}
+    assert out.joinpath("sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
