@@ -40,7 +40,7 @@ def test_a_worker_draws_the_same_png_and_the_block_waits_for_it(tmp_path, one_po
     with Figures(own=True) as figs:
         assert figs.in_own_process
         figs.draw("plot_sweep", [one_point], there, "title", caption="caption")
-    assert figs.results == [there]
+    assert figs.results == [there] and figs.in_own_process
     assert there.read_bytes() == here.read_bytes()
 
 

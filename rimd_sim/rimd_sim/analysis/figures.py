@@ -81,7 +81,8 @@ class Figures:
         self._loaded: cf.Future | None = None
         self._futures: list[cf.Future] = []
         self.results: list[Any] = []
-        if own_process() if own is None else own:
+        self._own = own_process() if own is None else bool(own)
+        if self._own:
             import concurrent.futures
             import multiprocessing
 
@@ -93,7 +94,7 @@ class Figures:
     @property
     def in_own_process(self) -> bool:
         """Whether the figures are drawn in a worker process."""
-        return self._pool is not None
+        return self._own
 
     def draw(self, name: str, /, *args: Any, **kwargs: Any) -> None:
         """Draw with ``rimd_sim.analysis.plots.<name>(*args, **kwargs)``: in the worker, or here at once."""
