@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
+import os
+import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +69,6 @@ def test_an_error_in_the_block_goes_through_not_a_figures(tmp_path, one_point):
 
 
 def test_a_process_with_other_threads_starts_its_worker_by_spawn_not_fork():
-    assert figures._start_method(["fork", "spawn"]) in {"fork", "spawn"}
     stop = threading.Event()
     other = threading.Thread(target=stop.wait, daemon=True)
     other.start()
@@ -87,9 +90,13 @@ def test_use_own_process_sets_what_a_new_block_does():
 
 
 @pytest.mark.process
-def test_the_rimd_executable_draws_a_sweeps_figure_in_a_worker(tmp_path):
-    # entry() turns the worker on: the process that runs ``rimd sweep`` has a child while it computes, and the
-    # files are all there when it returns.
+@pytest.mark.parametrize(("argv", "worker"), [
+    (["--f-min", "3", "--f-max", "3"], True),                              # one point: the sweep runs here
+    (["--f-min", "3", "--f-max", "3.5", "--f-step", "0.5", "--workers", "2"], False),   # a pool of its own
+])
+def test_the_rimd_executable_draws_a_one_point_sweeps_figure_in_a_worker(tmp_path, argv, worker):
+    # entry() turns the worker on: the process that runs ``rimd sweep`` has a child while it computes (not beside
+    # a pool of the sweep's own), and the files are all there when it returns.
     code = ("import sys, multiprocessing\n"
             "from rimd_sim import cli\n"
             "from rimd_sim.analysis import figures\n"
@@ -97,16 +104,49 @@ def test_the_rimd_executable_draws_a_sweeps_figure_in_a_worker(tmp_path):
             "made = figures.Figures.__init__\n"
             "def spy(self, own=None):\n"
             "    made(self, own)\n"
-            "    seen.append(self.in_own_process)\n"
+            "    seen.append((self.in_own_process, len(multiprocessing.active_children())))\n"
             "figures.Figures.__init__ = spy\n"
-            f"sys.argv = ['rimd', 'sweep', '--f-min', '3', '--f-max', '3', '--cycles', '20', '--measure-cycles', '10',"
+            f"sys.argv = ['rimd', 'sweep', *{argv!r}, '--cycles', '20', '--measure-cycles', '10',"
             f" '--out', {str(tmp_path / 'out')!r}]\n"
             "status = cli.entry()\n"
             "print(status, seen)\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                             stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.split("\n")[-2] == "0 [True]"
+    assert result.stdout.split("\n")[-2] == f"0 [({worker}, {int(worker)})]"
     out = Path(tmp_path / "out")
     assert {p.name for p in out.iterdir()} == {"summary.json", "sweep.csv", "sweep.png"}
     assert out.joinpath("sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.process
+def test_the_worker_ends_when_its_command_is_killed(tmp_path):
+    # SIGKILL leaves the pool unclosed; the worker asked the kernel for SIGTERM at its parent's death.
+    code = ("import os, sys, time, multiprocessing\n"
+            "from rimd_sim.analysis.figures import Figures\n"
+            "figs = Figures(own=True)\n"
+            "figs._loaded.result(timeout=60)\n"
+            "print([p.pid for p in multiprocessing.active_children()], flush=True)\n"
+            "time.sleep(60)\n")
+    command = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
+                               stdin=subprocess.DEVNULL)
+    try:
+        line = command.stdout.readline()
+        (worker,) = json.loads(line)
+        os.kill(command.pid, signal.SIGKILL)
+        command.wait(10)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and _alive(worker):
+            time.sleep(0.05)
+        assert not _alive(worker), f"the figure worker {worker} outlived its killed command"
+    finally:
+        command.kill()
+        command.wait(10)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from importlib.metadata import entry_points
 
+import pytest
+
 from rimd_sim import cli
 from rimd_sim.runtime import collector
 
@@ -27,6 +29,7 @@ def test_the_rimd_executable_is_the_entry_that_sets_the_collector():
     assert script.value == "rimd_sim.cli:entry"
 
 
+@pytest.mark.process
 def test_entry_runs_main_with_the_young_threshold_raised_and_freezes_at_the_end():
     out = _python("import sys; from rimd_sim.cli import entry; sys.argv = ['rimd']; status = entry(); "
                   f"print(status); {_REPORT}")
@@ -34,22 +37,30 @@ def test_entry_runs_main_with_the_young_threshold_raised_and_freezes_at_the_end(
 
 
 def test_a_program_calling_main_keeps_its_own_collector(capsys):
-    before = gc.get_threshold(), gc.get_freeze_count()
-    assert cli.main([]) == cli.EXIT_USAGE
-    assert "usage: rimd" in capsys.readouterr().err
-    assert (gc.get_threshold(), gc.get_freeze_count()) == before
+    saved = gc.get_threshold()
+    try:
+        gc.set_threshold(collector.CPYTHON_YOUNG_THRESHOLD, 10, 10)   # the test session's own is raised
+        before = gc.get_threshold(), gc.get_freeze_count()
+        assert cli.main([]) == cli.EXIT_USAGE
+        assert "usage: rimd" in capsys.readouterr().err
+        assert (gc.get_threshold(), gc.get_freeze_count()) == before
+    finally:
+        gc.set_threshold(*saved)
 
 
-def test_a_node_process_freezes_its_imports_before_its_main_runs():
-    # The entry module sets the collector when imported; a node's function freezes once its module is loaded,
-    # before the node's main runs (here a stand-in main that reports what it finds).
-    code = ("import gc; import rimd_sim.ros.nodes._entry as e; "
-            "print(gc.get_threshold()[0], gc.get_freeze_count() > 0); "
-            "e.load = lambda target: (lambda: print(target, gc.get_freeze_count() > 0, gc.isenabled()) or 7); "
+@pytest.mark.process
+def test_a_node_process_keeps_cpythons_threshold_and_freezes_its_imports_before_its_main_runs():
+    # A node's function freezes once its module is loaded, before the node's main runs (here a stand-in main
+    # that reports what it finds), and keeps CPython's young threshold (shorter pauses of its paced thread),
+    # whatever the process had set before.
+    code = ("import gc; gc.set_threshold(12345, 10, 10); import rimd_sim.ros.nodes._entry as e; "
+            "print(gc.get_freeze_count() > 0); "
+            "e.load = lambda target: (lambda: print(target, gc.get_threshold()[0], gc.get_freeze_count() > 0, "
+            "gc.isenabled()) or 7); "
             "print(e.ENTRIES['simulator']())")
     out = _python(code)
-    assert out == [str(collector.YOUNG_THRESHOLD), "False", "rimd_sim.ros.nodes.simulator:main", "True", "True",
-                   "7"]
+    assert out == ["False", "rimd_sim.ros.nodes.simulator:main", str(collector.CPYTHON_YOUNG_THRESHOLD), "True",
+                   "True", "7"]
 
 
 def test_configure_keeps_the_older_generations_thresholds():

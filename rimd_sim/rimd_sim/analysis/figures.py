@@ -6,8 +6,10 @@ process on, :class:`Figures` starts one worker process at once, which imports :m
 the other core while this process computes; each :meth:`Figures.draw` hands it a plotting function's name and
 arguments (pickled), and leaving the ``with`` block waits for every figure, raising the first failure as it was
 raised in the worker. With it off (the default), the figures are drawn here, at the call, exactly the same way.
-``rimd sweep``, the command a study scripts point by point, draws through :class:`Figures`; the maps and
-diagrams, which compute for seconds to minutes, draw in their own process.
+``rimd sweep``, the command a study scripts point by point, draws through :class:`Figures` when its sweep runs in
+its own process (one point, one worker, or up/down); the maps and diagrams, which compute for seconds to minutes,
+draw in the calling process. The worker ends with the command, also when the command is killed (it asks the
+kernel for SIGTERM at its parent's death).
 
 The ``rimd`` executable turns it on (:func:`rimd_sim.cli.entry`, :func:`use_own_process`): its process is its
 own and ends with the command. A program that calls the analyses or ``rimd_sim.cli.main`` keeps it off: no
@@ -16,8 +18,11 @@ process appears under it (a test session's quick target refuses them).
 
 from __future__ import annotations
 
+import ctypes
 import importlib
+import os
 import signal
+import sys
 import threading
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -43,9 +48,22 @@ def own_process() -> bool:
     return _own_process[0]
 
 
-def _start_worker() -> None:
+#: prctl's option that sends the caller a signal when its parent thread dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+
+
+def _start_worker(parent: int) -> None:
     # Ctrl-C is the command's: it stops the worker through the pool; the worker says nothing of it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A command killed outright (SIGKILL: a script's timeout) never closes the pool: the worker, which holds
+    # the pool's queues itself, would wait forever. On Linux it asks for SIGTERM at its parent's death.
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:   # the parent died before the request
+        os._exit(0)
 
 
 def _start_method(methods: list[str]) -> str:
@@ -88,7 +106,7 @@ class Figures:
 
             context = multiprocessing.get_context(_start_method(multiprocessing.get_all_start_methods()))
             self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=context,
-                                                                initializer=_start_worker)
+                                                                initializer=_start_worker, initargs=(os.getpid(),))
             self._loaded = self._pool.submit(_load_plots)   # starts the worker: its imports begin now
 
     @property

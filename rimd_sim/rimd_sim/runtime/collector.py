@@ -4,29 +4,41 @@ Such a process imports numba, matplotlib, rclpy or Rerun before it does anything
 as long as it does (160,000 after one ``rimd sweep`` point with its figure). With CPython's defaults the
 collector walks them over and over while they are made and once more at exit (a full pass over 160,000 objects
 is 0.07 s here): measured on one ``rimd sweep`` point, a quarter of its wall time (docs/benchmarks.md, "Latency").
-So a process of the package collects its youngest generation every :data:`YOUNG_THRESHOLD` allocations
-instead of 700 (cycles are still collected, later and in fewer passes), and hands what it has built to
-:func:`gc.freeze` once it is built (its imports, or its work at the end), which the collector then leaves alone.
 
-Only entry points call these (:func:`rimd_sim.cli.entry`, :mod:`rimd_sim.ros.nodes._entry`): a program that
-imports the package (a test session, a notebook) keeps its own collector.
+* A command (:func:`configure`, then :func:`keep_what_exists` at its end): its youngest generation is collected
+  every :data:`YOUNG_THRESHOLD` allocations instead of 700 (cycles are still collected, later and in fewer
+  passes), and what it has built is frozen before the exit, which then does not walk it again.
+* A node (:func:`for_node`): CPython's thresholds (a young collection 14 times larger would be a longer pause
+  of its paced thread), and its imports frozen, so that no later full collection walks them.
+
+Entry points call these (:func:`rimd_sim.cli.entry`, :mod:`rimd_sim.ros.nodes._entry`, ``rimd node``), and the
+test suite's session for itself (tests/conftest.py); a program that imports the package (a notebook, a user's
+test session) keeps its own collector.
 """
 
 from __future__ import annotations
 
 import gc
 
-__all__ = ["YOUNG_THRESHOLD", "configure", "keep_what_exists"]
+__all__ = ["CPYTHON_YOUNG_THRESHOLD", "YOUNG_THRESHOLD", "configure", "for_node", "keep_what_exists"]
 
 #: Net allocations of tracked objects between two collections of the youngest generation (CPython: 700).
 #: The older generations keep CPython's thresholds, counted in collections of the younger one.
 YOUNG_THRESHOLD = 10_000
+#: CPython's own young threshold, which a node keeps.
+CPYTHON_YOUNG_THRESHOLD = 700
 
 
-def configure() -> None:
-    """Collect the youngest generation every :data:`YOUNG_THRESHOLD` allocations (the process's own setting)."""
+def configure(young: int = YOUNG_THRESHOLD) -> None:
+    """Collect the youngest generation every ``young`` allocations (a command's setting); the older unchanged."""
     _, middle, oldest = gc.get_threshold()
-    gc.set_threshold(YOUNG_THRESHOLD, middle, oldest)
+    gc.set_threshold(young, middle, oldest)
+
+
+def for_node() -> None:
+    """A node's setting, once its module is imported: CPython's young threshold, and what exists frozen."""
+    configure(CPYTHON_YOUNG_THRESHOLD)
+    keep_what_exists()
 
 
 def keep_what_exists() -> None:

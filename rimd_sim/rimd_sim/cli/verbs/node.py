@@ -1,6 +1,7 @@
 """``rimd node NAME [--ros-args ...]``: run one node of the rig in the foreground (like ``ros2 run``).
 
-The nodes are those of the registry, :mod:`rimd_sim.ros.nodes.registry`.
+The nodes are those of the registry, :mod:`rimd_sim.ros.nodes.registry`. The process becomes the node's: its
+cycle collector is set as the node executables set theirs (:func:`rimd_sim.runtime.collector.for_node`).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ import argparse
 import importlib
 
 from rimd_sim.ros.nodes.registry import NODES, by_name
+from rimd_sim.runtime import collector
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,4 +26,5 @@ def main(args: argparse.Namespace) -> int:
     node = by_name(args.name)
     module, _, function = node.target.partition(":")
     run = getattr(importlib.import_module(module), function)
+    collector.for_node()   # the process is the node's from here on: a node's collector, as its executable sets
     return int(run([node.executable, *args.ros_args]) or 0)

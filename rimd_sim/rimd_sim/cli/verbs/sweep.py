@@ -41,29 +41,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
+    from rimd_sim.analysis.executor import scheduler_address
     from rimd_sim.analysis.figures import Figures
 
     check_range("f", args.f_min, args.f_max)
     if args.measure_cycles >= args.cycles:
         raise CommandError(f"--measure-cycles {args.measure_cycles} >= --cycles {args.cycles}: no transient left")
-    with Figures() as figures:   # before the heavy imports: a worker process may load the plots meanwhile
+    freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
+    # The figure's worker only when the sweep runs in this process (no pool of its own forked beside the
+    # worker's threads); made before the heavy imports, so that it loads the plots meanwhile.
+    here = scheduler_address(args.scheduler) is None and (args.direction != "rest" or len(freqs) == 1
+                                                          or args.workers == 1)
+    with Figures(None if here else False) as figures:
         from rimd_sim.analysis.captions import describe
         from rimd_sim.analysis.dynamics.sweep import points_table, sweep
 
         config = load_model_config(args)
-        freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
         with progress_printer("sweep", "frequencies") as progress:
             result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
                            workers=args.workers, scheduler=args.scheduler, progress=progress)
         args.out.mkdir(parents=True, exist_ok=True)
-        figures.draw("plot_sweep", [result], args.out / "sweep.png",
-                     f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}", caption=describe(config))
         rows = points_table(result)
         with open(args.out / "sweep.csv", "w", newline="") as fh:
             writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
         write_summary(args.out, result.summary())
+        figures.draw("plot_sweep", [result], args.out / "sweep.png",
+                     f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}", caption=describe(config))
     from rimd_sim.model.validity import Verdict, domain
 
     def band(p) -> str:

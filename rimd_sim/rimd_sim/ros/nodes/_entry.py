@@ -2,9 +2,9 @@
 
 Importing this module installs the stop handlers (SIGINT, SIGTERM) at once, before the node modules and
 their heavy imports are loaded: a node stopped while it is still starting exits 0 like one stopped while it
-runs; and it sets the process's cycle collector (:mod:`rimd_sim.runtime.collector`). Each function
-(``simulator``, ``recorder``, ...: the registry's names) then imports its node's module, freezes what the imports
-built (modules live as long as the process) and runs its ``main``.
+runs. Each function (``simulator``, ``recorder``, ...: the registry's names) then imports its node's module,
+freezes what the imports built (modules live as long as the process: :func:`rimd_sim.runtime.collector.for_node`)
+and runs its ``main``.
 
 ``python -m rimd_sim.ros.nodes._entry NAME [--ros-args ...]`` does the same for a child process (``rimd rig``,
 ``rimd experiment``).
@@ -23,7 +23,6 @@ from rimd_sim.ros.nodes.registry import NODES, NodeEntry
 from rimd_sim.runtime import collector
 
 install_stop_handlers()
-collector.configure()
 
 #: The Fast DDS profile of the nodes (a 0.2 s heartbeat of reliable writers; see the file). A profile the
 #: user chose through the variable wins.
@@ -40,7 +39,7 @@ def load(target: str) -> Callable[..., int | None]:
 def _entry(node: NodeEntry) -> Callable[[], int]:
     def run() -> int:
         main = load(node.target)
-        collector.keep_what_exists()
+        collector.for_node()
         return int(main() or 0)
 
     run.__name__ = run.__qualname__ = node.name
