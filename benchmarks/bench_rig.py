@@ -25,7 +25,7 @@ Printed for each layout (and written as JSON with --json):
     rig <= 25 %), each with "met" or "NOT met"; and the composed rig's CPU against the separate rig's.
 
 With ``--compare DIR`` (another checkout, set up: a worktree of an older commit), the rig of --only's layout
-(default composed) of this tree and of DIR's package run alternately, --rounds times each, in one run, and the
+(default composed) of this tree and of DIR's package run alternately (ABBA...), --rounds times each, in one run, and the
 whole rig's CPU is printed per run, as medians and as the median ratio DIR / this: on a shared machine whose speed
 drifts within hours, a before/after figure that means something.
 
@@ -231,7 +231,8 @@ def compare(args: argparse.Namespace, block_rate: float) -> dict:
     trees = {"this": None, "compare": args.compare.resolve()}
     runs: dict[str, list[dict]] = {name: [] for name in trees}
     for round_ in range(args.rounds):
-        for name, tree in trees.items():
+        order = list(trees.items()) if round_ % 2 == 0 else list(trees.items())[::-1]   # ABBA: no side first
+        for name, tree in order:
             print(f"\nbench_rig: round {round_ + 1}/{args.rounds}, {name} ({tree or soak.REPO}), load "
                   f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
             runs[name].append(measure(layout, args, block_rate, tree))

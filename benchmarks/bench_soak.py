@@ -260,7 +260,7 @@ def start_rig(tmp: Path, domain_id: int, seconds: float, options: tuple[str, ...
             raise SystemExit("rimd not on PATH: run `source env.sh` first")
         command = [rimd]
     else:
-        env["PYTHONPATH"] = os.pathsep.join([str(tree / "rimd_sim"), env.get("PYTHONPATH", "")])
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree / "rimd_sim"), env.get("PYTHONPATH")]))
         command = [sys.executable, "-m", "rimd_sim.cli"]
     # --duration is only a backstop (the bench stops the rig with SIGINT after --minutes): should the bench
     # die, the rig stops by itself 5 minutes later.
