@@ -49,18 +49,18 @@ def test_a_program_calling_main_keeps_its_own_collector(capsys):
 
 
 @pytest.mark.process
-def test_a_node_process_keeps_cpythons_threshold_and_freezes_its_imports_before_its_main_runs():
-    # A node's function freezes once its module is loaded, before the node's main runs (here a stand-in main
-    # that reports what it finds), and keeps CPython's young threshold (shorter pauses of its paced thread),
-    # whatever the process had set before.
+def test_a_node_process_imports_as_a_command_then_runs_at_cpythons_threshold_with_its_imports_frozen():
+    # The entry module sets the imports' collector as a command's; a node's function freezes once its module is
+    # loaded and gives back CPython's young threshold (shorter pauses of its paced thread) before the node's main
+    # runs (here a stand-in main that reports what it finds).
     code = ("import gc; gc.set_threshold(12345, 10, 10); import rimd_sim.ros.nodes._entry as e; "
-            "print(gc.get_freeze_count() > 0); "
+            "print(gc.get_threshold()[0], gc.get_freeze_count() > 0); "
             "e.load = lambda target: (lambda: print(target, gc.get_threshold()[0], gc.get_freeze_count() > 0, "
             "gc.isenabled()) or 7); "
             "print(e.ENTRIES['simulator']())")
     out = _python(code)
-    assert out == ["False", "rimd_sim.ros.nodes.simulator:main", str(collector.CPYTHON_YOUNG_THRESHOLD), "True",
-                   "True", "7"]
+    assert out == [str(collector.YOUNG_THRESHOLD), "False", "rimd_sim.ros.nodes.simulator:main",
+                   str(collector.CPYTHON_YOUNG_THRESHOLD), "True", "True", "7"]
 
 
 def test_configure_keeps_the_older_generations_thresholds():

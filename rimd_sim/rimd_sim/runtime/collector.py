@@ -8,8 +8,9 @@ is 0.07 s here): measured on one ``rimd sweep`` point, a quarter of its wall tim
 * A command (:func:`configure`, then :func:`keep_what_exists` at its end): its youngest generation is collected
   every :data:`YOUNG_THRESHOLD` allocations instead of 700 (cycles are still collected, later and in fewer
   passes), and what it has built is frozen before the exit, which then does not walk it again.
-* A node (:func:`for_node`): CPython's thresholds (a young collection 14 times larger would be a longer pause
-  of its paced thread), and its imports frozen, so that no later full collection walks them.
+* A node: its imports as a command's (:func:`configure`), then (:func:`for_node`) its imports frozen, so that
+  no later full collection walks them, and CPython's young threshold back while it runs (a young collection 14
+  times larger would be a longer pause of its paced thread).
 
 Entry points call these (:func:`rimd_sim.cli.entry`, :mod:`rimd_sim.ros.nodes._entry`, ``rimd node``), and the
 test suite's session for itself (tests/conftest.py); a program that imports the package (a notebook, a user's
