@@ -60,7 +60,7 @@ print(json.dumps({"returned_s": returned, "answered_s": answered, "ready_after_s
 def environment(tree: Path) -> dict[str, str]:
     """This environment with ``tree``'s package first on the import path."""
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(tree / "rimd_sim"), env.get("PYTHONPATH", "")])
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree / "rimd_sim"), env.get("PYTHONPATH")]))
     return env
 
 

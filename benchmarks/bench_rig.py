@@ -263,8 +263,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0 or args.rounds < 1:
         parser.error("--seconds, --period and --rounds must be positive, --warmup not negative")
-    if args.compare is not None and not (args.compare / "rimd_sim" / "rimd_sim" / "__init__.py").is_file():
-        parser.error(f"--compare {args.compare}: not a checkout of the project (no rimd_sim/rimd_sim)")
+    if args.compare is not None:
+        from bench_latency import check_tree
+
+        check_tree(args.compare)   # a checkout whose package is the one its runs import
 
     from rimd_sim.settings.config import find_config_file, load_config
 

@@ -251,17 +251,18 @@ def start_rig(tmp: Path, domain_id: int, seconds: float, options: tuple[str, ...
     instead, as ``python -m rimd_sim.cli`` with that tree's package first on the import path (its nodes are
     started the same way: they inherit the path).
     """
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
-    env.pop("ROS_STATIC_PEERS", None)
     if tree is None:
         rimd = shutil.which("rimd")
         if rimd is None:
             raise SystemExit("rimd not on PATH: run `source env.sh` first")
-        command = [rimd]
+        command, env = [rimd], dict(os.environ)
     else:
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree / "rimd_sim"), env.get("PYTHONPATH")]))
-        command = [sys.executable, "-m", "rimd_sim.cli"]
+        from bench_latency import environment
+
+        command, env = [sys.executable, "-m", "rimd_sim.cli"], environment(tree)
+    env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
+    env.pop("ROS_STATIC_PEERS", None)
     # --duration is only a backstop (the bench stops the rig with SIGINT after --minutes): should the bench
     # die, the rig stops by itself 5 minutes later.
     cmd = [*command, "rig", "--output-dir", str(tmp / "rec"), "--duration", f"{seconds + 300:.0f}", *options]

@@ -130,9 +130,9 @@ def test_the_worker_ends_when_its_command_is_killed(tmp_path):
             "time.sleep(60)\n")
     command = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
                                stdin=subprocess.DEVNULL)
+    worker = None
     try:
-        line = command.stdout.readline()
-        (worker,) = json.loads(line)
+        (worker,) = json.loads(command.stdout.readline())
         os.kill(command.pid, signal.SIGKILL)
         command.wait(10)
         deadline = time.monotonic() + 20
@@ -142,6 +142,8 @@ def test_the_worker_ends_when_its_command_is_killed(tmp_path):
     finally:
         command.kill()
         command.wait(10)
+        if worker is not None and _alive(worker):   # the test failed: stop what it started all the same
+            os.kill(worker, signal.SIGKILL)
 
 
 def _alive(pid: int) -> bool:

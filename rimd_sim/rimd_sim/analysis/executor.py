@@ -30,7 +30,8 @@ from dataclasses import dataclass
 from rimd_sim.dependencies import installed, missing_extra
 from rimd_sim.errors import UnavailableError
 
-__all__ = ["CONNECT_TIMEOUT_S", "ENV_SCHEDULER", "SchedulerError", "TaskRunner", "open_executor", "run_tasks"]
+__all__ = ["CONNECT_TIMEOUT_S", "ENV_SCHEDULER", "SchedulerError", "TaskRunner", "local_workers", "open_executor",
+           "run_tasks"]
 
 ENV_SCHEDULER = "RIMD_DASK_SCHEDULER"
 #: Seconds to connect to the scheduler, then again at most to wait for a first worker (refused within 10 s).
@@ -140,6 +141,15 @@ def _dask(address: str) -> Iterator[TaskRunner]:
         client.close(timeout=CONNECT_TIMEOUT_S)
 
 
+def local_workers(workers: int | None = None, tasks: int | None = None) -> int:
+    """The local processes :func:`open_executor` runs (without a scheduler); 1: the tasks run in this process.
+
+    ``workers`` (default: all cores), at most one per task of ``tasks``.
+    """
+    n = max(1, workers or os.cpu_count() or 1)
+    return n if tasks is None else max(1, min(n, tasks))
+
+
 @contextmanager
 def open_executor(workers: int | None = None, scheduler: str | None = None, tasks: int | None = None
                   ) -> Iterator[TaskRunner]:
@@ -161,9 +171,7 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, task
         with _dask(address) as runner:
             yield runner
         return
-    n = max(1, workers or os.cpu_count() or 1)
-    if tasks is not None:
-        n = max(1, min(n, tasks))
+    n = local_workers(workers, tasks)
     if n == 1:
         yield TaskRunner(_InlineExecutor(), 1, "local")
         return

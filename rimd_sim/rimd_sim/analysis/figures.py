@@ -89,7 +89,7 @@ class Figures:
     """A command's figures: ``with Figures() as figures: ...; figures.draw("plot_sweep", result, path)``.
 
     Make it before the computation, so that the worker's imports overlap it. :meth:`draw` returns at once in the
-    worker's case; leaving the block waits for every figure drawn (:meth:`results` then holds what each plotting
+    worker's case; leaving the block waits for every figure drawn (:attr:`results` then holds what each plotting
     function returned, in the order of the calls). An exception leaving the block cancels what was not drawn.
     """
 

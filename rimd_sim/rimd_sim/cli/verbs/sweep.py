@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
-    from rimd_sim.analysis.executor import scheduler_address
+    from rimd_sim.analysis.executor import local_workers, scheduler_address
     from rimd_sim.analysis.figures import Figures
 
     check_range("f", args.f_min, args.f_max)
@@ -49,9 +49,10 @@ def main(args: argparse.Namespace) -> int:
         raise CommandError(f"--measure-cycles {args.measure_cycles} >= --cycles {args.cycles}: no transient left")
     freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)
     # The figure's worker only when the sweep runs in this process (no pool of its own forked beside the
-    # worker's threads); made before the heavy imports, so that it loads the plots meanwhile.
-    here = scheduler_address(args.scheduler) is None and (args.direction != "rest" or len(freqs) == 1
-                                                          or args.workers == 1)
+    # worker's threads: up/down, or a rest sweep the executor runs inline, its tasks at most one per point);
+    # made before the heavy imports, so that it loads the plots meanwhile.
+    here = scheduler_address(args.scheduler) is None and (
+        args.direction != "rest" or local_workers(args.workers, len(freqs)) == 1)
     with Figures(None if here else False) as figures:
         from rimd_sim.analysis.captions import describe
         from rimd_sim.analysis.dynamics.sweep import points_table, sweep
