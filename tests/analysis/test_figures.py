@@ -49,6 +49,37 @@ def test_a_worker_draws_the_same_png_and_the_block_waits_for_it(tmp_path, one_po
 
 
 @pytest.mark.process
+def test_the_worker_draws_a_sweep_without_loading_the_model(tmp_path, one_point):
+    # What the worker imports to draw a sweep: the plots and the result's own module, not the model and numba
+    # (its imports are the time it has before the command asks for the figure).
+    import pickle
+
+    (tmp_path / "result.pickle").write_bytes(pickle.dumps([one_point]))
+    code = ("import json, pickle, sys; from rimd_sim.analysis import plots; "
+            "result = pickle.loads(open(sys.argv[1], 'rb').read()); plots.plot_sweep(result, sys.argv[2]); "
+            "print(json.dumps(sorted(m for m in ('numba', 'rimd_sim.model.rig_model', 'rimd_sim.model.kernel', "
+            "'rimd_sim.analysis.dynamics.sweep') if m in sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "result.pickle"), str(tmp_path / "s.png")],
+                         capture_output=True, text=True, timeout=120, check=True)
+    assert json.loads(out.stdout) == []
+    assert (tmp_path / "s.png").stat().st_size > 10_000
+
+
+def test_the_warm_up_writes_nothing_and_leaves_matplotlib_as_it_was(tmp_path, monkeypatch):
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    from rimd_sim.analysis import plots
+
+    monkeypatch.chdir(tmp_path)
+    settings, open_figures = dict(matplotlib.rcParams), plt.get_fignums()
+    plots.warm_up()
+    assert list(tmp_path.iterdir()) == []
+    assert plt.get_fignums() == open_figures
+    assert dict(matplotlib.rcParams) == settings
+
+
+@pytest.mark.process
 def test_a_failure_in_the_worker_is_raised_when_the_block_ends(tmp_path, one_point):
     with pytest.raises(AttributeError, match="no_such_plot"):
         with Figures(own=True) as figs:

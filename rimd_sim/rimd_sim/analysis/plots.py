@@ -14,13 +14,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from rimd_sim.analysis.dynamics.sweep import SweepResult  # noqa: E402
-
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
+    from rimd_sim.analysis.dynamics.sweep_result import SweepResult
     from rimd_sim.analysis.recordings.reading import Window
     from rimd_sim.analysis.recordings.recorded import Channel, Step
 
@@ -48,6 +47,27 @@ def _save(fig: Figure, path: Path, title: str, ax: Axes | None = None, dpi: int 
     fig.savefig(path, dpi=dpi, metadata=metadata)
     plt.close(fig)
     return path
+
+
+def warm_up() -> None:
+    """Draw a throwaway figure into memory, so that the next figure of this process draws warm.
+
+    A process's first figure pays once for the fonts, the text layout and the PNG writer: about 0.1 s more than
+    the next one (docs/benchmarks.md, "Latency"). The figure worker of :mod:`rimd_sim.analysis.figures` calls this
+    while its command computes. Nothing is written and matplotlib's settings are left as they were.
+    """
+    import io
+
+    fig, ax, ax2 = _force_over_impacts()
+    ax.plot([0.0, 1.0], [0.0, 1.0], "-o", ms=3, label="warm-up")
+    ax2.plot([0.0, 1.0], [1.0, 0.5], "-o", ms=3)
+    ax.annotate("A", (0.5, 0.5), textcoords="offset points", xytext=(9, -9), fontsize=9, fontweight="bold")
+    _label_force_over_impacts(ax, ax2, force="F_i / mg", frequency="Omega / omega_n",
+                              legend={"fontsize": 8, "loc": "best"})
+    fig.suptitle("warm-up\na 1, b 2", fontsize=10)   # as _save lays out and writes, into memory
+    fig.tight_layout()
+    fig.savefig(io.BytesIO(), format="png", dpi=120, metadata={"Title": "warm-up", "Description": "a 1, b 2"})
+    plt.close(fig)
 
 
 def _wrap(text: str, width: int) -> str:

@@ -36,12 +36,13 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Literal
 
 import numpy as np
 
 from rimd_sim.analysis.dynamics.steady import check_frequencies, classify, nondimensional
+from rimd_sim.analysis.dynamics.sweep_result import SweepPoint, SweepResult, band_peak
 from rimd_sim.analysis.executor import run_tasks, scheduler_address
 from rimd_sim.errors import ConfigError
 from rimd_sim.model.rig_model import ChatteringError, RigModel
@@ -51,91 +52,6 @@ from rimd_sim.settings.config import SimConfig
 __all__ = ["SweepPoint", "SweepResult", "band_peak", "sweep"]
 
 Direction = Literal["up", "down", "rest"]
-
-
-@dataclass(frozen=True)
-class SweepPoint:
-    """Steady state at one frequency.
-
-    Attributes:
-        frequency_hz: Motor frequency (Hz).
-        frequency_ratio: Omega / omega_n.
-        peak_force_n: Largest peak impact force over the measured cycles (N); 0 without impact.
-        force_ratio: ``peak_force_n / (m g)``.
-        impacts_per_cycle: Impacts per excitation cycle over the measured cycles.
-        simulated_seconds: Simulated time spent on this point (s).
-        max_abs_theta_rad: Largest ``|theta|`` over the point's whole run (rad).
-        max_force_n: Largest peak force over the point's whole run (N), the transient included.
-        valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
-        invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
-        motion_class: The class of the measured cycles (module docstring).
-        impact_velocity_m_s: Largest impact velocity over the measured cycles (m/s, the approach speed at
-            contact onset); 0 without impact.
-    """
-
-    frequency_hz: float
-    frequency_ratio: float
-    peak_force_n: float
-    force_ratio: float
-    impacts_per_cycle: float
-    simulated_seconds: float
-    max_abs_theta_rad: float = math.nan
-    max_force_n: float = math.nan
-    valid: bool = True
-    invalid_rule: str = ""
-    motion_class: str = ""
-    impact_velocity_m_s: float = math.nan
-
-
-@dataclass(frozen=True)
-class SweepResult:
-    """A sweep and its bands (see :func:`band_peak`, valid points only).
-
-    ``validity`` is the summary's report of the valid domain (:meth:`~rimd_sim.model.validity.ValidityDomain.report`);
-    ``restarts`` the frequencies where a continued sweep went on from rest after a chattering point.
-    """
-
-    gap_mm: float
-    direction: str
-    points: tuple[SweepPoint, ...]
-    band_a: SweepPoint | None
-    band_b: SweepPoint | None
-    simulated_seconds: float
-    wall_seconds: float
-    workers: int
-    validity: dict | None = None
-    restarts: tuple[float, ...] = ()
-
-    @property
-    def invalid(self) -> tuple[SweepPoint, ...]:
-        """The points outside the model's valid domain."""
-        return tuple(p for p in self.points if not p.valid)
-
-    def summary(self) -> dict:
-        """The ``summary.json`` content (its keys: docs/interface.md, "Commands")."""
-        def band(p: SweepPoint | None) -> dict | None:
-            return None if p is None else {"frequency_hz": p.frequency_hz, "peak_force_n": p.peak_force_n,
-                                           "force_ratio": p.force_ratio}
-        return {"gap_mm": self.gap_mm, "direction": self.direction, "band_a": band(self.band_a),
-                "band_b": band(self.band_b), "points": len(self.points),
-                "simulated_seconds": self.simulated_seconds, "wall_seconds": self.wall_seconds,
-                "workers": self.workers, "validity": self.validity, "restarts_from_rest_hz": list(self.restarts)}
-
-
-def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, tolerance: float = 0.03) -> SweepPoint | None:
-    """Valid point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B).
-
-    Args:
-        points: The sweep's points.
-        impacts_per_cycle: The band's impacts per cycle.
-        tolerance: Relative tolerance on ``impacts_per_cycle``.
-
-    Returns:
-        The point, or None when no valid point has that many impacts per cycle.
-    """
-    sel = [p for p in points
-           if p.valid and abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
-    return max(sel, key=lambda p: p.peak_force_n, default=None)
 
 
 def _measure(impacts, t_end: float, f: float, measure_cycles: int) -> tuple[float, float, float]:
