@@ -13,6 +13,11 @@ reaches ``chunk_size`` bytes or when :meth:`BagWriter.flush` is called (the reco
 ``flush_interval`` seconds). A process killed without warning therefore loses at most the chunk in
 progress; the finished chunks read back (see :mod:`rimd_sim.io.reader`).
 
+Memory: the summary written when a file is finished indexes every chunk, so each file keeps one index entry
+per chunk until then, packed (:class:`PackedChunkIndexes`: about 200 bytes per chunk, 0.75 MB per hour of a
+real-time rig's chunk a second, where mcap's writer alone keeps 1.4 KB: ``benchmarks/bench_bag_index.py``).
+``max_duration`` bounds it for recordings of days.
+
 Write errors (disk full, file too large, quota, I/O): the first ``OSError`` stops the recording. The file
 being written is cut back to its last complete record (the chunk in progress, whose write may have stopped
 half-way, is removed: this also gives back its space) and closed without a summary, like a file of a killed
@@ -28,13 +33,16 @@ from __future__ import annotations
 
 import datetime as _dt
 import errno
+import io
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
+from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.records import ChunkIndex
 from mcap.writer import CompressionType, Writer
 
 from rimd_sim.io.msgdefs import MessageDefinition, message_definition
@@ -211,6 +219,62 @@ class FileInfo:
     error: str | None = None
 
 
+class PackedChunkIndexes:
+    """The chunk indexes an MCAP writer keeps for its summary, each held as its serialized record.
+
+    mcap's :class:`~mcap.writer.Writer` keeps one :class:`~mcap.records.ChunkIndex` per chunk written until
+    :meth:`~mcap.writer.Writer.finish` writes them into the summary: about 1.5 KB of Python objects each with the
+    rig's dozen channels. The recorder closes a chunk at least every ``flush_interval`` (1 s), so a file recorded
+    for a day held some 130 MB of them. Here each is its record's bytes (about 200) in one buffer, read back into a
+    ``ChunkIndex`` one at a time when the summary is written: the file is the same, byte for byte.
+    """
+
+    def __init__(self) -> None:
+        self._records = bytearray()
+        self._count = 0
+
+    def append(self, index: ChunkIndex) -> None:
+        """Keep ``index`` (serialized now)."""
+        builder = RecordBuilder()
+        index.write(builder)
+        self._records += builder.end()
+        self._count += 1
+
+    def __len__(self) -> int:
+        """The number of indexes held."""
+        return self._count
+
+    def __iter__(self) -> Iterator[ChunkIndex]:
+        """Each index, read back from its record, in the order given."""
+        stream = ReadDataStream(io.BytesIO(bytes(self._records)))
+        for _ in range(self._count):
+            stream.read1()   # the opcode (CHUNK_INDEX)
+            stream.read8()   # the record's length
+            yield ChunkIndex.read(stream)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the serialized records held."""
+        return len(self._records)
+
+
+#: Where mcap's Writer keeps its chunk indexes (its private ``__chunk_indices`` list, mcap 1.x).
+_WRITER_CHUNK_INDEXES = "_Writer__chunk_indices"
+
+
+def pack_chunk_indexes(writer: Writer) -> bool:
+    """Have a new ``writer`` keep its chunk indexes as :class:`PackedChunkIndexes`.
+
+    Returns False, and leaves the writer as it is (correct, with the larger index), where this mcap keeps them
+    otherwise (tests/io/test_bag_chunk_indexes.py fails then, so that an upgrade of mcap is looked at).
+    """
+    current = getattr(writer, _WRITER_CHUNK_INDEXES, None)
+    if type(current) is not list or current:
+        return False
+    setattr(writer, _WRITER_CHUNK_INDEXES, PackedChunkIndexes())
+    return True
+
+
 class McapFile:
     """One rosbag2 MCAP file being written.
 
@@ -232,6 +296,7 @@ class McapFile:
         try:
             # mcap's Writer takes any object with write() and tell() (its annotation names only files).
             self._writer = Writer(self._raw, chunk_size=chunk_size, compression=_COMPRESSION_TYPES[compression])  # type: ignore[arg-type]
+            pack_chunk_indexes(self._writer)   # the summary's index kept in ~200 bytes per chunk, not ~1.5 KB
             self._writer.start(profile="ros2", library=library)
             self._compression = compression
             self._channels: dict[str, int] = {}
