@@ -223,10 +223,11 @@ class PackedChunkIndexes:
     """The chunk indexes an MCAP writer keeps for its summary, each held as its serialized record.
 
     mcap's :class:`~mcap.writer.Writer` keeps one :class:`~mcap.records.ChunkIndex` per chunk written until
-    :meth:`~mcap.writer.Writer.finish` writes them into the summary: about 1.5 KB of Python objects each with the
-    rig's dozen channels. The recorder closes a chunk at least every ``flush_interval`` (1 s), so a file recorded
-    for a day held some 130 MB of them. Here each is its record's bytes (about 200) in one buffer, read back into a
-    ``ChunkIndex`` one at a time when the summary is written: the file is the same, byte for byte.
+    :meth:`~mcap.writer.Writer.finish` writes them into the summary: up to 1.4 KB of Python objects each (a chunk
+    with a message on each of the rig's 12 topics). The recorder closes a chunk at least every ``flush_interval``
+    (1 s), so a file recorded for a day held up to 120 MB of them. Here each is its record's bytes (about 200) in
+    one buffer, read back into a ``ChunkIndex`` one at a time when the summary is written: the file is the same,
+    byte for byte.
     """
 
     def __init__(self) -> None:
@@ -296,7 +297,7 @@ class McapFile:
         try:
             # mcap's Writer takes any object with write() and tell() (its annotation names only files).
             self._writer = Writer(self._raw, chunk_size=chunk_size, compression=_COMPRESSION_TYPES[compression])  # type: ignore[arg-type]
-            pack_chunk_indexes(self._writer)   # the summary's index kept in ~200 bytes per chunk, not ~1.5 KB
+            pack_chunk_indexes(self._writer)   # the summary's index kept in ~200 bytes per chunk, not ~1.4 KB
             self._writer.start(profile="ros2", library=library)
             self._compression = compression
             self._channels: dict[str, int] = {}

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 __all__ = ["SweepPoint", "SweepResult", "band_peak"]
 
+
 @dataclass(frozen=True)
 class SweepPoint:
     """Steady state at one frequency.
@@ -27,7 +28,7 @@ class SweepPoint:
         max_force_n: Largest peak force over the point's whole run (N), the transient included.
         valid: Whether the point lies in the model's valid domain (:mod:`rimd_sim.model.validity`).
         invalid_rule: The rules it broke (``;``-separated names), ``""`` when valid.
-        motion_class: The class of the measured cycles (module docstring).
+        motion_class: The class of the measured cycles (:mod:`rimd_sim.analysis.dynamics.sweep`).
         impact_velocity_m_s: Largest impact velocity over the measured cycles (m/s, the approach speed at
             contact onset); 0 without impact.
     """
