@@ -14,6 +14,7 @@ from __future__ import annotations
 import errno
 import os
 import threading
+import time
 from pathlib import Path
 
 from rclpy.serialization import serialize_message
@@ -307,3 +308,27 @@ def test_a_lockstep_recording_joined_mid_run_says_nothing_of_late_starts(tmp_pat
     s.close()
     assert all(r.lost == 0 for r in s.loss_report().values())
     assert LOSS_METADATA not in open_recording(tmp_path / "rec").metadata
+
+
+def test_the_writer_waits_for_the_rest_of_a_batch_only_when_a_message_comes_alone(tmp_path):
+    # At real time a message comes alone: the writer sleeps batch_delay so that the rest of the rig's block joins
+    # it (one wake-up per batch). Faster than real time a batch is waiting already: it is written at once, so the
+    # lockstep progress that the rig waits for is not held back by the sleep.
+    slept: list[float] = []
+    s, _, written = session(tmp_path, batch_delay=0.25, batch_now=10, sleep=slept.append)
+    for i in range(10):
+        s.put(TOPIC, block(i), 10**18 + i, stamp=i)
+    s.start()
+    try:
+        deadline = time.monotonic() + 30
+        while not written and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert written[0] == {TOPIC: 9}
+        assert slept == []
+        s.put(TOPIC, block(10), 10**18 + 10, stamp=10)
+        while len(written) < 2 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert written[1] == {TOPIC: 10}
+        assert slept == [0.25]
+    finally:
+        s.close(timeout=10)

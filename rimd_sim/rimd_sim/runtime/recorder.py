@@ -6,9 +6,10 @@ how far each topic is written. The recorder node feeds it and reports it.
 * :meth:`RecordingSession.put` queues one serialized message (from any thread). A full queue (``queue_size``
   messages) drops the newest message and counts it: nothing is ever dropped silently.
 * The writer thread wakes once per batch (it sleeps ``batch_delay`` after the first message of a batch, then
-  takes everything waiting), writes, counts the samples missing between consecutive blocks of a topic
-  (``first_index`` gaps, :class:`LossCounter`), closes a chunk at least every ``flush_interval`` seconds, and
-  tells ``on_written`` how far each topic has been written (the recorder's lockstep progress).
+  takes everything waiting; at once when a batch is waiting already), writes, counts the samples missing between
+  consecutive blocks of a topic (``first_index`` gaps, :class:`LossCounter`), closes a chunk at least every
+  ``flush_interval`` seconds, and tells ``on_written`` how far each topic has been written (the recorder's
+  lockstep progress).
 * Write errors (disk full, file size limit, quota, I/O error) are the bag's to handle: the first one stops the
   writing, never the session. It is logged once at ERROR naming the path and the system's reason, again every
   ``reminder`` seconds while it lasts, and when the writing resumes after :meth:`split` (the retry). What a
@@ -131,7 +132,10 @@ class RecordingSession:
         bag: Where the messages go.
         queue_size: Messages waiting for the writer before new ones are dropped (and counted).
         flush_interval: The chunk in progress is closed at least this often (s).
-        batch_delay: The writer waits this long after the first message of a batch (s).
+        batch_delay: The writer waits this long after the first message of a batch (s), unless ``batch_now``
+            messages are waiting already.
+        batch_now: A batch this large is written at once (a rig faster than real time: at real time the rig's 600
+            messages a second bring a handful per ``batch_delay``).
         reminder: While writing is stopped by an error, the log reminds of it this often (s).
         log: ``log(level, line)``, level ``info``, ``warning`` or ``error``.
         on_written: Called on the writer thread after each batch with the header stamp (ns) of the last
@@ -139,18 +143,22 @@ class RecordingSession:
         in_lockstep: Whether the consumer has joined a lockstep run (then a sampled topic that starts late
             counts as loss); None: never.
         clock: Monotonic seconds.
+        sleep: The writer's wait for the rest of a batch (``time.sleep``).
     """
 
     def __init__(self, bag: BagWriter, *, queue_size: int = 200_000, flush_interval: float = 1.0,
-                 batch_delay: float = 0.02, reminder: float = 30.0,
+                 batch_delay: float = 0.02, batch_now: int = 20, reminder: float = 30.0,
                  log: Callable[[str, str], None] = lambda level, line: None,
                  on_written: Callable[[dict[str, int]], None] | None = None,
                  in_lockstep: Callable[[], bool] | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         self.bag = bag
         self._queue_size = queue_size
         self._flush_interval = flush_interval
         self._batch_delay = batch_delay
+        self._batch_now = batch_now
+        self._sleep = sleep
         self._reminder = reminder
         self._log = log
         self._on_written = on_written
@@ -290,8 +298,11 @@ class RecordingSession:
                     self._flush_if_due()
                     continue
                 # Let the rest of the rig's block arrive, then take everything: one wake-up of this thread per
-                # batch instead of one per message (each wake-up is a thread switch and a GIL hand-over).
-                time.sleep(self._batch_delay)
+                # batch instead of one per message (each wake-up is a thread switch and a GIL hand-over). When a
+                # batch is already waiting (a rig faster than real time), take it now: the sleep would only delay
+                # the writing, and with it the lockstep progress that the rig waits for.
+                if queue.qsize() + 1 < self._batch_now:
+                    self._sleep(self._batch_delay)
                 while True:
                     try:
                         batch.append(queue.get_nowait())
