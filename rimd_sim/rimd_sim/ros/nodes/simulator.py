@@ -38,6 +38,7 @@ from rimd_sim.errors import ConfigError
 from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.ros.nodes.feed import InProcessFeed
+from rimd_sim.ros.nodes.outbox import Outbox
 from rimd_sim.runtime.simulator import Answer, Qos, SimulatorRuntime, load_settings, outputs
 from rimd_sim.settings.config import NODE_PARAMETERS, PARAMETERS
 
@@ -103,11 +104,12 @@ class SimulatorNode(RimdNode):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=(
             PublisherEventCallbacks(matched=self._on_diagnostics_matched)))
         self._stop = threading.Event()
+        self._outbox: Outbox | None = None   # the composed rig's DDS writes (_feeding)
         send: Callable[[str, bytes], None] = lambda key, data: self._pubs[key].publish(data)  # noqa: E731
         if feed is not None:
             for out in outs:
                 feed.offer(self._pubs[out.key].topic_name, out.type_name, self._offered(self._pubs[out.key]))
-            send = self._feeding(feed)
+            send = self._feeding(feed, {out.key for out in outs if out.qos.latched})
         self._lockstep = settings.lockstep.enabled   # read by the wait for matches
         self._rt = SimulatorRuntime(
             config, settings, send=send,
@@ -129,15 +131,29 @@ class SimulatorNode(RimdNode):
         self._thread = threading.Thread(target=self._run, name="rimd-pacing", daemon=True)
         self.get_logger().info(self._rt.describe())
 
-    def _feeding(self, feed: InProcessFeed) -> Callable[[str, bytes], None]:
-        """``send(key, data)`` of the composed rig: to the in-process consumers, then on DDS."""
-        pubs = {key: (pub.topic_name, pub.publish) for key, pub in self._pubs.items()}
+    def _feeding(self, feed: InProcessFeed, latched: set[str]) -> Callable[[str, bytes], None]:
+        """``send(key, data)`` of the composed rig: to the in-process consumers, then on DDS.
+
+        The DDS writes go through an :class:`~rimd_sim.ros.nodes.outbox.Outbox` (without the GIL, and on a thread
+        of their own when the rig runs fast), flushed after each pass of the pacing loop; a message of a volatile
+        topic that no other process reads is not written at all. ``latched``: the keys of the transient local
+        topics (always written: a later reader gets them from the history).
+        """
+        outbox = self._outbox = Outbox()
+        # (topic, writer, the publisher when its topic is volatile) per key
+        pubs = {key: (pub.topic_name, outbox.writer(pub), None if key in latched else pub)
+                for key, pub in self._pubs.items()}
         hand_over = feed.send
+        post = outbox.send
 
         def send(key: str, data: bytes) -> None:
-            topic, publish = pubs[key]
+            topic, writer, volatile = pubs[key]
             hand_over(topic, data)
-            publish(data)
+            # A volatile message reaches only the readers matched when it is written: with none (no process but
+            # this one takes the topic) the write would be for nobody, and the rig skips it. A reader matched
+            # just after the check is one matched just after the write, as DDS discovery makes it anyway.
+            if volatile is None or volatile.get_subscription_count():
+                post(writer, data)
 
         return send
 
@@ -170,6 +186,8 @@ class SimulatorNode(RimdNode):
         self._rt.wake.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+        if self._outbox is not None:   # what the pacing thread sent goes out before the publishers go
+            self._outbox.close()
 
     def spin_node(self, executor: Executor, stop: StopRequest) -> None:
         """Start publishing, spin until the stop."""
@@ -183,9 +201,12 @@ class SimulatorNode(RimdNode):
     def _run(self) -> None:
         """The pacing thread: the runtime's steps, waiting as long as each says (a command or report wakes it)."""
         rt = self._rt
+        outbox = self._outbox
         try:
             while not self._stop.is_set():
                 step = rt.step()
+                if outbox is not None:
+                    outbox.flush()   # raises a write that failed on its thread
                 if step.report:
                     self._publish_diagnostics()
                 if step.stopped:
@@ -209,6 +230,8 @@ class SimulatorNode(RimdNode):
         topics, and the wait lasts until the graph here shows that node's readers of them, and they are matched.
         """
         timeout = MATCH_TIMEOUT_LOCKSTEP_S if self._lockstep else MATCH_TIMEOUT_S
+        if self._outbox is not None:   # the blocks before the match reach the readers matched before it only
+            self._outbox.drain(timeout)
         deadline = time.monotonic() + timeout
         while (unmatched := self._unmatched(joining)) and time.monotonic() < deadline and not self._stop.is_set():
             time.sleep(0.005)

@@ -1,0 +1,218 @@
+"""The composed rig's DDS writes: off the pacing thread when it runs fast, and without the GIL.
+
+In the composed rig (:mod:`rimd_sim.ros.nodes.composed`) one interpreter runs the simulator, the recorder and the
+Rerun bridge, so every thread's Python work shares one GIL. A DDS write of an already serialized message costs
+about 40 µs per matched reader in another process (Fast DDS publishes synchronously: the sample goes to the
+reader's transport in the caller's thread), and rclpy's ``Publisher.publish`` of bytes holds the GIL all that time
+(its ``publish_raw`` does not release it). With an external reader of the five block topics, a rig in lockstep at
+25× real time spent a third of its pacing thread's time there (py-spy, docs/benchmarks.md, "Lockstep"), on the
+path that decides how fast the rig runs, while the machine's second core idled.
+
+:class:`Outbox` takes those writes. A message is written at once on the caller's thread, by rclpy's ``publish``, when
+nothing is waiting to be written (a rig at real time: one block every 10 ms, no thread hand-over). When the pacing
+thread sends several blocks at once or its passes come back to back (faster than real time), the whole batch goes,
+in order, to a thread of its own that writes while the pacing thread computes the next blocks, and that thread
+calls ``rcl_publish_serialized_message`` (the C function rclpy calls) through ctypes, which releases the GIL during
+the call (:func:`gil_free_writer`); where that is not possible (no ``librcl`` to be found, an rclpy without the
+publisher's address) it uses rclpy's ``publish`` too. The messages of all topics keep one order: a batch waits
+behind the ones before it, and a message is written on the caller's thread only when none is waiting.
+
+Measured with an external lockstep reader of the five block topics (``bench_lockstep.py``, three rounds
+alternately): 27.5x real time against 23.9x writing on the pacing thread (26.1x with the thread but rclpy's
+``publish``); without an external reader, the same speed either way.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from queue import SimpleQueue
+from typing import Any
+
+from rimd_sim.errors import RimdError
+
+__all__ = ["Outbox", "PublishFailed", "gil_free_writer"]
+
+#: A batch of at least this many messages goes to the outbox's thread (one block of the rig is about eight).
+THREAD_BATCH = 12
+#: So does a batch that comes less than this long after the one before (s): the pacing loop runs back to back (in
+#: lockstep faster than real time, one block per pass); at real time its passes are a block (10 ms) apart.
+BACK_TO_BACK_S = 0.003
+
+
+class PublishFailed(RimdError):
+    """A DDS write failed (rcl's return code and the topic in the message)."""
+
+
+class _Allocator(ctypes.Structure):
+    """``rcutils_allocator_t``: not used by a publish (rclpy passes a zero one too)."""
+
+    _fields_ = [("allocate", ctypes.c_void_p), ("deallocate", ctypes.c_void_p), ("reallocate", ctypes.c_void_p),
+                ("zero_allocate", ctypes.c_void_p), ("state", ctypes.c_void_p)]
+
+
+class _SerializedMessage(ctypes.Structure):
+    """``rcl_serialized_message_t`` (``rcutils_uint8_array_t``)."""
+
+    _fields_ = [("buffer", ctypes.c_char_p), ("buffer_length", ctypes.c_size_t),
+                ("buffer_capacity", ctypes.c_size_t), ("allocator", _Allocator)]
+
+
+def _loaded_library(name: str) -> ctypes.CDLL | None:
+    """The shared library ``name`` this process has loaded (rclpy loaded it), else the loader's own search."""
+    try:
+        for line in Path("/proc/self/maps").read_text().splitlines():
+            path = line.rpartition(" ")[2]
+            if path.endswith("/" + name):
+                return ctypes.CDLL(path)
+    except OSError:
+        pass
+    try:
+        return ctypes.CDLL(name)
+    except OSError:
+        return None
+
+
+_RCL: list[Any] = []   # [publish function, reset-error function] once found; [None, None] when not found
+
+
+def _rcl_functions() -> tuple[Any, Any]:
+    if not _RCL:
+        rcl, rcutils = _loaded_library("librcl.so"), _loaded_library("librcutils.so")
+        publish = getattr(rcl, "rcl_publish_serialized_message", None) if rcl is not None else None
+        reset = getattr(rcutils, "rcutils_reset_error", None) if rcutils is not None else None
+        if publish is not None:
+            publish.argtypes = [ctypes.c_void_p, ctypes.POINTER(_SerializedMessage), ctypes.c_void_p]
+            publish.restype = ctypes.c_int32
+        if reset is not None:
+            reset.argtypes, reset.restype = [], None
+        _RCL[:] = [publish, reset]
+    return _RCL[0], _RCL[1]
+
+
+def gil_free_writer(publisher: Any) -> Callable[[bytes], None] | None:
+    """A function that writes serialized bytes on ``publisher`` with the GIL released; None where it cannot.
+
+    The function is for one thread at a time (it reuses one message header). The publisher's handle is held
+    during each write, as rclpy does, so that the publisher cannot be destroyed under it.
+    """
+    publish, reset = _rcl_functions()
+    handle: Any = getattr(publisher, "handle", None)
+    address = getattr(handle, "pointer", None)
+    if publish is None or not address:
+        return None
+    header = _SerializedMessage()
+    ref = ctypes.byref(header)
+    topic = publisher.topic_name
+
+    def write(data: bytes) -> None:
+        header.buffer = data
+        header.buffer_length = header.buffer_capacity = len(data)
+        with handle:
+            ret = publish(address, ref, None)
+        header.buffer = None
+        if ret:
+            if reset is not None:
+                reset()
+            raise PublishFailed(f"publishing on {topic} failed (rcl_publish_serialized_message returned {ret})")
+
+    return write
+
+
+class Outbox:
+    """DDS writes in order, on the caller's thread or on a thread of its own (see the module docstring).
+
+    The caller (the pacing thread) :meth:`send` s messages and :meth:`flush` es after each pass (another thread
+    may :meth:`send` too: its message goes at that flush); :meth:`close` writes what is waiting and stops the
+    thread. Only the caller flushes, so a publisher is never written from two threads at once. A failed write on
+    the thread is raised by the next :meth:`flush` (the caller stops as if it had failed itself).
+    """
+
+    def __init__(self, name: str = "rimd-dds", thread_batch: int = THREAD_BATCH, gap: float = BACK_TO_BACK_S) -> None:
+        self._pending: list[tuple[tuple[Callable[[bytes], None], Callable[[bytes], None]], bytes]] = []
+        self._queue: SimpleQueue[list | None] = SimpleQueue()
+        self._idle = threading.Event()
+        self._idle.set()
+        self._lock = threading.Lock()
+        self._waiting = 0   # batches handed to the thread and not written yet
+        self._thread_batch = thread_batch
+        self._gap = gap
+        self._last_flush = -math.inf   # monotonic time of the last flush that had messages
+        self._name = name
+        self._thread: threading.Thread | None = None
+        self.failure: BaseException | None = None
+        self.threaded = 0   # messages written on the thread (for the tests and the benchmarks)
+        self.inline = 0     # messages written on the caller's thread
+
+    @staticmethod
+    def writer(publisher: Any) -> tuple[Callable[[bytes], None], Callable[[bytes], None]]:
+        """How ``publisher`` is written: on the caller's thread (rclpy's ``publish``), on the outbox's thread.
+
+        The caller's thread keeps the GIL through the write: released and taken back, the GIL can cost the pacing
+        thread up to the interpreter's switch interval (5 ms) per message while another thread runs Python. The
+        outbox's thread releases it (:func:`gil_free_writer`) where it can: its waits for it delay no one.
+        """
+        return publisher.publish, gil_free_writer(publisher) or publisher.publish
+
+    def send(self, writer: tuple[Callable[[bytes], None], Callable[[bytes], None]], data: bytes) -> None:
+        """Queue one message for ``writer`` (:meth:`writer`), from any thread (written at the next :meth:`flush`)."""
+        with self._lock:
+            self._pending.append((writer, data))
+
+    def flush(self) -> None:
+        """Write what was sent since the last flush: here when it is small and nothing waits, else on the thread."""
+        if self.failure is not None:
+            raise self.failure
+        with self._lock:
+            batch, self._pending = self._pending, []
+        if not batch:
+            return
+        now = time.monotonic()
+        back_to_back, self._last_flush = now - self._last_flush < self._gap, now
+        if len(batch) < self._thread_batch and not back_to_back and self._idle.is_set():
+            self.inline += len(batch)
+            for (write, _), data in batch:
+                write(data)
+            return
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._loop, name=self._name, daemon=True)
+            self._thread.start()
+        with self._lock:
+            self._waiting += 1
+            self._idle.clear()
+        self._queue.put(batch)
+
+    def drain(self, timeout: float = 5.0) -> bool:
+        """Flush and wait until every message is written (or ``timeout`` s); whether it was."""
+        self.flush()
+        return self._idle.wait(timeout)
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Write what is waiting, stop the thread (idempotent). A failure is left in :attr:`failure`."""
+        try:
+            self.flush()
+        except BaseException:  # noqa: BLE001 - kept in self.failure: the caller is stopping anyway
+            pass
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join(timeout)
+            self._thread = None
+
+    def _loop(self) -> None:
+        while (batch := self._queue.get()) is not None:
+            try:
+                if self.failure is None:
+                    for (_, write), data in batch:
+                        write(data)
+                    self.threaded += len(batch)
+            except BaseException as exc:  # noqa: BLE001 - raised on the caller's thread by its next flush
+                self.failure = exc
+            finally:
+                with self._lock:
+                    self._waiting -= 1
+                    if not self._waiting:
+                        self._idle.set()
