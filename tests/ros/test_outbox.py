@@ -10,6 +10,8 @@ Hypotheses:
 - the outbox writes every message once, in the order sent, whether a flush writes on the caller's thread (a small
   batch, nothing waiting) or hands the batch to its thread (a large batch, or flushes back to back), and a message
   sent from another thread goes at the next flush;
+- at most ``max_waiting`` batches wait for the thread: a caller faster than the writes waits for them (a rig running
+  free does not queue its blocks without end);
 - a write that fails on the outbox's thread is raised by the caller's next flush, and nothing after it is written;
   ``close`` writes what is waiting first.
 """
@@ -17,6 +19,7 @@ Hypotheses:
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -102,6 +105,39 @@ def test_a_failed_write_on_the_thread_is_raised_by_the_next_flush_and_stops_the_
     finally:
         outbox.close()
     assert [d for _, d, _ in rec.writes] == [b"ok"]
+
+
+def test_a_caller_faster_than_the_writes_waits_for_room():
+    release = threading.Event()
+    written: list[bytes] = []
+
+    def slow(data: bytes) -> None:
+        release.wait(30)
+        written.append(data)
+
+    outbox = Outbox(thread_batch=1, gap=0.0, max_waiting=2)
+    flushed = [0]
+
+    def caller() -> None:
+        for i in range(5):
+            outbox.send((slow, slow), bytes([i]))
+            outbox.flush()
+            flushed[0] += 1
+
+    worker = threading.Thread(target=caller)
+    worker.start()
+    try:
+        deadline = time.monotonic() + 20
+        while flushed[0] < 2 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert flushed[0] == 2
+        worker.join(0.2)   # the third flush waits: two batches wait for the thread, which is stuck on the first
+        assert worker.is_alive() and flushed[0] == 2
+    finally:
+        release.set()
+        worker.join(20)
+        outbox.close()
+    assert flushed[0] == 5 and written == [bytes([i]) for i in range(5)]
 
 
 def test_close_writes_what_is_waiting():

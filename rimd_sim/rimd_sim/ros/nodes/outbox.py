@@ -42,6 +42,10 @@ THREAD_BATCH = 12
 #: So does a batch that comes less than this long after the one before (s): the pacing loop runs back to back (in
 #: lockstep faster than real time, one block per pass); at real time its passes are a block (10 ms) apart.
 BACK_TO_BACK_S = 0.003
+#: At most this many batches wait for the thread; the next flush waits for room. Without a bound a rig running free
+#: (open loop) faster than the external readers' writes would queue its blocks without end; with it, it runs at
+#: the writes' speed, as when it wrote them itself.
+MAX_WAITING = 4
 
 
 class PublishFailed(RimdError):
@@ -126,19 +130,22 @@ def gil_free_writer(publisher: Any) -> Callable[[bytes], None] | None:
 class Outbox:
     """DDS writes in order, on the caller's thread or on a thread of its own (see the module docstring).
 
-    The caller (the pacing thread) :meth:`send` s messages and :meth:`flush` es after each pass (another thread
-    may :meth:`send` too: its message goes at that flush); :meth:`close` writes what is waiting and stops the
-    thread. Only the caller flushes, so a publisher is never written from two threads at once. A failed write on
-    the thread is raised by the next :meth:`flush` (the caller stops as if it had failed itself).
+    The caller (the pacing thread) :meth:`send` s messages and :meth:`flush` es after each pass (another thread may
+    :meth:`send` too: its message goes at that flush); a flush waits while ``max_waiting`` batches wait for the
+    thread. :meth:`close` writes what is waiting and stops the thread. Only the caller flushes, so a publisher is
+    never written from two threads at once. A failed write on the thread is raised by the next :meth:`flush` (the
+    caller stops as if it had failed itself).
     """
 
-    def __init__(self, name: str = "rimd-dds", thread_batch: int = THREAD_BATCH, gap: float = BACK_TO_BACK_S) -> None:
+    def __init__(self, name: str = "rimd-dds", thread_batch: int = THREAD_BATCH, gap: float = BACK_TO_BACK_S,
+                 max_waiting: int = MAX_WAITING) -> None:
         self._pending: list[tuple[tuple[Callable[[bytes], None], Callable[[bytes], None]], bytes]] = []
         self._queue: SimpleQueue[list | None] = SimpleQueue()
         self._idle = threading.Event()
         self._idle.set()
         self._lock = threading.Lock()
         self._waiting = 0   # batches handed to the thread and not written yet
+        self._room = threading.BoundedSemaphore(max_waiting)
         self._thread_batch = thread_batch
         self._gap = gap
         self._last_flush = -math.inf   # monotonic time of the last flush that had messages
@@ -181,6 +188,7 @@ class Outbox:
         if self._thread is None:
             self._thread = threading.Thread(target=self._loop, name=self._name, daemon=True)
             self._thread.start()
+        self._room.acquire()   # at most max_waiting batches wait: a rig faster than its writes slows to them
         with self._lock:
             self._waiting += 1
             self._idle.clear()
@@ -216,3 +224,4 @@ class Outbox:
                     self._waiting -= 1
                     if not self._waiting:
                         self._idle.set()
+                self._room.release()
