@@ -42,10 +42,12 @@ THREAD_BATCH = 12
 #: So does a batch that comes less than this long after the one before (s): the pacing loop runs back to back (in
 #: lockstep faster than real time, one block per pass); at real time its passes are a block (10 ms) apart.
 BACK_TO_BACK_S = 0.003
-#: At most this many batches wait for the thread; the next flush waits for room. Without a bound a rig running free
-#: (open loop) faster than the external readers' writes would queue its blocks without end; with it, it runs at
-#: the writes' speed, as when it wrote them itself.
-MAX_WAITING = 4
+#: At most this many batches (passes of the pacing loop, up to 10 blocks each) wait for the thread; the next flush
+#: waits for room. Without a bound a rig running free (open loop) faster than the external readers' writes would
+#: queue its blocks without end; with it, it runs at the writes' speed, as when it wrote them itself. In lockstep a
+#: pass is often one block: 4 batches held the rig with an external reader to 25.2x, 32 let it run at 28.3x
+#: (bench_lockstep.run, 2 rounds alternately).
+MAX_WAITING = 64
 
 
 class PublishFailed(RimdError):
