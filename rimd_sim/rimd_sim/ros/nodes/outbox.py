@@ -25,6 +25,7 @@ alternately): 27.5x real time against 23.9x writing on the pacing thread (26.1x 
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
 import threading
 import time
@@ -83,21 +84,18 @@ def _loaded_library(name: str) -> ctypes.CDLL | None:
         return None
 
 
-_RCL: list[Any] = []   # [publish function, reset-error function] once found; [None, None] when not found
-
-
+@functools.cache
 def _rcl_functions() -> tuple[Any, Any]:
-    if not _RCL:
-        rcl, rcutils = _loaded_library("librcl.so"), _loaded_library("librcutils.so")
-        publish = getattr(rcl, "rcl_publish_serialized_message", None) if rcl is not None else None
-        reset = getattr(rcutils, "rcutils_reset_error", None) if rcutils is not None else None
-        if publish is not None:
-            publish.argtypes = [ctypes.c_void_p, ctypes.POINTER(_SerializedMessage), ctypes.c_void_p]
-            publish.restype = ctypes.c_int32
-        if reset is not None:
-            reset.argtypes, reset.restype = [], None
-        _RCL[:] = [publish, reset]
-    return _RCL[0], _RCL[1]
+    """The C functions ``rcl_publish_serialized_message`` and ``rcutils_reset_error`` (None each where not found)."""
+    rcl, rcutils = _loaded_library("librcl.so"), _loaded_library("librcutils.so")
+    publish = getattr(rcl, "rcl_publish_serialized_message", None) if rcl is not None else None
+    reset = getattr(rcutils, "rcutils_reset_error", None) if rcutils is not None else None
+    if publish is not None:
+        publish.argtypes = [ctypes.c_void_p, ctypes.POINTER(_SerializedMessage), ctypes.c_void_p]
+        publish.restype = ctypes.c_int32
+    if reset is not None:
+        reset.argtypes, reset.restype = [], None
+    return publish, reset
 
 
 def gil_free_writer(publisher: Any) -> Callable[[bytes], None] | None:
@@ -154,7 +152,7 @@ class Outbox:
         self._name = name
         self._thread: threading.Thread | None = None
         self.failure: BaseException | None = None
-        self.threaded = 0   # messages written on the thread (for the tests and the benchmarks)
+        self.threaded = 0   # messages written on the thread (what the tests check)
         self.inline = 0     # messages written on the caller's thread
 
     @staticmethod
