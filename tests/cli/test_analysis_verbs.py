@@ -148,6 +148,8 @@ def test_basins_give_each_initial_condition_its_attractor(tmp_path, capsys):
     (["poincare", "--frequency", "30"], "--frequency 30 refused: above motor.max_frequency"),
     (["poincare", "--ratio", "20"], "--frequency 36.4 refused: above motor.max_frequency"),
     (["peterka", "--f-min", "8", "--f-max", "2"], "--f-min 8 > --f-max 2"),
+    (["peterka", "--rest-cycles", "100"], "--rest-cycles 100 refused: must be at least the cap of the other starts, "
+                                          "--transient-cycles + --measure-cycles = 192"),
     (["basins", "--theta-min", "0.1", "--theta-max", "0.0"], "theta_range"),
 ])
 def test_bad_input_gives_one_line_and_exit_1(tmp_path, capsys, argv, message):

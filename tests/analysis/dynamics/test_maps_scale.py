@@ -357,3 +357,46 @@ def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path, monkeypat
     assert right - left >= cols and bottom - top >= rows  # at least a pixel per cell
     plot_area = image[int(top) + 1:int(bottom) - 1, int(left) + 1:int(right) - 1, :3]
     assert (plot_area < 0.99).any(axis=2).mean() > 0.99  # the map fills it
+
+
+def test_rest_cycles_classifies_each_cell_as_the_run_of_that_many_cycles_from_rest():
+    """``rest_cycles=1920``: the starts from rest still unsettled at the cap of 192 run on, so the class of every
+    cell of a 4 x 5 grid (chaotic, 2/4, 1/3 read at 1920 cycles, no impact among them) equals the fixed run of 1920
+    cycles from rest (``rest_classes``), where the default map differs in at least 4 cells. A start from rest that
+    settled before the cap is untouched (class and cycles), one that ran to it goes on past it; the other starts
+    are the default map's, class and cycles."""
+    from rimd_sim.analysis.dynamics.peterka import peterka, rest_classes
+
+    config = load_config(None)
+    gaps, freqs = [0.0, 0.7e-3, 1.3e-3, 2.3e-3], [4.25, 5.37, 7.23, 8.54, 9.1]
+    default = peterka(config, gaps, freqs, starts=0, workers=1)
+    long = peterka(config, gaps, freqs, starts=0, rest_cycles=1920, workers=1)
+    reference = rest_classes(config, gaps, freqs, cycles=1920, workers=1)
+    assert (default.rest_cap, long.rest_cap) == (192, 1920)
+    assert long.primary.tolist() == reference.tolist()
+    assert (default.primary != reference).sum() >= 4
+    settled = default.cycles[0] <= 192
+    assert long.cycles[0][settled].tolist() == default.cycles[0][settled].tolist()
+    assert long.primary[settled].tolist() == default.primary[settled].tolist()
+    assert (~settled).sum() >= 4 and (long.cycles[0][~settled] > 193).all()
+    assert (long.cycles[0] == 1921).any()   # a chaotic cell runs to the new cap
+    assert long.labels[1:].tolist() == default.labels[1:].tolist()
+    assert long.cycles[1:].tolist() == default.cycles[1:].tolist()
+    for bad in (100, 1920.0, True, 2_000_000):
+        with pytest.raises(ConfigError, match="rest_cycles"):
+            peterka(config, gaps[:1], freqs[:1], starts=0, rest_cycles=bad, workers=1)
+
+
+def test_rimd_peterka_rest_cycles_writes_its_cap_and_how_many_ran_to_it(tmp_path):
+    """``--rest-cycles 1920``: ``summary.json`` gives the cap of the start from rest and the fraction of the cells
+    whose start from rest ran to it; the default gives the common cap."""
+    grid = ["--gap-min-mm", "0", "--gap-max-mm", "0", "--gaps", "1", "--f-min", "5.37", "--f-max", "8.54",
+            "--freqs", "2", "--starts", "0", "--workers", "1"]
+    assert cli.main(["peterka", *grid, "--rest-cycles", "1920", "--out", str(tmp_path / "long")]) == 0
+    assert cli.main(["peterka", *grid, "--out", str(tmp_path / "default")]) == 0
+    long, default = read_json(tmp_path / "long" / "summary.json"), read_json(tmp_path / "default" / "summary.json")
+    assert (long["rest_cycles"], default["rest_cycles"]) == (1920, 192)
+    assert long["cycles_run"]["rest_cap"] == 1920 and default["cycles_run"]["rest_cap"] == 192
+    # Gap 0: 5.37 Hz is chaotic at 1920 cycles from rest, 8.54 Hz settles (2/4) after 247: both ran to 192.
+    assert default["cycles_run"]["rest_ran_to_cap"] == 1.0 and long["cycles_run"]["rest_ran_to_cap"] == 0.5
+    assert long["classes_from_rest"] == {"chaotic/non-periodic": 1, "2/4": 1}

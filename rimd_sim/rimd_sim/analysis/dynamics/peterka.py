@@ -132,6 +132,8 @@ class PeterkaResult:
             columns): the steady force of the cell's motion from rest; 0 without impact, NaN where it failed.
         impact_velocity: Largest impact velocity (m/s, the approach speed at contact onset) of the same window.
         stop: How trajectories were judged settled when stopping early (``contraction`` or ``window``).
+        rest_cycles: The cap of the ``rest`` start (0: ``cycles_per_start``, as for the other starts); its
+            ``cycles`` are ``rest_cycles + 1`` where it ran to that cap.
     """
 
     gaps_mm: np.ndarray
@@ -156,6 +158,12 @@ class PeterkaResult:
     peak_force: np.ndarray | None = None
     impact_velocity: np.ndarray | None = None
     stop: str = "window"
+    rest_cycles: int = 0
+
+    @property
+    def rest_cap(self) -> int:
+        """The cap of the ``rest`` start (cycles): ``rest_cycles``, or the other starts' cap."""
+        return self.rest_cycles or self.cycles_per_start
 
     @property
     def starts(self) -> int:
@@ -256,31 +264,30 @@ def _row(args: tuple[SimConfig, float, list[float], int, int, int]) -> list[tupl
 
 
 def _row_ensemble(args):
-    """One gap row in two compiled calls: rest and kick starts, then the continuation along the row.
+    """One gap row in three compiled calls: the rest starts, the kick starts, then the continuation along the row.
 
-    A third call runs the extra starts, when any (``args[6]``: ``(theta0, theta_dot0)`` arrays of shape
-    ``(starts, frequencies)``).
+    ``args``: ``(model, params, kick, freqs, rule, continued_rule, extra, rest_rule)``; ``extra`` (None or the
+    ``(theta0, theta_dot0)`` arrays of shape ``(starts, frequencies)``) runs in a fourth call; ``rest_rule`` is
+    the rest start's (its cap ``rest_cycles``; the others' rule but for the cap).
 
     Returns ``(labels, cycles, measures, window)``: per start, the class, the cycles run and the valid domain's
     measures (:func:`_measures`) of each frequency, the extra starts after the three named ones; and per
     frequency, the ``rest`` start's ``(peak force, impact velocity)`` of its classified window.
     """
-    model, p, kick, freqs, rule, continued_rule = args[:6]
-    extra = args[6] if len(args) > 6 else None
+    model, p, kick, freqs, rule, continued_rule, extra, rest_rule = args
     nf = len(freqs)
     zeros = np.zeros(nf)
-    both = run_cells(model, p[None, :], np.zeros(2 * nf, dtype=np.int64), np.concatenate([freqs, freqs]),
-                     np.zeros(2 * nf), np.concatenate([zeros, np.full(nf, kick)]), rule)
+    gi = np.zeros(nf, dtype=np.int64)
+    rest = run_cells(model, p[None, :], gi, freqs, zeros, zeros, rest_rule)
+    kicked = run_cells(model, p[None, :], gi, freqs, zeros, np.full(nf, kick), rule)
     chain = np.ones(nf, dtype=bool)
     chain[0] = False
-    cont = run_cells(model, p[None, :], np.zeros(nf, dtype=np.int64), freqs, zeros, zeros, continued_rule,
-                     chain=chain, fallback=(both.final[:nf, 0].copy(), both.final[:nf, 1].copy()))
-    labels = both.labels()
-    measures = _measures(both)
-    out = ([labels[:nf], labels[nf:], cont.labels()],
-           [both.cycles[:nf].tolist(), both.cycles[nf:].tolist(), cont.cycles.tolist()],
-           [measures[:nf], measures[nf:], _measures(cont)],
-           _window(both, nf))
+    cont = run_cells(model, p[None, :], gi, freqs, zeros, zeros, continued_rule, chain=chain,
+                     fallback=(rest.final[:, 0].copy(), rest.final[:, 1].copy()))
+    out = ([rest.labels(), kicked.labels(), cont.labels()],
+           [rest.cycles.tolist(), kicked.cycles.tolist(), cont.cycles.tolist()],
+           [_measures(rest), _measures(kicked), _measures(cont)],
+           _window(rest, nf))
     if extra is not None and extra[0].size:
         th0, om0 = extra
         ns = th0.shape[0]
@@ -346,6 +353,22 @@ def extra_starts(config: SimConfig, frequencies_hz, starts: int) -> tuple[np.nda
     return th, om
 
 
+#: Largest ``rest_cycles`` of a Peterka map (a run from rest of a million cycles is hours per cell).
+MAX_REST_CYCLES = 1_000_000
+
+
+def check_rest_cycles(rest_cycles, cap: int) -> int:
+    """``rest_cycles`` of :func:`peterka` as an int: ``cap`` for None; refused below the cap or past the maximum."""
+    if rest_cycles is None:
+        return cap
+    if not (isinstance(rest_cycles, int | np.integer) and not isinstance(rest_cycles, bool)
+            and cap <= rest_cycles <= MAX_REST_CYCLES):
+        raise ConfigError("rest_cycles", rest_cycles,
+                          f"must be an integer from the cap transient_cycles + measure_cycles = {cap} to "
+                          f"{MAX_REST_CYCLES}")
+    return int(rest_cycles)
+
+
 def _check_cycles(transient: int, measure: int) -> None:
     if transient < 0 or measure < 6:
         raise ConfigError("cycles", (transient, measure), "need transient_cycles >= 0 and measure_cycles >= 6")
@@ -364,8 +387,8 @@ def stop_rule(transient_cycles: int, measure_cycles: int, early_stop: bool, meth
 
 def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int = 120, measure_cycles: int = 72,
             continued_transient_cycles: int = 60, early_stop: bool = True, starts: int = DEFAULT_EXTRA_STARTS,
-            stop: str = DEFAULT_STOP, workers: int | None = None, scheduler: str | None = None,
-            progress=None) -> PeterkaResult:
+            stop: str = DEFAULT_STOP, rest_cycles: int | None = None, workers: int | None = None,
+            scheduler: str | None = None, progress=None) -> PeterkaResult:
     """Classify every (gap, frequency) cell from three starts (module docstring).
 
     Args:
@@ -383,6 +406,10 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
         stop: How a trajectory is judged settled when stopping early (module docstring): ``contraction`` (the
             default, the convergence test on the stroboscopic map) or ``window`` (the former fixed confirmation
             window: the maps made before, bit for bit).
+        rest_cycles: The cap of the start from rest, which gives the cell its class (module docstring, "Long
+            transients"): a trajectory from rest still unsettled at the other starts' cap runs on until it settles
+            or reaches this many cycles, its last ``measure_cycles`` then classified. Default (None): the same cap
+            as the other starts, ``transient_cycles + measure_cycles``; at least that.
         workers: Local processes (default: all cores).
         scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else the local pool).
         progress: Optional callable ``progress(rows_done, rows)``.
@@ -402,17 +429,20 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
     _check_cycles(continued_transient_cycles, measure_cycles)
     if not (isinstance(starts, int | np.integer) and 0 <= starts <= 4096):
         raise ConfigError("starts", starts, "must be an integer in [0, 4096]")
+    cap = transient_cycles + measure_cycles
+    rest_cycles = check_rest_cycles(rest_cycles, cap)
     start = time.perf_counter()
     rule = stop_rule(transient_cycles, measure_cycles, early_stop, stop)   # refuses an unknown method
     continued_rule = stop_rule(continued_transient_cycles, measure_cycles, early_stop, stop)
+    rest_rule = stop_rule(rest_cycles - measure_cycles, measure_cycles, early_stop, stop)
     rig = config.rig
     jobs = []
     for g in gaps:
         cfg = config.with_parameters({"gap": g})
         kick = rig.omega_n * (g + 2.0 * rig.amplitude) / rig.length  # rad/s
         model = model_for(cfg)
-        job = (model.name, model.params(cfg), kick, np.array(freqs), rule, continued_rule)
-        jobs.append(job + (extra_starts(cfg, freqs, starts),) if starts else job)
+        jobs.append((model.name, model.params(cfg), kick, np.array(freqs), rule, continued_rule,
+                     extra_starts(cfg, freqs, starts) if starts else None, rest_rule))
     rows, n, where = run_tasks(_row_ensemble, jobs, workers=workers, scheduler=scheduler, progress=progress)
     all_labels = np.array([r[0] for r in rows], dtype=object).transpose(1, 0, 2)
     labels = all_labels[:len(START_NAMES)]
@@ -439,7 +469,8 @@ def peterka(config: SimConfig, gaps_m, frequencies_hz, *, transient_cycles: int 
                            extra_invalid_rules=all_rules[named:] if starts else None,
                            extra_max_abs_theta=theta[named:] if starts else None,
                            extra_max_force=force[named:] if starts else None,
-                           peak_force=window[..., 0], impact_velocity=window[..., 1], stop=stop)
+                           peak_force=window[..., 0], impact_velocity=window[..., 1], stop=stop,
+                           rest_cycles=rest_cycles)
     return _with_validity(result, dom)
 
 
@@ -501,7 +532,7 @@ def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, 
     """Where an early-stopped map and a fixed-length map (same grid) disagree, and which is right.
 
     Returns the agreement per start and every differing cell with both classes; for the ``rest`` and ``kick``
-    starts, also the class of a run ``long_factor`` times the cap (its last ``measure`` cycles), the verdict.
+    starts, also the class of a run ``long_factor`` times the start's cap (its last ``measure`` cycles), the verdict.
     The ``continued`` start depends on its neighbour's final state, which differs between the two maps, so it
     gets no long run.
     """
@@ -518,7 +549,7 @@ def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, 
             if name != "continued":
                 cfg = config.with_parameters({"gap": early.gaps_mm[i] * 1e-3})
                 kick = rig.omega_n * (cfg.rig.gap + 2.0 * rig.amplitude) / rig.length if name == "kick" else 0.0
-                cap = long_factor * fixed.cycles_per_start
+                cap = long_factor * (fixed.rest_cap if name == "rest" else fixed.cycles_per_start)
                 model = model_for(cfg)
                 res = run_cells(model.name, model.params(cfg)[None, :], np.zeros(1, dtype=np.int64),
                                 np.array([early.frequencies_hz[j]]), np.zeros(1), np.array([kick]),
@@ -559,12 +590,24 @@ def rest_classes(config: SimConfig, gaps_m, frequencies_hz, *, cycles: int = 192
     return np.array(rows, dtype=object)
 
 
-def cycles_summary(cycles: np.ndarray, cap: int) -> dict:
-    """How long the trajectories ran: mean cycles per start, and the fraction stopped before the cap."""
+def cycles_summary(cycles: np.ndarray, cap: int, rest_cap: int | None = None) -> dict:
+    """How long the trajectories ran: mean cycles per start, and the fraction stopped before the cap.
+
+    ``rest_cap``: the cap of the first start (a Peterka map's ``rest``, :attr:`PeterkaResult.rest_cap`) when it
+    differs from the others'; then also ``rest_cap`` and ``rest_ran_to_cap``, the fraction of the cells whose start
+    from rest ran to its cap (classified on its last cycles without having settled).
+    """
     if cycles.size == 0:
         return {}
-    return {"mean": float(cycles.mean()), "cap": int(cap), "stopped_early": float((cycles <= cap).mean()),
-            "mean_per_start": [float(c.mean()) for c in cycles]}
+    caps = np.full(len(cycles), cap)
+    if rest_cap is not None:
+        caps[0] = rest_cap
+    early = cycles <= caps.reshape((-1,) + (1,) * (cycles.ndim - 1))
+    out = {"mean": float(cycles.mean()), "cap": int(cap), "stopped_early": float(early.mean()),
+           "mean_per_start": [float(c.mean()) for c in cycles]}
+    if rest_cap is not None:
+        out.update(rest_cap=int(rest_cap), rest_ran_to_cap=float((cycles[0] > rest_cap).mean()))
+    return out
 
 
 def save_peterka_npz(result: PeterkaResult, path) -> None:

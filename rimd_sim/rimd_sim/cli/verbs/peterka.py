@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from rimd_sim.cli import count, gap_mm
+from rimd_sim.cli import CommandError, count, gap_mm
 from rimd_sim.cli.verbs._analysis_io import (
     add_accept_invalid_argument,
     add_map_arguments,
@@ -50,6 +50,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "repeat and their repetition shrinks, so they are within 1e-4 of their limit) or "
                              "window (the former rule: a 24-cycle confirmation window after at least 30 cycles, "
                              "to reproduce earlier maps bit for bit)")
+    parser.add_argument("--rest-cycles", type=count("--rest-cycles", 1, 1_000_000), default=None,
+                        help="cap of the start from rest, which gives each cell its class: a trajectory from rest "
+                             "still unsettled at the cap of the others runs on until it settles or reaches this "
+                             "many cycles (default: the same cap, --transient-cycles + --measure-cycles; 1920, ten "
+                             "times the default cap, classifies as a run of 1920 cycles from rest does)")
     add_accept_invalid_argument(parser)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the cap) and list the differing cells in "
@@ -75,19 +80,23 @@ def main(args: argparse.Namespace) -> int:
 
     check_range("gap", args.gap_min_mm, args.gap_max_mm, allow_zero=True, unit="-mm")
     check_range("f", args.f_min, args.f_max)
+    cap = args.transient_cycles + args.measure_cycles
+    if args.rest_cycles is not None and args.rest_cycles < cap:
+        raise CommandError(f"--rest-cycles {args.rest_cycles} refused: must be at least the cap of the other starts, "
+                           f"--transient-cycles + --measure-cycles = {cap}")
     config = load_config(args.config)
     gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3
     freqs = np.linspace(args.f_min, args.f_max, args.freqs)
     result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
                      measure_cycles=args.measure_cycles, early_stop=not args.fixed_length, starts=args.starts,
-                     stop=args.stop, workers=args.workers, scheduler=args.scheduler,
-                     progress=progress_printer("peterka", "gap rows"))
+                     stop=args.stop, rest_cycles=args.rest_cycles, workers=args.workers,
+                     scheduler=args.scheduler, progress=progress_printer("peterka", "gap rows"))
     comparison = None
     if args.compare_fixed and not args.fixed_length:
         fixed = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
                         measure_cycles=args.measure_cycles, early_stop=False, starts=args.starts,
-                        workers=args.workers,
-                        scheduler=args.scheduler, progress=progress_printer("peterka (fixed length)", "gap rows"))
+                        rest_cycles=args.rest_cycles, workers=args.workers, scheduler=args.scheduler,
+                        progress=progress_printer("peterka (fixed length)", "gap rows"))
         comparison = compare_maps(result, fixed, config, args.measure_cycles)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "peterka.csv", peterka_table(result))
@@ -103,8 +112,8 @@ def main(args: argparse.Namespace) -> int:
                         + (f" and {args.starts - 1} Halton points over the region of rimd basins"
                            if args.starts > 1 else "")},
         "transient_cycles": args.transient_cycles,
-        "measure_cycles": args.measure_cycles, "early_stop": result.early_stop, "stop": result.stop,
-        "cycles_run": cycles_summary(result.cycles, result.cycles_per_start),
+        "measure_cycles": args.measure_cycles, "rest_cycles": result.rest_cap, "early_stop": result.early_stop,
+        "stop": result.stop, "cycles_run": cycles_summary(result.cycles, result.cycles_per_start, result.rest_cap),
         "wall_seconds": result.wall_seconds, "workers": result.workers, "where": result.where,
         "validity": result.validity,
     }
