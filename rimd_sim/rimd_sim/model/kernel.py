@@ -509,6 +509,28 @@ def motor_slip(fs, ist, t):
 
 
 #: What a physics module must define (the contract of the module docstring); ``RINGS`` adds :data:`RING_HOOKS`.
+@_jit_inline
+def next_strobe(fs, ist):
+    """Time of the next stroboscopic point (the motor phase crossing the next whole turn, cart at 0 moving forward).
+
+    ``inf`` when no crossing is ahead: the motor stopped, or a ramp down stops it before the crossing.
+    """
+    k = ist[I_STRK] - ist[I_CYC]  # turns ahead of the segment base
+    target = k - fs[F_MPHI0]  # turns to go
+    w0 = fs[F_MW0]
+    alpha = fs[F_MALPHA]
+    if alpha == 0.0:
+        if w0 <= 0.0:
+            return np.inf
+        tau = target / w0
+    else:
+        disc = w0 * w0 + 2.0 * alpha * target
+        if disc < 0.0 or w0 + math.sqrt(disc) <= 0.0:
+            return np.inf
+        tau = 2.0 * target / (w0 + math.sqrt(disc))
+    return fs[F_MT0] + tau
+
+
 CONTRACT = ("N_MODES", "RINGS", "HAMMER_MODES", "derivs", "free_flight", "mode_scale", "point", "dense_point",
             "penetration", "sensor_force", "force_free_is_zero", "sample", "truth", "params")
 RING_HOOKS = ("ring_amplitude", "ring_period", "settle")
@@ -575,10 +597,13 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
     the closure's cells. The functions reach the physics and one another through namespaces (modules registered
     in ``sys.modules``) whose names hold the digest of the physics sources: a module is pickled by its name into
     that key (a compiled function would be pickled with an id of its process, and never hit the cache), and an
-    edit to the physics changes the name, so it is never served stale.
+    edit to the physics (or to this module: a cached caller holds its code) changes the name, so it is never
+    served stale.
     """
     check_physics(physics)
-    key = source_key(physics, *sources)
+    # This module's own source is in the key too: a cached caller (the ensemble loop, ...) holds the driver's
+    # compiled code, and numba checks only the caller's file, so an edit here would otherwise be served stale.
+    key = source_key(sys.modules[__name__], physics, *sources)
     phys = _namespace(f"{__name__}.physics_{name}_{key}", f"The physics of the {name!r} model ({physics.__name__}).")
     for attr in CONTRACT + (RING_HOOKS if physics.RINGS else ()):
         setattr(phys, attr, getattr(physics, attr))
@@ -966,20 +991,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         # Stroboscopic points: the motor phase crosses a multiple of 2 pi (cart at 0 moving forward).
         if st_out.shape[0] > 0:
             while ist[I_STROUT] < st_out.shape[0]:
-                k = ist[I_STRK] - ist[I_CYC]  # turns ahead of the segment base
-                target = k - fs[F_MPHI0]  # turns to go
-                w0 = fs[F_MW0]
-                alpha = fs[F_MALPHA]
-                if alpha == 0.0:
-                    if w0 <= 0.0:
-                        break  # motor stopped: no crossing ahead
-                    tau = target / w0
-                else:
-                    disc = w0 * w0 + 2.0 * alpha * target
-                    if disc < 0.0 or w0 + math.sqrt(disc) <= 0.0:
-                        break  # a ramp down stops the motor before this crossing
-                    tau = 2.0 * target / (w0 + math.sqrt(disc))
-                tk = fs[F_MT0] + tau
+                tk = next_strobe(fs, ist)   # inf when the motor stops before it
                 if tk < ta:  # already behind the current step (round-off at a rebase): skip it
                     ist[I_STRK] += 1
                     continue
@@ -1155,7 +1167,8 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                     t_next = min(t_next, ch_next[c] / ch_rate[c])
             if tr_next[0] < tr_stop[0]:
                 t_next = min(t_next, tr_next[0] / tr_rate)
-            if strobe or t_next < fs[F_TB]:
+            # emit_samples only when something falls in the step: a call per step cost a third of a free step.
+            if t_next < fs[F_TB] or (strobe and next_strobe(fs, ist) < fs[F_TB]):
                 drv.emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
                                  tr_rate, tr_next, tr_stop, tr_base, tr_out, st_out, t_stop)
             if st_out.shape[0] > 0 and ist[I_STROUT] >= st_out.shape[0]:
@@ -1174,7 +1187,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 ya[i] = yb[i]
             t = fs[F_TB]
             fs[F_TA] = t
-            if not drv.apply_event(fs, ist, p, ya, imp_out):
+            if ist[I_PEND] != EV_NONE and not drv.apply_event(fs, ist, p, ya, imp_out):   # most steps: none
                 return ST_ZENO
             if fs[F_MTEND] <= t + 1e-12 * max(1.0, abs(t)):
                 motor_finish_ramp(fs, ist, t)
