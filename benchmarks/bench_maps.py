@@ -24,13 +24,17 @@ the load average is printed with each figure):
    from rest of the default map (``contraction``) and of the former ``window`` stop against ``rest_classes``: every
    trajectory from rest run 1920 cycles (ten times the cap, no early stop), its last 72 classified (target
    >= 99.5 % of the cells); the cells each gets wrong where the other is right; the time of both maps (ratio).
+7. How reproducible that reference is: on an N x N map (default 40, ``--tolerance-size``), the 1920-cycle class
+   from rest at ``integrator.rtol`` 1e-7 (the default), 1e-8 and 1e-9, pairwise; and the default map and the map
+   with ``rest_cycles=1920`` against each (sections 3 and 6 also run ``rest_cycles=1920``: its time against the
+   default's, its agreement with the reference).
 5. The single-trajectory core as users meet it: ``rimd sweep --workers 1`` (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300
    cycles from rest) in real-time factor, and the scipy ``solve_ivp`` event-driven reference
    (tests/harness/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
 
 Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
-[--sections 1,2,3,4,5,6] [--workers 2] [--reference-size 100]. Sections 2 and 4 run the default stop
-(``contraction``).
+[--sections 1,2,3,4,5,6,7] [--workers 2] [--reference-size 100] [--tolerance-size 40]. Sections 2 and 4 run the
+default stop (``contraction``).
 """
 
 from __future__ import annotations
@@ -147,6 +151,12 @@ def big(config, workers, n_big, skip_big):
     same = float((rw.primary == r200.primary).mean())
     print(f"  200 x 200, former (window stop):       {tw:.1f} s, mean {rw.cycles.mean():.1f} cycles: the default "
           f"x{tw / t200:.2f} faster; classes from rest the same in {100 * same:.2f} % of the cells   {load()}")
+    tl, rl = timed_map(config, gaps, freqs, rest_cycles=1920, workers=workers)
+    print(f"  200 x 200, --rest-cycles 1920:          {tl:.1f} s, mean {rl.cycles[0].mean():.1f} cycles from rest "
+          f"(default {r200.cycles[0].mean():.1f}): x{tl / t200:.2f} the default's time; the starts from rest that "
+          f"ran to 192: {100 * (r200.cycles[0] > 192).mean():.1f} %, to 1920: {100 * (rl.cycles[0] > 1920).mean():.1f} "
+          f"%; classes from rest the same as the default's in {100 * (rl.primary == r200.primary).mean():.2f} % of "
+          f"the cells   {load()}")
     if skip_big:
         return t200, r200
     gaps, freqs = grid(n_big)
@@ -165,8 +175,10 @@ def reference_agreement(config, workers, size):
           f"classified), {load()}")
     tc, new = timed_map(config, gaps, freqs, workers=workers)
     tw, old = timed_map(config, gaps, freqs, stop="window", workers=workers)
+    tl, long = timed_map(config, gaps, freqs, rest_cycles=1920, workers=workers)
     print(f"  default (contraction) {tc:.1f} s, mean {new.cycles.mean():.1f} cycles; former (window) {tw:.1f} s, "
-          f"mean {old.cycles.mean():.1f} cycles: x{tw / tc:.2f}   {load()}")
+          f"mean {old.cycles.mean():.1f} cycles: x{tw / tc:.2f}; --rest-cycles 1920 {tl:.1f} s (x{tl / tc:.2f} the "
+          f"default)   {load()}")
     t0 = time.perf_counter()
     ref = pk.rest_classes(config, gaps, freqs, cycles=1920, measure_cycles=72, workers=workers)
     print(f"  reference: {time.perf_counter() - t0:.1f} s   {load()}")
@@ -178,6 +190,36 @@ def reference_agreement(config, workers, size):
     wrong = Counter(zip(new.primary[~ok_new].tolist(), ref[~ok_new].tolist(), strict=True))
     print("  the default's differing cells (map, reference: cells): "
           + ", ".join(f"{a} vs {b}: {n}" for (a, b), n in wrong.most_common(8)))
+    ok_long = long.primary == ref
+    wrong = Counter(zip(long.primary[~ok_long].tolist(), ref[~ok_long].tolist(), long.cycles[0][~ok_long].tolist(),
+                        strict=True))
+    print(f"  --rest-cycles 1920: {100 * ok_long.mean():.2f} % of the cells (target >= 99.5 %); its differing cells "
+          "(map, reference, cycles the map ran: cells): "
+          + (", ".join(f"{a} vs {b} at {c}: {n}" for (a, b, c), n in wrong.most_common(8)) or "none"))
+
+
+def reproducibility(config, workers, size):
+    """Section 7: how reproducible the reference itself is, against the integrator's tolerance."""
+    gaps, freqs = grid(size)
+    print(f"\n7. {size} x {size}: the 1920-cycle reference from rest at integrator.rtol 1e-7 (the default), 1e-8 and "
+          f"1e-9 (atol 1e-9 each), {load()}")
+    refs = {}
+    for rtol in (1e-7, 1e-8, 1e-9):
+        cfg = config.with_parameters({"integrator.rtol": rtol})
+        t0 = time.perf_counter()
+        refs[rtol] = pk.rest_classes(cfg, gaps, freqs, cycles=1920, measure_cycles=72, workers=workers)
+        print(f"  rtol {rtol:g}: {time.perf_counter() - t0:.1f} s   {load()}")
+    for a, b in ((1e-7, 1e-8), (1e-7, 1e-9), (1e-8, 1e-9)):
+        same = refs[a] == refs[b]
+        differ = Counter(zip(refs[a][~same].tolist(), refs[b][~same].tolist(), strict=True))
+        print(f"  rtol {a:g} vs {b:g}: the same class in {100 * same.mean():.2f} % of the cells; differing "
+              f"({a:g}, {b:g}: cells): " + (", ".join(f"{x} vs {y}: {n}" for (x, y), n in differ.most_common(6))
+                                           or "none"))
+    tl, long = timed_map(config, gaps, freqs, rest_cycles=1920, workers=workers)
+    tc, new = timed_map(config, gaps, freqs, workers=workers)
+    for rtol, ref in refs.items():
+        print(f"  against the reference at rtol {rtol:g}: the default map {100 * (new.primary == ref).mean():.2f} %, "
+              f"--rest-cycles 1920 {100 * (long.primary == ref).mean():.2f} %")
 
 
 def _port() -> int:
@@ -285,9 +327,11 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
     parser.add_argument("--compare-size", type=int, default=None,
                         help="section 2 on an N x N map instead of the default 31 x 61")
-    parser.add_argument("--sections", default="1,2,3,4,5,6", help="sections to run (default 1,2,3,4,5,6)")
+    parser.add_argument("--sections", default="1,2,3,4,5,6,7", help="sections to run (default 1,2,3,4,5,6,7)")
     parser.add_argument("--reference-size", type=int, default=100,
                         help="section 6 on an N x N map (default 100; 200 is the full map, about 4x as long)")
+    parser.add_argument("--tolerance-size", type=int, default=40,
+                        help="section 7 on an N x N map (default 40: three references of 1920 cycles per cell)")
     args = parser.parse_args()
     sections = {int(x) for x in args.sections.split(",")}
     config = SimConfig()
@@ -305,6 +349,8 @@ def main() -> None:
         single_trajectory(config)
     if 6 in sections:
         reference_agreement(config, args.workers, args.reference_size)
+    if 7 in sections:
+        reproducibility(config, args.workers, args.tolerance_size)
 
 
 if __name__ == "__main__":

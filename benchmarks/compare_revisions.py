@@ -228,8 +228,10 @@ for name, s in steps:
 
 
 def export(rev: str, into: Path) -> Path:
-    """``git archive REV`` of the code, configuration, benchmarks and tests into ``into``."""
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "rimd_sim", "config", "benchmarks", "tests"],
+    """``git archive REV`` of the code, the interface package, configuration, benchmarks and tests into ``into``."""
+    # rimd_msgs too: without it the tree is not a source checkout (settings.paths.source_root) and finds no config.
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "rimd_sim", "rimd_msgs", "config", "benchmarks",
+                              "tests"],
                              check=True, capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
     return into
