@@ -387,13 +387,20 @@ def test_rest_cycles_classifies_each_cell_as_the_run_of_that_many_cycles_from_re
             peterka(config, gaps[:1], freqs[:1], starts=0, rest_cycles=bad, workers=1)
 
 
-def test_rimd_peterka_rest_cycles_writes_its_cap_and_how_many_ran_to_it(tmp_path):
+def test_rimd_peterka_rest_cycles_writes_its_cap_and_how_many_ran_to_it(tmp_path, capsys):
     """``--rest-cycles 1920``: ``summary.json`` gives the cap of the start from rest and the fraction of the cells
-    whose start from rest ran to it; the default gives the common cap."""
+    whose start from rest ran to it; the default gives the common cap. Both say how many cells were classified at
+    the cap without having settled, the default with the option that runs them on."""
     grid = ["--gap-min-mm", "0", "--gap-max-mm", "0", "--gaps", "1", "--f-min", "5.37", "--f-max", "8.54",
             "--freqs", "2", "--starts", "0", "--workers", "1"]
     assert cli.main(["peterka", *grid, "--rest-cycles", "1920", "--out", str(tmp_path / "long")]) == 0
+    out = capsys.readouterr().out
+    assert "1 cell(s) (50.0 %) classified at the cap of 1920 cycles from rest without having settled" in out
+    assert "--rest-cycles" not in out
     assert cli.main(["peterka", *grid, "--out", str(tmp_path / "default")]) == 0
+    out = capsys.readouterr().out
+    assert ("2 cell(s) (100.0 %) classified at the cap of 192 cycles from rest without having settled (chaotic, or a "
+            "transient longer than the cap); --rest-cycles 1920 runs their start from rest on") in out
     long, default = read_json(tmp_path / "long" / "summary.json"), read_json(tmp_path / "default" / "summary.json")
     assert (long["rest_cycles"], default["rest_cycles"]) == (1920, 192)
     assert long["cycles_run"]["rest_cap"] == 1920 and default["cycles_run"]["rest_cap"] == 192

@@ -131,6 +131,13 @@ def main(args: argparse.Namespace) -> int:
     on = "process(es)" if result.where == "local" else f"Dask worker thread(s) of {result.where}"
     print(f"{result.primary.size} cells, {summary['coexisting_cells']} with coexisting attractors, in "
           f"{result.wall_seconds:.1f} s on {result.workers} {on}; files in {args.out}", file=sys.stdout)
+    unsettled = int((result.cycles[0] > result.rest_cap).sum()) if result.early_stop else 0
+    if unsettled:
+        longer = (f"; --rest-cycles {10 * result.rest_cap} runs their start from rest on"
+                  if result.rest_cap < 10 * cap else "")
+        print(f"{unsettled} cell(s) ({100 * unsettled / result.primary.size:.1f} %) classified at the cap of "
+              f"{result.rest_cap} cycles from rest without having settled (chaotic, or a transient longer than the "
+              f"cap){longer}", file=sys.stdout)
     sentence = domain(config).sentence((Verdict.of(r) for r in result.invalid_rule.ravel().tolist()), "cells")
     return validity_exit("peterka", sentence, args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'peterka.csv'}")
