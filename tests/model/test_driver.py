@@ -98,6 +98,17 @@ def test_an_edit_of_the_physics_is_not_served_from_the_cache(tmp_path):
     assert after["peak"] == 2.0 * before["peak"]
 
 
+def test_the_drivers_cache_key_holds_the_kernels_own_source():
+    """The driver's namespace, whose name is its compiled code's cache key, is named after the digest of
+    ``kernel.py`` too, not only of the physics: a cached caller in another file (the ensemble loop) holds the
+    driver's compiled code, numba checks only that caller's file, so with the physics alone in the key an edit of
+    ``kernel.py`` was served stale through it. Every model's driver."""
+    for name, spec in MODELS.items():
+        key = kernel.source_key(kernel, spec.physics, *spec.sources)
+        assert spec.driver.__name__ == f"{kernel.__name__}.driver_{name}_{key}", name
+        assert key != kernel.source_key(spec.physics, *spec.sources)
+
+
 def test_a_physics_module_is_checked_against_the_contract():
     """A physics module that lacks part of the contract is refused, naming what it lacks; a ringing one must
     also give the ring hooks."""
