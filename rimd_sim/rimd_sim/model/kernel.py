@@ -503,12 +503,6 @@ def motor_slip(fs, ist, t):
     fs[F_SLIPBACK] = back
 
 
-# ======================================================================================================
-# The driver, built once per model
-# ======================================================================================================
-
-
-#: What a physics module must define (the contract of the module docstring); ``RINGS`` adds :data:`RING_HOOKS`.
 @_jit_inline
 def next_strobe(fs, ist):
     """Time of the next stroboscopic point (the motor phase crossing the next whole turn, cart at 0 moving forward).
@@ -531,6 +525,12 @@ def next_strobe(fs, ist):
     return fs[F_MT0] + tau
 
 
+# ======================================================================================================
+# The driver, built once per model
+# ======================================================================================================
+
+
+#: What a physics module must define (the contract of the module docstring); ``RINGS`` adds :data:`RING_HOOKS`.
 CONTRACT = ("N_MODES", "RINGS", "HAMMER_MODES", "derivs", "free_flight", "mode_scale", "point", "dense_point",
             "penetration", "sensor_force", "force_free_is_zero", "sample", "truth", "params")
 RING_HOOKS = ("ring_amplitude", "ring_period", "settle")
