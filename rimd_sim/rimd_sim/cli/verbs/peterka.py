@@ -120,7 +120,8 @@ def main(args: argparse.Namespace) -> int:
     if comparison is not None:
         summary["comparison"] = comparison
     write_summary(args.out, summary)
-    plot_peterka(result, args.out / "peterka.png", "RIMD model: Peterka map (class of the motion from rest)",
+    longer = f", run up to {result.rest_cap} cycles" if result.rest_cap > cap else ""
+    plot_peterka(result, args.out / "peterka.png", f"RIMD model: Peterka map (class of the motion from rest{longer})",
                  caption=describe(config, omit=("gap",)))
     if comparison is not None:
         differ = [c for c in comparison["differing_cells"] if c["start"] == "rest"]
