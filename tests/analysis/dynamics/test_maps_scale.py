@@ -231,12 +231,14 @@ PETERKA = ["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "6",
 
 
 def test_rimd_peterka_offers_the_analysis_stop_methods_and_default():
-    """The verb mirrors the methods and the default without importing the analysis to build its parser."""
-    from rimd_sim.analysis.dynamics.peterka import DEFAULT_STOP
+    """The verb mirrors the methods, the default and the largest --rest-cycles without importing the analysis to
+    build its parser."""
+    from rimd_sim.analysis.dynamics.peterka import DEFAULT_STOP, MAX_REST_CYCLES
     from rimd_sim.cli.verbs import peterka as verb
     from rimd_sim.model.ensemble import STOP_METHODS
 
     assert (tuple(verb.STOP_METHODS), verb.DEFAULT_STOP) == (STOP_METHODS, DEFAULT_STOP)
+    assert verb.MAX_REST_CYCLES == MAX_REST_CYCLES
 
 
 @pytest.mark.process

@@ -29,6 +29,8 @@ from rimd_sim.cli.verbs._analysis_io import (
 DEFAULT_EXTRA_STARTS = 1
 #: ``rimd_sim.model.ensemble.STOP_METHODS`` and ``rimd_sim.analysis.dynamics.peterka.DEFAULT_STOP``, likewise.
 STOP_METHODS, DEFAULT_STOP = ("window", "contraction"), "contraction"
+#: ``rimd_sim.analysis.dynamics.peterka.MAX_REST_CYCLES``, likewise.
+MAX_REST_CYCLES = 1_000_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -50,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "repeat and their repetition shrinks, so they are within 1e-4 of their limit) or "
                              "window (the former rule: a 24-cycle confirmation window after at least 30 cycles, "
                              "to reproduce earlier maps bit for bit)")
-    parser.add_argument("--rest-cycles", type=count("--rest-cycles", 1, 1_000_000), default=None,
+    parser.add_argument("--rest-cycles", type=count("--rest-cycles", 1, MAX_REST_CYCLES), default=None,
                         help="cap of the start from rest, which gives each cell its class: a trajectory from rest "
                              "still unsettled at the cap of the others runs on until it settles or reaches this "
                              "many cycles (default: the same cap, --transient-cycles + --measure-cycles; 1920, ten "
