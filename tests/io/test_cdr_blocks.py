@@ -20,6 +20,7 @@ Hypotheses:
 from __future__ import annotations
 
 import array
+import struct
 
 import numpy as np
 import pytest
@@ -265,3 +266,36 @@ def test_the_truth_and_motor_encoders_give_what_rosbags_serializes(first, rate, 
         header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id="motor"), frequency_setpoint=motor[0],
         frequency=motor[1], phase=motor[2], cycle_index=max(cycle, 0), ramp_rate=motor[3], cart_position=motor[4])
     assert encode_motor(stamp, m) == bytes(STORE.serialize_cdr(state, "rimd_msgs/msg/MotorState"))
+
+
+@SETTINGS
+@given(frame=TEXT, sizes=st.lists(st.integers(0, 6), min_size=10, max_size=10), little=st.booleans(),
+       rig_state=st.booleans())
+def test_the_fast_block_reader_reads_what_the_field_reader_reads_and_refuses_what_it_refuses(frame, sizes, little,
+                                                                                            rig_state):
+    # read_block takes a path of three unpacks for bytes that fit the layout, else reads field by field (whose
+    # errors say where): for every prefix of a message, both refuse it or both read the same fields.
+    from rimd_sim.io.cdr import CdrReader, _read_block_fast, _read_block_head
+
+    kind = "rimd_msgs/msg/RigState" if rig_state else "rimd_msgs/msg/SampleBlock"
+    names = BLOCK_ARRAYS[kind]
+    arrays = {name: np.arange(n, dtype=np.float64) - i for i, (name, n) in enumerate(zip(names, sizes, strict=False))}
+    data = bytes(STORE.serialize_cdr(_rosbags_block(kind, frame, 7, 20_000.0, arrays, 12, 34), kind,
+                                     little_endian=little))
+    for cut in range(len(data) + 1):
+        part = data[:cut]
+        try:
+            r = CdrReader(part)
+            header, first, rate = _read_block_head(r)
+            fields = {name: r.f64_array() for name in names}
+        except ValueError:
+            with pytest.raises((ValueError, IndexError, struct.error)):
+                _read_block_fast(part, names)
+            with pytest.raises(ValueError):
+                read_block(part, kind)
+            continue
+        view = _read_block_fast(part, names)
+        assert (view.header.stamp.sec, view.header.stamp.nanosec, view.header.frame_id, view.first_index,
+                view.sample_rate) == (header.stamp.sec, header.stamp.nanosec, header.frame_id, first, rate)
+        for name in names:
+            assert _same(getattr(view, name), fields[name]), name

@@ -326,10 +326,52 @@ def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays
     names = BLOCK_ARRAYS[type_name]
     if arrays is not None:
         names = names[:arrays]
+    try:
+        return _read_block_fast(data, names)
+    except (ValueError, IndexError, struct.error):
+        pass   # bytes that do not fit the layout: read field by field below, which names what is wrong
     r = CdrReader(data)
     header, first_index, sample_rate = _read_block_head(r)
     assert header is not None   # read: header=True
     return BlockView(header, first_index, sample_rate, {name: r.f64_array() for name in names})
+
+
+#: A block's leading fields by byte order: the stamp (int32 sec, uint32 nanosec) and frame_id's uint32 length.
+_BLOCK_HEAD = {order: struct.Struct(order + "iiI") for order in "<>"}
+#: ``first_index`` (uint64) and ``sample_rate`` (float64), 8-aligned after frame_id.
+_INDEX_RATE = {order: struct.Struct(order + "Qd") for order in "<>"}
+
+
+def _read_block_fast(data: bytes | bytearray | memoryview, names: tuple[str, ...]) -> BlockView:
+    """:func:`read_block` in three unpacks and a view per array, for bytes that fit the layout.
+
+    The same reads as :class:`CdrReader`'s, without a call per field (the Rerun bridge reads hundreds of blocks a
+    second). Raises ValueError, IndexError or struct.error on bytes that do not fit; the caller then reads them
+    field by field, whose errors say where.
+    """
+    order = "<" if data[1] & 1 else ">"
+    size = len(data)
+    sec, nanosec, length = _BLOCK_HEAD[order].unpack_from(data, 4)
+    end = 16 + length   # absolute offset after frame_id and its NUL
+    if end > size:
+        raise ValueError("frame_id does not fit")
+    frame_id = bytes(data[16:end - 1]).decode("utf-8", "replace") if length else ""
+    pos = (12 + length + 7) & ~7
+    first_index, sample_rate = _INDEX_RATE[order].unpack_from(data, 4 + pos)
+    pos += 16
+    count_of = _PRIMITIVES[order]["I"].unpack_from
+    dtype = _F8[order]
+    arrays = {}
+    for name in names:
+        (count,) = count_of(data, 4 + pos)
+        pos += 4
+        if count:
+            pos = (pos + 7) & ~7
+        if 4 + pos + 8 * count > size:
+            raise ValueError("array does not fit")
+        arrays[name] = np.frombuffer(data, dtype, count, 4 + pos)
+        pos += 8 * count
+    return BlockView(Header(Stamp(sec, nanosec), frame_id), first_index, sample_rate, arrays)
 
 
 def samples_before(stamp_ns: int, sample_rate: float, count: int, end_ns: int) -> int:

@@ -1,0 +1,56 @@
+"""The Rerun mapping's array shortcuts give what the general paths give, bit for bit.
+
+Hypotheses (in-process, no ROS):
+* :func:`line_strips` builds the Arrow array Rerun's own conversion builds from the list of strips (one per
+  block, each starting at the previous one's last point), so the phase plane in the .rrd is unchanged;
+* ``_second_order_rate`` is ``np.gradient(f, dx, edge_order=2)`` to the last bit (the cart velocity of the
+  phase plane);
+* :func:`sample_times_ns` for an integer rate is ``n / rate`` s in integer ns rounded half up (1024 Hz has
+  halves), for every ``n`` of a block, across whole seconds (the grid the simulator stamps).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from rimd_sim.viz.rerun_map import _second_order_rate, line_strips, sample_times_ns
+
+FINITE = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(lengths=st.lists(st.integers(1, 12), min_size=1, max_size=12), lead=st.integers(0, 3), seed=st.integers(0, 99))
+def test_line_strips_is_the_array_rerun_builds_from_the_strips(lengths, lead, seed):
+    # lead: points before the first strip's start (the batch continued from the previous batch's last point)
+    rng = np.random.default_rng(seed)
+    ends = lead + np.cumsum(lengths)
+    starts = np.r_[lead, ends[:-1]]
+    xs, ys = rng.normal(size=ends[-1] + 1) * 1e3, rng.normal(size=ends[-1] + 1)
+    strips = [np.column_stack((xs[a:b + 1], ys[a:b + 1])) for a, b in zip(starts, ends, strict=True)]
+    want = rr.LineStrips2D.columns(strips=strips).partition([1] * len(strips))
+    got = rr.LineStrips2D.columns(strips=line_strips(xs, ys, starts, ends)).partition([1] * len(strips))
+    assert len(got) == len(want)
+    for g, w in zip(got, want, strict=True):
+        assert g.component_descriptor() == w.component_descriptor()
+        assert g.as_arrow_array().equals(w.as_arrow_array())
+
+
+@settings(max_examples=300, deadline=None)
+@given(values=st.lists(FINITE, min_size=3, max_size=40),
+       rate=st.sampled_from([1000.0, 2000.0, 20000.0, 3.0, 7.5, 44100.0]))
+def test_the_cart_velocity_is_numpys_gradient_bit_for_bit(values, rate):
+    f = np.array(values)
+    assert np.array_equal(_second_order_rate(f, 1.0 / rate), np.gradient(f, 1.0 / rate, edge_order=2))
+
+
+@settings(max_examples=300, deadline=None)
+@given(rate=st.sampled_from([1, 3, 7, 1000, 1024, 2000, 20000, 44100, 999_983]), seconds=st.integers(0, 10**7),
+       offset=st.integers(-5, 5), count=st.integers(0, 300))
+def test_sample_times_are_the_exact_grid_across_whole_seconds(rate, seconds, offset, count):
+    first = max(0, seconds * rate + offset)   # blocks that start just before, on or after a whole second
+    got = sample_times_ns(first, count, float(rate))
+    want = [(2 * n * 1_000_000_000 + rate) // (2 * rate) for n in range(first, first + count)]
+    assert got.dtype == np.int64 and got.tolist() == want
