@@ -1,4 +1,4 @@
-"""The Rerun mapping's array shortcuts give what the general paths give, bit for bit.
+"""The Rerun mapping's shortcuts give what the general paths give, bit for bit.
 
 Hypotheses (in-process, no ROS):
 * :func:`line_strips` builds the Arrow array Rerun's own conversion builds from the list of strips (one per
@@ -6,17 +6,33 @@ Hypotheses (in-process, no ROS):
 * ``_second_order_rate`` is ``np.gradient(f, dx, edge_order=2)`` to the last bit (the cart velocity of the
   phase plane);
 * :func:`sample_times_ns` for an integer rate is ``n / rate`` s in integer ns rounded half up (1024 Hz has
-  halves), for every ``n`` of a block, across whole seconds (the grid the simulator stamps).
+  halves), for every ``n`` of a block, across whole seconds (the grid the simulator stamps);
+* impacts sent in batches (one ``send_columns`` per entity) leave in the .rrd what one ``rr.log`` per impact
+  leaves: markers, log lines and table rows at the same times.
 """
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import rerun as rr
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rimd_sim.viz.rerun_map import _second_order_rate, line_strips, sample_times_ns
+from rimd_sim.viz.rerun_map import (
+    IMPACT_LOG,
+    IMPACT_MARKERS,
+    IMPACT_TABLE,
+    TIMELINE,
+    RigMapper,
+    _second_order_rate,
+    impact_text,
+    line_strips,
+    sample_times_ns,
+    stamp_ns,
+)
+from rimd_sim.viz.rrd_data import load_rrd
 
 FINITE = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
 
@@ -54,3 +70,58 @@ def test_sample_times_are_the_exact_grid_across_whole_seconds(rate, seconds, off
     got = sample_times_ns(first, count, float(rate))
     want = [(2 * n * 1_000_000_000 + rate) // (2 * rate) for n in range(first, first + count)]
     assert got.dtype == np.int64 and got.tolist() == want
+
+
+def _event(index: int, stamp_ns: int, seed: int) -> SimpleNamespace:
+    rng = np.random.default_rng(seed)
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)), index=index,
+                           cycle_index=index // 2, peak_force=float(rng.uniform(1, 300)),
+                           impulse=float(rng.uniform(0, 1e-2)), impact_velocity=float(rng.uniform(0, 0.5)),
+                           duration=float(rng.uniform(1e-4, 1e-3)), max_penetration=float(rng.uniform(0, 1e-4)),
+                           excitation_frequency=4.25, excitation_phase=float(rng.uniform(0, 6.28)))
+
+
+def _logged_one_by_one(rec, events) -> None:
+    """The impacts as three ``rr.log`` calls each at their time (how the mapping logged them before batching)."""
+    for ev in events:
+        rr.set_time(TIMELINE, duration=np.timedelta64(stamp_ns(ev.header.stamp), "ns"), recording=rec)
+        rr.log(IMPACT_MARKERS, rr.Scalars(float(ev.peak_force)), recording=rec)
+        rr.log(IMPACT_LOG, rr.TextLog(impact_text(ev), level="INFO"), recording=rec)
+        rr.log(IMPACT_TABLE, rr.AnyValues(
+            index=int(ev.index), cycle=int(ev.cycle_index), peak_force_N=float(ev.peak_force),
+            impulse_Ns=float(ev.impulse), impact_velocity_mps=float(ev.impact_velocity), duration_s=float(ev.duration),
+        ), recording=rec)
+
+
+def test_impacts_sent_in_batches_are_what_logging_each_gives(tmp_path):
+    # Impacts wait for the next send of a channel and go in one send_columns per entity: the .rrd holds the same
+    # markers, log lines (text and level) and table rows at the same times as one rr.log per impact would.
+    events = [_event(i, 1_000_000_000 + 137_000_000 * i + i % 3, i) for i in range(7)]
+    oracle = rr.RecordingStream("oracle")
+    oracle.save(str(tmp_path / "oracle.rrd"))
+    _logged_one_by_one(oracle, events)
+    oracle.flush()
+    oracle.disconnect()
+
+    rec = rr.RecordingStream("batched")
+    rec.save(str(tmp_path / "batched.rrd"))
+    mapper = RigMapper(rec, batch=5)
+    mapper.origin_ns = 0
+    for ev in events[:3]:
+        mapper.log_impact(ev)
+    mapper.flush()                 # a send: the three waiting go
+    for ev in events[3:]:
+        mapper.log_impact(ev)
+    assert mapper.stats.impacts == 7
+    mapper.flush()
+    rec.flush()
+    rec.disconnect()
+
+    want, got = load_rrd(tmp_path / "oracle.rrd"), load_rrd(tmp_path / "batched.rrd")
+    for entity in (IMPACT_MARKERS, IMPACT_LOG, IMPACT_TABLE):
+        assert np.array_equal(got[entity].times, want[entity].times), entity
+        assert set(got[entity].columns) == set(want[entity].columns), entity
+        for name, column in want[entity].columns.items():
+            assert got[entity].columns[name].to_pylist() == column.to_pylist(), (entity, name)
+    assert got[IMPACT_LOG].texts() == [impact_text(ev) for ev in events]
