@@ -7,8 +7,9 @@ Hypotheses (in-process, no ROS):
   phase plane);
 * :func:`sample_times_ns` for an integer rate is ``n / rate`` s in integer ns rounded half up (1024 Hz has
   halves), for every ``n`` of a block, across whole seconds (the grid the simulator stamps);
-* impacts sent in batches (one ``send_columns`` per entity) leave in the .rrd what one ``rr.log`` per impact
-  leaves: markers, log lines and table rows at the same times.
+* impacts sent with the blocks, as columns (one ``send_columns`` per entity) or logged one by one with typed
+  table values, leave in the .rrd what one plain ``rr.log`` per impact leaves: markers, log lines and table
+  rows at the same times.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rimd_sim.viz.rerun_map import (
+    COLUMNS_FROM,
     IMPACT_LOG,
     IMPACT_MARKERS,
     IMPACT_TABLE,
@@ -97,7 +99,7 @@ def _logged_one_by_one(rec, events) -> None:
 def test_impacts_sent_in_batches_are_what_logging_each_gives(tmp_path):
     # Impacts wait for the next send of a channel and go in one send_columns per entity: the .rrd holds the same
     # markers, log lines (text and level) and table rows at the same times as one rr.log per impact would.
-    events = [_event(i, 1_000_000_000 + 137_000_000 * i + i % 3, i) for i in range(7)]
+    events = [_event(i, 1_000_000_000 + 137_000_000 * i + i % 3, i) for i in range(9)]
     oracle = rr.RecordingStream("oracle")
     oracle.save(str(tmp_path / "oracle.rrd"))
     _logged_one_by_one(oracle, events)
@@ -108,13 +110,13 @@ def test_impacts_sent_in_batches_are_what_logging_each_gives(tmp_path):
     rec.save(str(tmp_path / "batched.rrd"))
     mapper = RigMapper(rec, batch=5)
     mapper.origin_ns = 0
-    for ev in events[:3]:
-        mapper.log_impact(ev)
-    mapper.flush()                 # a send: the three waiting go
-    for ev in events[3:]:
-        mapper.log_impact(ev)
-    assert mapper.stats.impacts == 7
-    mapper.flush()
+    sent = 0
+    for size in (1, 2, COLUMNS_FROM, 9 - 3 - COLUMNS_FROM):   # logged one by one below COLUMNS_FROM, as columns from it
+        for ev in events[sent:sent + size]:
+            mapper.log_impact(ev)
+        mapper.flush()   # a send: the impacts waiting go
+        sent += size
+    assert sent == 9 and mapper.stats.impacts == 9 and COLUMNS_FROM <= 9 - 3 - COLUMNS_FROM
     rec.flush()
     rec.disconnect()
 
