@@ -57,9 +57,11 @@ def rig_messages(seconds: float) -> list[tuple[str, bytes]]:
     rt = SimulatorRuntime(config, settings, send=lambda key, data: out.append((key, data)), clock=lambda: clock[0],
                           wall_ns=lambda: 1_764_000_000_000_000_000 + round((clock[0] - 100.0) * 1e9))
     rt.start()
-    blocks = round(seconds * config.block_rate)
-    while sum(1 for key, _ in out if key == "motor/state") < blocks:
+    blocks, done = round(seconds * config.block_rate), 0
+    while done < blocks:   # one motor state per block published
+        before = len(out)
         rt.step()
+        done += sum(1 for key, _ in out[before:] if key == "motor/state")
         clock[0] += 1.0 / config.block_rate
     return out
 
