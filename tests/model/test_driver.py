@@ -109,6 +109,36 @@ def test_the_drivers_cache_key_holds_the_kernels_own_source():
         assert key != kernel.source_key(spec.physics, *spec.sources)
 
 
+#: The compiled functions that create arrays (their workspace): the only ones compiled with numba's reference counting.
+ALLOCATING = {"advance", "truncate", "run_cells", "map_one", "map_many"}
+
+
+@pytest.mark.skipif(not kernel.JIT, reason="RIMD_NO_JIT=1: nothing is compiled")
+def test_the_compiled_functions_borrow_their_arrays():
+    """Hypothesis: every compiled function of the kernel, of each model's driver and physics, of the maps' ensemble
+    and of the shooting maps runs without numba's reference counting (``_nrt`` off), but for the few that create
+    arrays, which keep it explicitly (a caller's setting would otherwise be inherited and refuse their ``np.empty``).
+    With the counting, every call incremented and decremented each array's count atomically: half a Peterka map's
+    time (docs/benchmarks.md). Functions inlined into their callers take the callers' setting and are not listed."""
+    from numba.core.registry import CPUDispatcher
+
+    from rimd_sim.model import ensemble, shooting
+
+    spaces = [kernel, ensemble]
+    for name, spec in MODELS.items():
+        spaces += [spec.physics, spec.driver, ensemble._loop(name), shooting._loop(name)]
+    seen = {}
+    for space in spaces:
+        for attr, fn in vars(space).items():
+            if isinstance(fn, CPUDispatcher) and fn.targetoptions.get("inline", "never") == "never":
+                seen[f"{space.__name__}.{attr}"] = fn.targetoptions.get("_nrt")
+    named = {key.rsplit(".", 1)[1] for key in seen}
+    assert {"rk_step", "detect_event", "dense_coeffs", "emit_samples", "run_one", "_converged", "motor_phase",
+            "advance", "run_cells", "map_one"} <= named
+    wrong = {key: nrt for key, nrt in seen.items() if nrt is not (key.rsplit(".", 1)[1] in ALLOCATING)}
+    assert not wrong, f"reference counting where it should not be (True) or missing where arrays are made: {wrong}"
+
+
 def test_a_physics_module_is_checked_against_the_contract():
     """A physics module that lacks part of the contract is refused, naming what it lacks; a ringing one must
     also give the ring hooks."""

@@ -392,6 +392,7 @@ def _loop(name: str) -> types.ModuleType:
     ns = k._namespace(drv.__name__ + "_ensemble", f"The loop over the cells of the {name!r} model.")
     loop = ns
     compiled = k.jit_for(f"_loop.{name}")
+    allocating = k.jit_for(f"_loop.{name}", allocates=True)   # run_cells makes the cells' workspace
 
     @compiled
     def init_cell(p, fs, ist, ya, yb, f, theta0, theta_dot0, h_first, imp_buf):
@@ -527,7 +528,7 @@ def _loop(name: str) -> types.ModuleType:
                         _rate(counts, cap - measure + 1, cap + 1), status, w_peak,
                         _window_max(vels, cap - measure + 1, cap + 1))
 
-    @compiled
+    @allocating
     def run_cells(params, gap_index, freqs, theta0, theta_dot0, chain, fb_theta, fb_theta_dot, rule, out_i, out_f,
                   out_pts):
         """Run every cell; ``chain[i]`` true starts cell ``i`` from the final state of cell ``i - 1``."""

@@ -95,6 +95,7 @@ if os.environ.get("RIMD_NO_JIT") == "1":  # pragma: no cover - exercised by a su
     def _jit(func):
         return func
 
+    _jit_alloc = _jit
     _jit_inline = _jit
     physics_jit = _jit
     physics_inline = _jit
@@ -115,8 +116,20 @@ else:
     from numba.cpython.unsafe.tuple import tuple_setitem as tuple_set  # type: ignore[assignment]
     from numba.np.unsafe.ndarray import to_fixed_tuple as to_tuple  # type: ignore[assignment]
 
+    # Compiled functions *borrow* their arrays: numba's reference counting (NRT) is off in them (``_nrt=False``),
+    # because with it every call of a compiled function incremented and decremented the count of each array it
+    # was given, atomically, on entry and exit: measured, half of a Peterka map's time went into those two
+    # instructions (the driver's steps pass six arrays to each of their calls, the ensemble's cycles more). A
+    # borrowing function cannot create an array (numba refuses to compile one that does) and must not return
+    # one; the few that allocate their workspace are compiled with ``_jit_alloc``, which keeps the counting, set
+    # explicitly: a function left at numba's default inherits its caller's setting. ``_nrt`` is numba's own
+    # (underscored) option; tests/model/test_driver.py checks that every compiled function has the one meant.
     def _jit(func):
-        return njit(cache=True, fastmath=False, nogil=True)(func)
+        return njit(cache=True, fastmath=False, nogil=True, _nrt=False)(func)  # type: ignore[call-overload]  # _nrt: numba's option
+
+    def _jit_alloc(func):
+        """A compiled function that creates arrays (its workspace, its results): with reference counting."""
+        return njit(cache=True, fastmath=False, nogil=True, _nrt=True)(func)  # type: ignore[call-overload]  # _nrt: numba's option
 
     def _jit_inline(func):
         # Small functions of the hot loop, inlined at the numba IR level (measured: +20 % steps/s).
@@ -128,7 +141,7 @@ else:
         It is compiled into the driver built from it, whose cache entry is keyed by the physics sources
         (:func:`build_driver`), so an edit to the physics is never served stale.
         """
-        return njit(cache=False, fastmath=False, nogil=True)(func)
+        return njit(cache=False, fastmath=False, nogil=True, _nrt=False)(func)  # type: ignore[call-overload]  # _nrt: numba's option
 
     def physics_inline(func):
         """A small physics function of the hot loop, inlined into the driver (see :func:`physics_jit`)."""
@@ -545,16 +558,21 @@ def source_key(*modules) -> str:
     return digest.hexdigest()[:12]
 
 
-def jit_for(scope: str):
+def jit_for(scope: str, *, allocates: bool = False):
     """The decorator of the functions a factory compiles for one model: ``_jit`` under the name ``scope.fn``.
+
+    ``allocates``: the functions create arrays (``_jit_alloc``, with numba's reference counting); by default they
+    borrow the arrays they are given (``_jit``).
 
     Functions built by one factory share their Python qualified name; numba names the compiled symbols and the
     cache files after it, and two models' functions loaded from the cache into one process must not share a
     symbol (the second would call the first's code). ``scope`` holds the model's name.
     """
+    jit = _jit_alloc if allocates else _jit
+
     def compiled(func):
         func.__qualname__ = f"{scope}.{func.__name__}"
-        return _jit(func)
+        return jit(func)
 
     return compiled
 
@@ -614,6 +632,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                     f"The integration driver of the {name!r} model, built by rimd_sim.model.kernel.build_driver.")
     drv = ns
     compiled = jit_for(f"build_driver.{name}")
+    allocating = jit_for(f"build_driver.{name}", allocates=True)   # the two entry points make their workspace
 
     # ---- Runge-Kutta step ------------------------------------------------------------------------
 
@@ -1140,7 +1159,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
 
     # ---- the driver ----------------------------------------------------------------------------
 
-    @compiled
+    @allocating
     def advance(p, fs, ist, ya, yb, fa, Q, t_stop,
                 ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
                 tr_rate, tr_next, tr_stop, tr_base, tr_out,
@@ -1247,7 +1266,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             if mode == CONTACT:
                 drv.track_contact_extremes(fs, p, ya, Q, h)
 
-    @compiled
+    @allocating
     def truncate(p, fs, ist, ya, yb, fa, Q, t, imp_out):
         """End the current step at ``t`` (``F_TA <= t <= F_TB``), discarding what lies beyond.
 

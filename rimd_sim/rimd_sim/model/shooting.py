@@ -51,7 +51,7 @@ def _loop(name: str) -> types.ModuleType:
     n_strobe = k.N_STROBE + n_modes
     ns = k._namespace(drv.__name__ + "_shooting", f"The shooting maps of the {name!r} model.")
     loop = ns
-    compiled = k.jit_for(f"_shooting.{name}")
+    compiled = k.jit_for(f"_shooting.{name}", allocates=True)   # both make their workspace
 
     @compiled
     def map_one(p, f, x0, periods, fs, ist, ya, yb, fa, Q, imp_out, st_out, x_out):
