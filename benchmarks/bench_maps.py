@@ -34,7 +34,9 @@ the load average is printed with each figure):
 
 Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
 [--sections 1,2,3,4,5,6,7] [--workers 2] [--reference-size 100] [--tolerance-size 40]. Sections 2 and 4 run the
-default stop (``contraction``).
+default stop (``contraction``). ``--compare DIR [--compare-map-size 200] [--rounds 2]`` runs only the default map,
+in this tree and in another checkout alternately (fresh processes), and prints the ratio and whether the classes
+and cycles are identical.
 """
 
 from __future__ import annotations
@@ -166,6 +168,49 @@ def big(config, workers, n_big, skip_big):
         line += f"; 1000 x 1000 projected (x{(1000 / n_big) ** 2:.2f} cells): {tb * (1000 / n_big) ** 2 / 60:.1f} min"
     print(line)
     return t200, r200
+
+
+_ONE_MAP = """
+import hashlib, sys, time
+import numpy as np
+from rimd_sim.analysis.dynamics import peterka as pk
+from rimd_sim.settings.config import SimConfig
+n, workers = int(sys.argv[1]), int(sys.argv[2])
+gaps, freqs = np.linspace(0, 3e-3, n), np.linspace(1.82, 9.1, n)
+pk.peterka(SimConfig(), gaps[:2], freqs[:3], workers=1)   # numba's cache, once per process
+t0 = time.perf_counter()
+res = pk.peterka(SimConfig(), gaps, freqs, workers=workers)
+wall = time.perf_counter() - t0
+digest = hashlib.sha256(np.asarray(res.labels, dtype=str).tobytes() + np.asarray(res.cycles).tobytes()).hexdigest()
+print(wall, res.cycles.mean(), digest[:16])
+"""
+
+
+def compare_trees(other: Path, size: int, workers: int, rounds: int) -> None:
+    """The default N x N map in this tree and in ``other`` (a checkout), alternately, each in a fresh process.
+
+    Each process imports its own tree's package (PYTHONPATH, inherited by the pool's workers); the map's classes
+    and cycles are digested, so that a change meant to leave the results alone shows that it did.
+    """
+    trees = {"this": ROOT, "other": other.resolve()}
+    times: dict[str, list[float]] = {"this": [], "other": []}
+    digests: dict[str, set[str]] = {"this": set(), "other": set()}
+    print(f"\n{size} x {size}, the default map, pool of {workers}: this tree ({ROOT}) against {other}, "
+          f"{rounds} round(s), alternately   {load()}")
+    for r in range(rounds):
+        for name in (("other", "this") if r % 2 == 0 else ("this", "other")):
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(trees[name] / "rimd_sim"),
+                                                               os.environ.get("PYTHONPATH", "")]))
+            out = subprocess.run([sys.executable, "-c", _ONE_MAP, str(size), str(workers)], env=env, check=True,
+                                 capture_output=True, text=True).stdout.split()
+            wall, cycles, digest = float(out[0]), float(out[1]), out[2]
+            times[name].append(wall)
+            digests[name].add(digest)
+            print(f"  round {r + 1} {name:5s}: {wall:6.1f} s, mean {cycles:.1f} cycles, classes {digest}   {load()}")
+    med = {name: float(np.median(v)) for name, v in times.items()}
+    same = digests["this"] == digests["other"] and len(digests["this"]) == 1
+    print(f"  median: this {med['this']:.1f} s, other {med['other']:.1f} s: x{med['other'] / med['this']:.2f} "
+          f"(> 1: this tree is faster); classes and cycles {'identical' if same else 'DIFFERENT'}")
 
 
 def reference_agreement(config, workers, size):
@@ -332,7 +377,16 @@ def main() -> None:
                         help="section 6 on an N x N map (default 100; 200 is the full map, about 4x as long)")
     parser.add_argument("--tolerance-size", type=int, default=40,
                         help="section 7 on an N x N map (default 40: three references of 1920 cycles per cell)")
+    parser.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                        help="only the default N x N map (--compare-map-size) in this tree and in the checkout DIR, "
+                             "alternately in fresh processes, and the ratio")
+    parser.add_argument("--compare-map-size", type=int, default=200, help="map size of --compare (default 200)")
+    parser.add_argument("--rounds", type=int, default=2, help="rounds of --compare (default 2)")
     args = parser.parse_args()
+    if args.compare is not None:
+        print(f"RIMD maps benchmark on {os.cpu_count()} core(s), {load()}")
+        compare_trees(args.compare, args.compare_map_size, args.workers or 2, args.rounds)
+        return
     sections = {int(x) for x in args.sections.split(",")}
     config = SimConfig()
     print(f"RIMD maps benchmark on {os.cpu_count()} core(s), {load()}")
