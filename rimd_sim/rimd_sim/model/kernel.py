@@ -844,8 +844,37 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         return best, code
 
     @compiled
-    def detect_event(mode, rec, ya, yb, h, Q, p, fs):
-        """Earliest switch inside the step ``[0, 1]``: returns ``(fraction, event code)`` or ``(2, EV_NONE)``.
+    def onset(ya, h, K, Q, q_ok, p, fs, da, dda, db, ddb):
+        """A free step with no impact open: ``delta`` rising through 0 inside it (``da``, ``db``: its ends).
+
+        Returns ``(fraction, event code, q_ok)``; ``Q`` is computed from the stages ``K`` (unless ``q_ok``) only
+        where the search needs the dense output: ``delta`` ending the step beyond the stop from below it, or
+        peaking inside the step. Most free steps need neither (a map's asks for ``Q`` once a cycle, for its
+        stroboscopic point).
+        """
+        if db > 0.0:
+            if da < 0.0:
+                if not q_ok:
+                    drv.dense_coeffs(K, Q)
+                return drv.find_root(0, FREE, ya, Q, h, 0.0, da, 1.0, db, p, fs), EV_ENTER, True
+            return min(1.0, p[P_EVTOL] / h), EV_ENTER, q_ok   # starts on the surface and moves in
+        if da < 0.0 and dda > 0.0 and ddb < 0.0:
+            xm = hermite_peak(da, db, dda * h, ddb * h)
+            if xm > 0.0:
+                if not q_ok:
+                    drv.dense_coeffs(K, Q)
+                gm = drv.event_value(0, FREE, ya, Q, h, xm, p, fs)
+                if gm > 0.0:
+                    return drv.find_root(0, FREE, ya, Q, h, 0.0, da, xm, gm, p, fs), EV_ENTER, True
+                return 2.0, EV_NONE, True
+        return 2.0, EV_NONE, q_ok
+
+    @compiled
+    def detect_event(mode, rec, ya, yb, h, K, Q, p, fs):
+        """Earliest switch inside the step ``[0, 1]``: ``(fraction, event code, q_ok)``, or ``(2, EV_NONE, q_ok)``.
+
+        The step's dense coefficients ``Q`` are computed from its stages ``K`` when the search needs them (always
+        but in the free steps of :func:`onset`); ``q_ok`` says whether they were.
 
         ``rec`` tells whether an impact is open. In FREE mode it selects what to watch: with no impact open,
         ``delta`` rising through 0 (a state a rounding error beyond the surface counts as on it); with an
@@ -857,6 +886,9 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         code = EV_NONE
         da, dda = phys.penetration(phys.point(ya), p)
         db, ddb = phys.penetration(phys.point(yb), p)
+        if mode == FREE and rec == 0 and not rings:
+            return drv.onset(ya, h, K, Q, False, p, fs, da, dda, db, ddb)
+        drv.dense_coeffs(K, Q)
         if mode == FREE:
             scan = 0
             amp = 0.0
@@ -865,38 +897,27 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             if rec == 0:
                 if rings and scan > 0:
                     if da > 0.0 and dda > 0.0:  # on the surface (rounding) and moving in
-                        return min(1.0, p[P_EVTOL] / h), EV_ENTER
+                        return min(1.0, p[P_EVTOL] / h), EV_ENTER, True
                     # On the surface (rounding) but moving out: not a contact.
-                    return drv.scan_onset(ya, Q, h, p, fs, scan, amp, min(da, 0.0))
-                if db > 0.0:
-                    if da < 0.0:
-                        best = drv.find_root(0, mode, ya, Q, h, 0.0, da, 1.0, db, p, fs)
-                    else:  # starts on the surface and moves in
-                        best = min(1.0, p[P_EVTOL] / h)
-                    code = EV_ENTER
-                elif da < 0.0 and dda > 0.0 and ddb < 0.0:
-                    xm = hermite_peak(da, db, dda * h, ddb * h)
-                    if xm > 0.0:
-                        gm = drv.event_value(0, mode, ya, Q, h, xm, p, fs)
-                        if gm > 0.0:
-                            best = drv.find_root(0, mode, ya, Q, h, 0.0, da, xm, gm, p, fs)
-                            code = EV_ENTER
-            else:
-                # Separated by a vanishing force while still beyond the stop position.
-                if da <= 0.0:  # already back at the surface (rounding): the impact is over
-                    return min(1.0, p[P_EVTOL] / h), EV_CLOSE
-                if rings and scan > 0:
-                    return drv.scan_release(ya, Q, h, p, fs, scan, da, dda)
-                if db <= 0.0:
-                    best = drv.find_root(0, mode, ya, Q, h, 0.0, da, 1.0, db, p, fs)
-                    code = EV_CLOSE
-                fa = law_force(da, dda, p, fs[F_VIMP])
-                fb = law_force(db, ddb, p, fs[F_VIMP])
-                if fa < 0.0 and fb >= 0.0:
-                    x = drv.find_root(1, mode, ya, Q, h, 0.0, fa, 1.0, fb, p, fs)
-                    if x < best:
-                        best = x
-                        code = EV_REENTER
+                    x, c = drv.scan_onset(ya, Q, h, p, fs, scan, amp, min(da, 0.0))
+                    return x, c, True
+                return drv.onset(ya, h, K, Q, True, p, fs, da, dda, db, ddb)
+            # Separated by a vanishing force while still beyond the stop position.
+            if da <= 0.0:  # already back at the surface (rounding): the impact is over
+                return min(1.0, p[P_EVTOL] / h), EV_CLOSE, True
+            if rings and scan > 0:
+                x, c = drv.scan_release(ya, Q, h, p, fs, scan, da, dda)
+                return x, c, True
+            if db <= 0.0:
+                best = drv.find_root(0, mode, ya, Q, h, 0.0, da, 1.0, db, p, fs)
+                code = EV_CLOSE
+            fa = law_force(da, dda, p, fs[F_VIMP])
+            fb = law_force(db, ddb, p, fs[F_VIMP])
+            if fa < 0.0 and fb >= 0.0:
+                x = drv.find_root(1, mode, ya, Q, h, 0.0, fa, 1.0, fb, p, fs)
+                if x < best:
+                    best = x
+                    code = EV_REENTER
         else:
             fa = law_force(da, dda, p, fs[F_VIMP])
             fb = law_force(db, ddb, p, fs[F_VIMP])
@@ -908,7 +929,7 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 if x < best:
                     best = x
                     code = EV_EXIT_CLOSE
-        return best, code
+        return best, code, True
 
     # ---- sampling ------------------------------------------------------------------------------
 
@@ -1172,8 +1193,14 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
         and the model's modes; counts in ``ist[I_IMPOUT]``, ``ist[I_STROUT]``; the caller resets them). Returns
         a status code; on ``ST_IMPACTS_FULL`` / ``ST_STROBE_FULL`` the caller drains the buffers and calls again
         with the same stop.
+
+        The current step's dense coefficients ``Q`` are computed from its stages when something needs them (a
+        sample, a stroboscopic point, an event search, a contact's extremes) and before returning, so that the
+        caller's ``Q`` always holds the current step's on return, as if computed at every step; after a failure
+        status (``ST_STEP_UNDERFLOW``, ``ST_NONFINITE``) they may be those of an earlier step.
         """
         K = np.empty((7, n))
+        q_ok = True   # Q holds the current step's coefficients (the caller's, on entry)
         ynew = np.empty(n)
         hmax = p[P_HMAX]
         n_ch = ch_rate.shape[0]
@@ -1188,8 +1215,15 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 t_next = min(t_next, tr_next[0] / tr_rate)
             # emit_samples only when something falls in the step: a call per step cost a third of a free step.
             if t_next < fs[F_TB] or (strobe and next_strobe(fs, ist) < fs[F_TB]):
+                if not q_ok:
+                    drv.dense_coeffs(K, Q)
+                    q_ok = True
                 drv.emit_samples(fs, ist, p, ya, Q, ch_rate, ch_qty, ch_next, ch_stop, ch_base, ch_out,
                                  tr_rate, tr_next, tr_stop, tr_base, tr_out, st_out, t_stop)
+            if not q_ok and (ist[I_IMPOUT] >= imp_out.shape[0] or fs[F_TB] >= t_stop
+                             or (st_out.shape[0] > 0 and ist[I_STROUT] >= st_out.shape[0])):
+                drv.dense_coeffs(K, Q)   # it may return below: the caller's Q is the current step's
+                q_ok = True
             if st_out.shape[0] > 0 and ist[I_STROUT] >= st_out.shape[0]:
                 return ST_STROBE_FULL
             if fs[F_TB] >= t_stop and tr_next[0] >= tr_stop[0]:
@@ -1207,6 +1241,8 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             t = fs[F_TB]
             fs[F_TA] = t
             if ist[I_PEND] != EV_NONE and not drv.apply_event(fs, ist, p, ya, imp_out):   # most steps: none
+                if not q_ok:
+                    drv.dense_coeffs(K, Q)   # K still holds the last step's stages
                 return ST_ZENO
             if fs[F_MTEND] <= t + 1e-12 * max(1.0, abs(t)):
                 motor_finish_ramp(fs, ist, t)
@@ -1241,14 +1277,13 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 ist[I_NREJ] += 1
                 h *= max(0.2, 0.9 * err ** -0.2)
             ist[I_NSTEP] += 1
-            drv.dense_coeffs(K, Q)
-            x, code = drv.detect_event(mode, ist[I_REC], ya, ynew, h, Q, p, fs)
+            x, code, q_ok = drv.detect_event(mode, ist[I_REC], ya, ynew, h, K, Q, p, fs)
             if code != EV_NONE and x < 1.0:
                 # Recompute the step exactly up to the switch.
                 h_full = h
                 h = x * h
                 drv.rk_step(t, ya, fa, h, mode, p, fs, K, ynew)
-                drv.dense_coeffs(K, Q)
+                q_ok = False
                 fs[F_H] = min(h_full * factor, hmax)
                 at_break = False
             else:
@@ -1264,6 +1299,9 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
                 fs[F_THMAX] = abs(yb[0])
             ist[I_PEND] = code
             if mode == CONTACT:
+                if not q_ok:
+                    drv.dense_coeffs(K, Q)
+                    q_ok = True
                 drv.track_contact_extremes(fs, p, ya, Q, h)
 
     @allocating
@@ -1330,7 +1368,8 @@ def build_driver(physics, name: str, sources=()) -> types.ModuleType:
             yb[i] = ya[i]
         ist[I_NEEDF] = 1
 
-    for fn in (rk_step, dense_coeffs, rhs, event_value, find_root, ring_scan, scan_onset, scan_release, detect_event,
+    for fn in (rk_step, dense_coeffs, rhs, event_value, find_root, ring_scan, scan_onset, scan_release, onset,
+               detect_event,
                emit_samples, open_record, apply_event, force_and_delta, refine_max, track_contact_extremes,
                advance, truncate, resync):
         setattr(ns, getattr(fn, "py_func", fn).__name__, fn)
