@@ -274,3 +274,44 @@ def test_the_sink_offers_the_range_and_carries_requests_both_ways(recording):
             sink.broadcast_playback(report)
             told = client.wait_for(lambda r: [s for s in r.playback if not s.request_id], 10, "a broadcast")
             assert told[0].status == "playing"
+
+
+def test_the_sink_is_not_called_while_it_restarts(recording):
+    """Offering a range restarts the SDK's server (stop, then a new one), on the relay's watcher thread, while the
+    executor's timer broadcasts the time: the SDK refused a call made during the stop ("Already mutably borrowed"),
+    which killed the bridge in a CI run. Hypothesis: broadcasts from another thread through restarts raise nothing,
+    and reach the server again after them."""
+    import threading
+
+    from rimd_sim.viz.foxglove_sink import FoxgloveSink
+
+    control, _controls, _player, _clock = replay(recording, start_paused=True)
+    control.poll()
+    start, end = control.time_range
+    failures: list[BaseException] = []
+    sent = [0]
+    done = threading.Event()
+
+    def broadcast() -> None:
+        while not done.is_set():
+            try:
+                sink.broadcast_time(start)
+                sink.status("busy", status_id="test")
+                sent[0] += 1
+            except BaseException as exc:  # noqa: BLE001 - the test reports it
+                failures.append(exc)
+                return
+
+    with FoxgloveSink(port=0, playback=control) as sink:
+        thread = threading.Thread(target=broadcast, daemon=True)
+        thread.start()
+        try:
+            for k in range(6):
+                assert sink.set_playback_range(start, end - k)   # a new range each time: a restart each time
+        finally:
+            done.set()
+            thread.join(timeout=10)
+        before = sent[0]
+        sink.broadcast_time(end)
+    assert not failures, f"a call during a restart raised: {failures[0]!r}"
+    assert not thread.is_alive() and before > 0

@@ -57,6 +57,8 @@ DEFAULT_PORT = 8765
 SCHEMA_ENCODING = "ros2msg"
 #: How long a restarted server (a new playback range) waits for the stopped one to release the port (s).
 RESTART_PATIENCE_S = 2.0
+#: How long a call to the server waits for a restart to end before it is dropped (s; a restart takes milliseconds).
+SERVER_WAIT_S = 0.5
 MESSAGE_ENCODING = "cdr"
 #: The kinds of parameter values (ROS 2's parameter types, by name).
 PARAMETER_KINDS = ("bool", "integer", "double", "string", "byte_array", "bool_array", "integer_array",
@@ -230,6 +232,9 @@ class FoxgloveSink:
         self._context = fg.Context()
         self._channels: dict[str, Any] = {}
         self._lock = threading.Lock()
+        # The SDK refuses any call on its server while another thread stops it ("Already mutably borrowed"): the
+        # server's calls and its stop (a restart, the close) take turns under this lock.
+        self._server_lock = threading.Lock()
         self._services = list(services)
         self._service_backend = service_backend
         self._parameter_backend = parameter_backend
@@ -298,21 +303,35 @@ class FoxgloveSink:
         if channel is not None:
             channel.log(data, log_time=log_time_ns)
 
+    def _on_server(self, call: Callable[[Any], Any]) -> None:
+        """``call(server)`` unless the sink is closed, never while the server stops.
+
+        Waits at most ``SERVER_WAIT_S`` for a restart to end, then drops the call: a restart drops the connected
+        clients, so nobody would receive it (and a listener's callback waiting here must not hold the stop up).
+        """
+        if not self._server_lock.acquire(timeout=SERVER_WAIT_S):
+            return
+        try:
+            if not self._closed:
+                call(self._server)
+        finally:
+            self._server_lock.release()
+
     def broadcast_time(self, time_ns: int) -> None:
         """Tell every client the rig's current time (ns)."""
-        if not self._closed:
-            self._server.broadcast_time(int(time_ns))
+        self._on_server(lambda server: server.broadcast_time(int(time_ns)))
 
     def publish_parameters(self, entries: Sequence[ParameterEntry]) -> None:
         """Send new values to the clients subscribed to them (the SDK filters by subscription)."""
-        if not self._closed and entries:
-            self._server.publish_parameter_values([self._parameter(e) for e in entries])
+        if entries:
+            values = [self._parameter(e) for e in entries]
+            self._on_server(lambda server: server.publish_parameter_values(values))
 
     def status(self, message: str, *, error: bool = False, status_id: str | None = None) -> None:
         """Show ``message`` in the clients (Foxglove's problems and notifications)."""
-        if not self._closed:
-            level = self._fg.StatusLevel
-            self._server.publish_status(message, level.Error if error else level.Info, status_id)
+        level = self._fg.StatusLevel
+        self._on_server(lambda server: server.publish_status(message, level.Error if error else level.Info,
+                                                             status_id))
 
     # -- playback control --------------------------------------------------------------------------------------
     def set_playback_range(self, start_ns: int, end_ns: int) -> bool:
@@ -328,15 +347,17 @@ class FoxgloveSink:
         with self._lock:
             if self._closed or self.playback_range == (start_ns, end_ns):
                 return False
-            self._server.stop()   # it lets the port go a few ms later: the new server waits for it
-            self.playback_range = (int(start_ns), int(end_ns))
-            self._server = self._start(self.port, patience=RESTART_PATIENCE_S)
+            with self._server_lock:
+                self._server.stop()   # it lets the port go a few ms later: the new server waits for it
+                self.playback_range = (int(start_ns), int(end_ns))
+                self._server = self._start(self.port, patience=RESTART_PATIENCE_S)
             return True
 
     def broadcast_playback(self, report: PlaybackReport) -> None:
         """Tell every client the playback state (a change not asked by a request)."""
-        if not self._closed and self.playback_range is not None:
-            self._server.broadcast_playback_state(playback_state(report))
+        if self.playback_range is not None:
+            state = playback_state(report)
+            self._on_server(lambda server: server.broadcast_playback_state(state))
 
     def handle_playback(self, request: Any) -> Any:
         """The SDK's PlaybackControlRequest carried out: its errors shown as error statuses; the state answered."""
@@ -435,7 +456,8 @@ class FoxgloveSink:
             channels, self._channels = list(self._channels.values()), {}
         for channel in channels:
             channel.close()
-        self._server.stop()
+        with self._server_lock:
+            self._server.stop()
 
     def __enter__(self) -> FoxgloveSink:
         """The sink itself."""
