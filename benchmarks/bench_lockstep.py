@@ -22,13 +22,24 @@ external consumer, what it counted too (messages per topic, from sample 0, holes
 The external consumer's hold-back of the rig: the fraction of wall time the rig waits on it, taken from the speeds
 of the same layout with and without it in this one run, 1 - speed(with) / speed(without). It includes the CPU the
 consumer takes from the rig on this 2-core machine, not only the waits for its reports (the simulator's diagnostics
-say who holds the run only once a hold lasts a second).
+say who holds the run only once a hold lasts a second). So the composed lockstep rig runs a third time with the
+same process subscribed only (not a lockstep consumer: the rig does not wait for it; what it got is counted as
+well): the speed lost from alone to subscribed is what its data costs (the DDS writes to another process, its
+CPU), the speed lost from subscribed to reporting is what the waits for its reports cost.
+
+``--compare DIR [--rounds 2]`` instead: this tree's composed rig in lockstep with the external consumer against
+DIR's lockstep rig (another checkout, e.g. a worktree of the commit before the composed rig, whose lockstep rig
+is the recorder and the bridge as processes), each with its own defaults, alternately (ABBA) in one run: the
+ratio of goal 2 (at least twice). DIR's rig is started by its own benchmark's ``run`` with its package first on
+PYTHONPATH (its numba cache warmed first: a cold one compiles during the warm-up). With ``--same-rig`` DIR's rig
+has the external consumer too: a before/after of a change (DIR a checkout from the composed rig on).
 
 Goals (set when lockstep was added; docs/benchmarks.md, Lockstep): lockstep >= 20x real time on this 2-core
 machine, and within 15 % of the free-running rate when the consumers keep up (the ratio is taken in this one run).
 Goal of the external consumer: hold-back <= 5 % in the composed rig.
 Run on an otherwise idle machine:
     python benchmarks/bench_lockstep.py [--seconds 30] [--warmup 8] [--json out.json] [--consumer batched]
+                                        [--compare DIR [--rounds 2] [--same-rig]]
 """
 
 from __future__ import annotations
@@ -47,6 +58,7 @@ CHANNELS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/accel
 TICKS = os.sysconf("SC_CLK_TCK")
 HERE = Path(__file__).resolve().parent
 CONSUMER = "bench_consumer"   # the external consumer's lockstep name
+READER = "reader"   # the same process subscribed only: not a lockstep consumer, the rig does not wait for it
 GOAL_HOLD_BACK = 0.05
 
 
@@ -78,8 +90,13 @@ def loss(recording: Path) -> dict[str, str]:
 
 
 def start_consumer(run_dir: Path, env: dict, how: str) -> subprocess.Popen:
-    """The external consumer (benchmarks/_consumer.py), lockstep as ``bench_consumer``, in the rig's domain."""
-    cmd = [sys.executable, str(HERE / "_consumer.py"), "--out", str(run_dir / "consumer.json"), "--lockstep", CONSUMER]
+    """The external process (benchmarks/_consumer.py) in the rig's domain.
+
+    Lockstep as ``bench_consumer``, or (``how`` ``reader``) a plain subscriber that the rig does not wait for.
+    """
+    cmd = [sys.executable, str(HERE / "_consumer.py"), "--out", str(run_dir / "consumer.json")]
+    if how != READER:
+        cmd += ["--lockstep", CONSUMER]
     if how == "batched":
         cmd.append("--batched")
     log = (run_dir / "consumer.log").open("wb")
@@ -127,7 +144,8 @@ def run(mode: str, seconds: float, warmup: float, base: Path, window: float | No
         plan = plan_rig(None, output_dir=run_dir / "recording", lockstep=mode == "lockstep", real_time_factor=0.0,
                         parameters={"rimd_rerun": {"sink": "save", "save_path": str(run_dir / "rig.rrd")},
                                     "rimd_simulator": sim},
-                        run_dir=run_dir, separate=separate, consumers=[CONSUMER] if consumer else [])
+                        run_dir=run_dir, separate=separate,
+                        consumers=[CONSUMER] if consumer and consumer != READER else [])
         env = ros_environment(lease.domain_id, run_dir / "ros_log")
         rig = Rig(plan, env=env, log_dir=run_dir / "logs")
         if consumer:   # the rig waits for it from its first block
@@ -169,6 +187,71 @@ def run(mode: str, seconds: float, warmup: float, base: Path, window: float | No
     return result
 
 
+#: Another checkout's lockstep rig with its own defaults, by its own benchmark's ``run`` (whose first four arguments
+#: have not changed since lockstep came): argv = its benchmarks directory, seconds, warm-up, the external consumer
+#: or "-"; one JSON line out.
+_OTHER_RUN = """
+import json, sys, tempfile
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+import bench_lockstep
+extra = {} if sys.argv[4] == "-" else {"consumer": sys.argv[4]}   # trees since the composed rig take it
+with tempfile.TemporaryDirectory(prefix="bench_lockstep_other_") as tmp:
+    r = bench_lockstep.run("lockstep", float(sys.argv[2]), float(sys.argv[3]), Path(tmp), **extra)
+print(json.dumps({k: r.get(k) for k in ("speed", "cpu_percent", "loss", "layout", "external_loss")}))
+"""
+
+
+def run_other(tree: Path, seconds: float, warmup: float, consumer: str | None = None) -> dict:
+    """``tree``'s lockstep rig (its package first on PYTHONPATH, its nodes started by its own bring-up)."""
+    from bench_latency import environment
+
+    out = subprocess.run([sys.executable, "-c", _OTHER_RUN, str(tree / "benchmarks"), str(seconds), str(warmup),
+                          consumer or "-"],
+                         env=environment(tree), capture_output=True, text=True, timeout=600 + seconds + warmup)
+    if out.returncode:
+        raise RuntimeError(f"{tree}'s lockstep rig failed (exit {out.returncode}):\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def compare(args: argparse.Namespace) -> dict:
+    """This tree's composed rig in lockstep with the external consumer against ``args.compare``'s lockstep rig.
+
+    DIR's rig with its defaults and no external consumer; alternately (ABBA), ``args.rounds`` each: goal 2's ratio.
+    """
+    import statistics
+
+    other = args.compare.resolve()
+    speeds: dict[str, list[float]] = {"this": [], "other": []}
+    results: dict[str, list[dict]] = {"this": [], "other": []}
+    with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
+        for round_ in range(args.rounds):
+            for name in (("this", "other") if round_ % 2 == 0 else ("other", "this")):
+                load = " ".join(f"{x:.2f}" for x in os.getloadavg())
+                if name == "this":
+                    r = run("lockstep", args.seconds, args.warmup, Path(tmp), args.window, False, args.consumer)
+                else:
+                    r = run_other(other, args.seconds, args.warmup, args.consumer if args.same_rig else None)
+                lost = [f"recording {t}" for t, v in r["loss"].items() if v != "complete from sample 0"]
+                lost += [f"external {t}" for t, v in (r.get("external_loss") or {}).items()
+                         if not v.startswith("all from sample 0")]
+                speeds[name].append(r["speed"])
+                results[name].append(r)
+                cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
+                print(f"round {round_ + 1}, {name:>5}: {r['speed']:5.1f}x real time; CPU {cpu}; "
+                      + (f"LOSS in {lost}" if lost else "nothing lost") + f" (load at its start {load})", flush=True)
+    this, base = statistics.median(speeds["this"]), statistics.median(speeds["other"])
+    ratios = [t / o for t, o in zip(speeds["this"], speeds["other"], strict=True)]
+    external = "an external reader (not lockstep)" if args.consumer == READER else CONSUMER
+    what = f"with {external} too" if args.same_rig else "no external consumer"
+    print(f"this tree, composed lockstep with {external}: median {this:.1f}x; {other}'s lockstep rig (its defaults, "
+          f"{what}): median {base:.1f}x; ratio median {statistics.median(ratios):.2f} (per round "
+          f"{', '.join(f'{x:.2f}' for x in ratios)})")
+    if not args.same_rig:
+        print(f"goal at least twice that lockstep rig: {'met' if statistics.median(ratios) >= 2 else 'NOT met'}")
+    return {"speeds": speeds, "ratios": ratios, "results": results}
+
+
 def recorded_blocks(recording: Path) -> dict[str, int]:
     """Messages per block topic in the recording."""
     from rimd_sim.io.reader import open_recording
@@ -186,10 +269,27 @@ def main() -> int:
                         help="lockstep.window of the lockstep rig (s of simulation time; default: the rig's)")
     parser.add_argument("--compare-windows", type=float, nargs="+", default=None, metavar="W",
                         help="instead: only lockstep rigs, one per window, one after the other (their speeds)")
-    parser.add_argument("--consumer", choices=("per-message", "batched"), default="per-message",
-                        help="how the external consumer takes and reports (default: done() after each message)")
+    parser.add_argument("--consumer", choices=("per-message", "batched", READER), default="per-message",
+                        help="how the external consumer takes and reports (default: done() after each message; "
+                             "reader: subscribed only, not a lockstep consumer)")
+    parser.add_argument("--compare", type=Path, default=None, metavar="DIR",
+                        help="instead: the composed rig with the external consumer against DIR's lockstep rig "
+                             "(another checkout, its defaults), alternately")
+    parser.add_argument("--rounds", type=int, default=2, help="with --compare: runs of each (default 2)")
+    parser.add_argument("--same-rig", action="store_true",
+                        help="with --compare: DIR's rig with the external consumer too (a before/after of a change; "
+                             "DIR from the composed rig on)")
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    if args.compare is not None:
+        from bench_latency import check_tree
+
+        check_tree(args.compare)
+        result = compare(args)
+        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+        if args.json:
+            args.json.write_text(json.dumps(result, indent=1))
+        return 0
     if args.compare_windows:
         with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
             for w in args.compare_windows:
@@ -205,20 +305,22 @@ def main() -> int:
         # side by side; then each in lockstep with the external consumer too.
         runs = [(separate, mode, None) for separate in (False, True) for mode in ("lockstep", "free")]
         runs += [(separate, "lockstep", args.consumer) for separate in (False, True)]
+        runs.append((False, "lockstep", READER))   # what serving the external process's data costs, no waits
         results = [run(mode, args.seconds, args.warmup, Path(tmp), args.window, separate, consumer)
                    for separate, mode, consumer in runs]
     for r in results:
         cpu = ", ".join(f"{n} {c:.0f} %" for n, c in r["cpu_percent"].items())
         cpu += f"; total {sum(r['cpu_percent'].values()):.0f} %"
-        label = r["mode"] + (f" + {CONSUMER}" if r["consumer"] else "")
+        label = r["mode"] + (" + external reader" if r["consumer"] == READER else
+                             f" + {CONSUMER}" if r["consumer"] else "")
         print(f"{r['layout']:>9} {label:>24}: {r['speed']:6.1f}x real time ({r['simulated_s']:.1f} s simulated in "
               f"{r['wall_s']:.1f} s); CPU {cpu}; exit {r['exit_status']}")
         for topic, verdict in r["loss"].items():
             print(f"{'':>11}{topic}: {verdict}")
         if r["consumer"]:
             ext = r["external"]
-            print(f"{'':>11}{CONSUMER} ({r['consumer']}): exit {ext.get('exit_status')}, "
-                  f"{ext.get('reports', '?')} progress reports")
+            print(f"{'':>11}{'the reader' if r['consumer'] == READER else CONSUMER} ({r['consumer']}): exit "
+                  f"{ext.get('exit_status')}, {ext.get('reports', '?')} progress reports")
             for topic, verdict in r["external_loss"].items():
                 print(f"{'':>13}{topic}: {verdict}")
     by = {(r["layout"], r["mode"], r["consumer"]): r for r in results}
@@ -231,6 +333,13 @@ def main() -> int:
         hold[layout] = 1 - with_it["speed"] / alone["speed"] if alone["speed"] else float("nan")
         print(f"{layout} lockstep with {CONSUMER}: {with_it['speed']:.1f}x against {alone['speed']:.1f}x without: "
               f"hold-back {100 * hold[layout]:.1f} % of wall time")
+    alone, reader, with_it = (by["composed", "lockstep", c] for c in (None, READER, args.consumer))
+    if reader["speed"] and alone["speed"]:
+        print(f"composed lockstep, {alone['speed']:.1f}x alone, {reader['speed']:.1f}x with the external process "
+              f"subscribed only (the rig does not wait for it), {with_it['speed']:.1f}x with it reporting: its data "
+              f"(the DDS writes to it, its CPU) {100 * (1 - reader['speed'] / alone['speed']):.1f} %, its reports "
+              f"(the waits for them) {100 * (1 - with_it['speed'] / reader['speed']):.1f} % of the speed with it "
+              f"subscribed")
     composed_ext, separate_ext = by["composed", "lockstep", args.consumer], by["separate", "lockstep", args.consumer]
     print(f"composed / separate, lockstep with {CONSUMER}: {composed_ext['speed'] / separate_ext['speed']:.3f}")
     print(f"goal lockstep >= 20x real time: {'met' if lock['speed'] >= 20 else 'NOT met'} ({lock['speed']:.1f}x)")
