@@ -200,3 +200,53 @@ def test_the_gil_free_writer_puts_rclpys_bytes_on_the_wire(rclpy_context):
         executor.shutdown()
         writer_node.destroy_node()
         reader_node.destroy_node()
+
+
+@pytest.mark.ros
+def test_many_messages_in_one_gil_free_call_reach_the_reader_in_order_and_a_failed_one_stops_them(rclpy_context):
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from rimd_sim.ros.nodes.outbox import GilFreeWriter, _batch_kernel, write_many
+
+    found = _batch_kernel()
+    assert found is not None, "the compiled loop of write_many could not be made"
+    assert found[0].targetoptions.get("nogil") is True   # the point of it: one GIL release for the whole batch
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    writer_node = Node("outbox_many_writer", context=rclpy_context)
+    reader_node = Node("outbox_many_reader", context=rclpy_context)
+    pubs = [writer_node.create_publisher(String, f"/outbox_many_{k}", qos) for k in range(2)]
+    got: list[tuple[int, bytes]] = []
+    for k in range(2):
+        reader_node.create_subscription(String, f"/outbox_many_{k}", lambda data, k=k: got.append((k, data)), qos,
+                                        raw=True)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(reader_node)
+    try:
+        writers = [gil_free_writer(p) for p in pubs]
+        assert all(isinstance(w, GilFreeWriter) for w in writers)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() == 1 for p in pubs), timeout=10)
+        sent = [(n % 3 % 2, serialize_message(String(data=f"{n}:" + "y" * (n * 13 % 251)))) for n in range(60)]
+        write_many([(writers[k], data) for k, data in sent])
+        assert spin_until(executor, lambda: len(got) >= len(sent), timeout=20), len(got)
+        for k in range(2):   # each topic in order, byte for byte (rclpy's bytes, a reader's padding aside)
+            mine = [d for t, d in sent if t == k]
+            theirs = [d for t, d in got if t == k]
+            assert [g[:len(d)] for g, d in zip(theirs, mine, strict=True)] == mine
+
+        # A write that rcl refuses (no publisher at that address) raises naming the topic; the ones before it are
+        # written, none after it.
+        bad = GilFreeWriter(writers[0]._publish, writers[0]._reset, writers[0].handle, 0, "/nowhere")
+        got.clear()
+        later = [serialize_message(String(data=f"later {n}")) for n in range(3)]
+        with pytest.raises(PublishFailed, match="publishing on /nowhere failed"):
+            write_many([(writers[1], later[0]), (bad, later[1]), (writers[1], later[2])])
+        assert spin_until(executor, lambda: len(got) >= 1, timeout=20)
+        spin_until(executor, lambda: False, timeout=0.2)   # nothing more may come
+        assert [(t, d[:len(later[0])]) for t, d in got] == [(1, later[0])]
+    finally:
+        executor.shutdown()
+        writer_node.destroy_node()
+        reader_node.destroy_node()

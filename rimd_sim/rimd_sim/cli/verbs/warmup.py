@@ -6,8 +6,8 @@ their first call and keeps the machine code in its cache (``__pycache__`` beside
 rig's simulator before it says ``rig ready``, a test, a sweep. ``rimd warmup`` pays it at set-up time instead
 (``scripts/setup.sh`` runs it after the build); later processes load the compiled code in about a second. It
 runs the rigid and the two-mass model through the simulator (the drivers and the sensors) and one cell of a
-Peterka map for each (the ensembles), and prints how long each took: a few tenths of a second each when the
-cache already held them.
+Peterka map for each (the ensembles), compiles the composed rig's loop of DDS writes, and prints how long each
+took: a few tenths of a second each when the cache already held them.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ def main(args: argparse.Namespace) -> int:
     """Compile (or load from the cache) every compiled function of the simulator and the maps."""
     from rimd_sim.analysis.dynamics.peterka import peterka
     from rimd_sim.instruments.rig_simulator import RigSimulator
+    from rimd_sim.ros.nodes.outbox import compile_batch_writer
     from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
     rigid = SimConfig().with_parameters({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75})
@@ -37,6 +38,7 @@ def main(args: argparse.Namespace) -> int:
                                            workers=1)),
         ("two-mass ensemble", lambda: peterka(two_mass, [0.0], [3.75], transient_cycles=2, measure_cycles=6,
                                               workers=1)),
+        ("the composed rig's DDS batch writer", compile_batch_writer),
     )
     where = os.environ.get("NUMBA_CACHE_DIR") or "__pycache__ beside the sources"
     total = time.perf_counter()
