@@ -28,12 +28,16 @@ the load average is printed with each figure):
    from rest at ``integrator.rtol`` 1e-7 (the default), 1e-8 and 1e-9, pairwise; and the default map and the map
    with ``rest_cycles=1920`` against each (sections 3 and 6 also run ``rest_cycles=1920``: its time against the
    default's, its agreement with the reference).
+8. The start from rest's cap against the agreement (not in the default sections): the 1920-cycle reference on
+   R x R, the map at each of ``--rest-caps`` (default 192,480,640,960,1920) against it with its time, and the
+   200 x 200 map's time at each of ``--rest-caps-big`` (default 192,640).
 5. The single-trajectory core as users meet it: ``rimd sweep --workers 1`` (gap 1 mm, 1.5-9 Hz at 0.05 Hz, 300
    cycles from rest) in real-time factor, and the scipy ``solve_ivp`` event-driven reference
    (tests/harness/reference.py, DOP853, rtol 1e-7 as the core) on a sample of its points; ratio (goal >= 1,000x).
 
 Run: .venv/bin/python benchmarks/bench_maps.py [--steps-size 60] [--big 400] [--skip-big] [--skip-dask]
-[--sections 1,2,3,4,5,6,7] [--workers 2] [--reference-size 100] [--tolerance-size 40]. Sections 2 and 4 run the
+[--sections 1,2,3,4,5,6,7,8] [--workers 2] [--reference-size 100] [--tolerance-size 40] [--rest-caps 192,640]
+[--rest-caps-big 192,640]. Sections 2 and 4 run the
 default stop (``contraction``). ``--compare DIR [--compare-map-size 200] [--rounds 2]`` runs only the default map,
 in this tree and in another checkout alternately (fresh processes), and prints the ratio and whether the classes
 and cycles are identical.
@@ -243,6 +247,27 @@ def reference_agreement(config, workers, size):
           + (", ".join(f"{a} vs {b} at {c}: {n}" for (a, b, c), n in wrong.most_common(8)) or "none"))
 
 
+def rest_caps(config, workers, size, caps, big_caps):
+    """Section 8: the cap of the start from rest against the agreement (size x size) and the 200 x 200 time."""
+    gaps, freqs = grid(size)
+    print(f"\n8. The start from rest's cap (--rest-cycles) against the agreement with 1920 cycles from rest on "
+          f"{size} x {size} and the time of 200 x 200, pool of {workers or os.cpu_count()}, {load()}")
+    t0 = time.perf_counter()
+    ref = pk.rest_classes(config, gaps, freqs, cycles=1920, measure_cycles=72, workers=workers)
+    print(f"  reference: {time.perf_counter() - t0:.1f} s   {load()}")
+    for cap in caps:
+        t, res = timed_map(config, gaps, freqs, rest_cycles=cap, workers=workers)
+        ok = res.primary == ref
+        print(f"  rest cap {cap:5d}: agreement {100 * ok.mean():6.2f} % (target >= 99.5 %), {size} x {size} in "
+              f"{t:.1f} s, mean {res.cycles[0].mean():.1f} cycles from rest, at the cap "
+              f"{100 * (res.cycles[0] > cap).mean():.1f} %   {load()}")
+    gaps, freqs = grid(200)
+    for cap in big_caps:
+        t, res = timed_map(config, gaps, freqs, rest_cycles=cap, workers=workers)
+        print(f"  rest cap {cap:5d}: 200 x 200 in {t:.1f} s (target <= 30 s on 2), mean {res.cycles[0].mean():.1f} "
+              f"cycles from rest   {load()}")
+
+
 def reproducibility(config, workers, size):
     """Section 7: how reproducible the reference itself is, against the integrator's tolerance."""
     gaps, freqs = grid(size)
@@ -377,6 +402,10 @@ def main() -> None:
                         help="section 6 on an N x N map (default 100; 200 is the full map, about 4x as long)")
     parser.add_argument("--tolerance-size", type=int, default=40,
                         help="section 7 on an N x N map (default 40: three references of 1920 cycles per cell)")
+    parser.add_argument("--rest-caps", default="192,480,640,960,1920",
+                        help="section 8: the caps of the start from rest measured on the reference's map")
+    parser.add_argument("--rest-caps-big", default="192,640",
+                        help="section 8: the caps whose 200 x 200 map is timed")
     parser.add_argument("--compare", type=Path, default=None, metavar="DIR",
                         help="only the default N x N map (--compare-map-size) in this tree and in the checkout DIR, "
                              "alternately in fresh processes, and the ratio")
@@ -405,6 +434,9 @@ def main() -> None:
         reference_agreement(config, args.workers, args.reference_size)
     if 7 in sections:
         reproducibility(config, args.workers, args.tolerance_size)
+    if 8 in sections:
+        rest_caps(config, args.workers, args.reference_size, [int(x) for x in args.rest_caps.split(",")],
+                  [int(x) for x in args.rest_caps_big.split(",") if x])
 
 
 if __name__ == "__main__":
