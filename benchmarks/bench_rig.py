@@ -200,6 +200,9 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path
                 print(f"bench_rig: NOT FOUND: {', '.join(missing)}", file=sys.stderr)
             time.sleep(args.warmup)
             series = soak.sample_run(run.rig, procs, args.seconds, args.period)
+            if soak.RERUN_SERVER not in procs:   # config/rimd.yaml's sink serve_web starts one, when the bridge opens
+                print(f"bench_rig: NOT FOUND: {soak.RERUN_SERVER} (the whole rig's figure is without it)",
+                      file=sys.stderr)
             wall = max(s.t[-1] for s in series.values() if s.t)
             status = soak.stop_rig(run.rig, {n: p for n, p in procs.items() if n != EXTERNAL})
         finally:

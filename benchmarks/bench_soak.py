@@ -179,7 +179,12 @@ class Series:
 
 
 def sample_run(rig: subprocess.Popen, procs: dict[str, int], seconds: float, period: float) -> dict[str, Series]:
-    """Sample every process each ``period`` s for ``seconds`` (or until Ctrl-C or the rig ends)."""
+    """Sample every process each ``period`` s for ``seconds`` (or until Ctrl-C or the rig ends).
+
+    The rig's processes are looked for again at every sample: one started after ``procs`` was taken (the composed
+    rig opens its Rerun sink, and so starts the Rerun server, after it runs) is sampled from the first sample that
+    finds it, and added to ``procs``.
+    """
     series = {name: Series(pid) for name, pid in procs.items()}
     t0 = time.monotonic()
     self_cpu0 = _self_cpu()
@@ -187,6 +192,10 @@ def sample_run(rig: subprocess.Popen, procs: dict[str, int], seconds: float, per
     try:
         while True:
             now = time.monotonic() - t0
+            for name, pid in rig_processes(rig.pid).items():
+                if name not in series and pid not in procs.values():
+                    procs[name] = pid
+                    series[name] = Series(pid)
             for s in series.values():
                 s.sample(now)
             if now >= seconds or rig.poll() is not None:
