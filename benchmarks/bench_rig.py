@@ -15,7 +15,10 @@ Printed for each layout (and written as JSON with --json):
     the ``rimd rig`` parent), from /proc, not from the nodes' own reports: CPU in % of one core (utime + stime
     over the measured wall time; the worst --period s window), resident memory at the start and end; the whole
     rig (every process the rig runs: the nodes, the Rerun server that holds the web viewer's data, the ``rimd
-    rig`` parent); the external subscriber's CPU apart (it is not the rig);
+    rig`` parent); the external subscriber's CPU apart (it is not the rig); and the composed rig's CPU per thread
+    (/proc/PID/task: its main thread, which runs the executor and with it the recorder's and the bridge's takes
+    and the Rerun mapping; the threads the rig names, rimd_sim.runtime.threads.OS_NAMES; Fast DDS's; the Rerun
+    SDK's; the others);
   * the traffic, from the recording: messages and bytes (serialized payload) per second per topic and in all;
   * loss: the recorder's count (every block topic from sample 0 with ``first_index``, impact events by index,
     motor states one per block: bench_soak's checks) and the external subscriber's (each block topic contiguous
@@ -168,6 +171,9 @@ def report(result: dict) -> None:
     b = procs.get(soak.BENCH, {})
     print(f"  ({soak.BENCH}: {soak._f(b.get('cpu_percent'))} %; memory growth: least-squares slope of RSS "
           f"{'after the first minute' if run['seconds'] >= 180 else 'over the second half (a short run: noise)'})")
+    if result.get("threads"):
+        print(f"  the {soak.COMPOSED}'s threads, % of a core: "
+              + ", ".join(f"{name} {cpu:.1f}" for name, cpu in result["threads"].items()))
     print(f"\ntraffic, from the recording ({flow['seconds_of_data']:.1f} s of data): "
           f"{flow['messages_per_s']:.1f} messages/s, {flow['bytes_per_s'] / 1e6:.3f} MB/s serialized")
     for topic, t in flow["topics"].items():
@@ -199,7 +205,12 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path
             if missing:
                 print(f"bench_rig: NOT FOUND: {', '.join(missing)}", file=sys.stderr)
             time.sleep(args.warmup)
+            composed = procs.get(soak.COMPOSED)
+            threads_before = soak.thread_ticks(composed) if composed else {}
+            t_threads = time.monotonic()
             series = soak.sample_run(run.rig, procs, args.seconds, args.period)
+            threads = (soak.thread_cpu(composed, threads_before, soak.thread_ticks(composed),
+                                       time.monotonic() - t_threads) if composed else {})
             if soak.RERUN_SERVER not in procs:   # config/rimd.yaml's sink serve_web starts one, when the bridge opens
                 print(f"bench_rig: NOT FOUND: {soak.RERUN_SERVER} (the whole rig's figure is without it)",
                       file=sys.stderr)
@@ -212,6 +223,7 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path
                                 "domain_id": run.domain_id, "rig_exit_status": status,
                                 "from_sample_0": from_sample_0, "tmp": str(tmp)}}
         result["processes"] = {name: soak.process_figures(s) for name, s in series.items()}
+        result["threads"] = threads
         result["logs"] = soak.log_reports((tmp / "rig.log").read_text(errors="replace"))
         result["external"] = counts
         try:

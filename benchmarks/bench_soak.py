@@ -111,6 +111,50 @@ def read_stat(pid: int) -> tuple[int, int] | None:
     return int(fields[1]), int(fields[11]) + int(fields[12])
 
 
+def thread_ticks(pid: int) -> dict[int, tuple[str, int]]:
+    """``{tid: (kernel name, utime + stime in clock ticks)}`` of every thread of a process (empty if it is gone)."""
+    out = {}
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            text = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+        except OSError:
+            continue   # the thread ended meanwhile
+        fields = text[text.rindex(")") + 2:].split()
+        out[int(tid)] = (text[text.index("(") + 1:text.rindex(")")], int(fields[11]) + int(fields[12]))
+    return out
+
+
+#: How the per-thread CPU of a rig process is grouped: the rig's own threads by their name
+#: (rimd_sim.runtime.threads.OS_NAMES), the libraries' by their prefixes.
+THREAD_GROUPS = (("Fast DDS", ("dds.",)), ("Rerun SDK", ("ChunkBatcher", "RecordingStream", "message_proxy",
+                                                         "tokio-", "jemalloc", "re_")))
+
+
+def thread_cpu(pid: int, before: dict[int, tuple[str, int]], after: dict[int, tuple[str, int]],
+               seconds: float) -> dict[str, float]:
+    """CPU per thread group of process ``pid`` between two :func:`thread_ticks`, in % of one core.
+
+    The main thread is ``main``; a thread named by the rig (``rimd-*``) is its own group; the libraries' threads
+    are grouped (:data:`THREAD_GROUPS`); the rest (unnamed Python threads, ROS's) is ``other``. A thread that
+    ended between the two readings is missing from both sums (its CPU is not counted).
+    """
+    groups: dict[str, float] = {}
+    for tid, (name, ticks) in after.items():
+        used = ticks - before.get(tid, (name, 0))[1]
+        if tid == pid:
+            group = "main"
+        elif name.startswith("rimd-"):
+            group = name
+        else:
+            group = next((g for g, prefixes in THREAD_GROUPS if name.startswith(prefixes)), "other")
+        groups[group] = groups.get(group, 0.0) + 100.0 * used / CLK_TCK / seconds
+    return dict(sorted(groups.items(), key=lambda kv: -kv[1]))
+
+
 def read_rss_kb(pid: int) -> int | None:
     """VmRSS of a process in kB (KiB), None if it is gone."""
     try:

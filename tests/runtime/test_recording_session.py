@@ -76,6 +76,11 @@ class FakeFile:
             self._fd = None
 
 
+def os_name() -> str:
+    """The calling thread's name as the kernel has it."""
+    return Path(f"/proc/self/task/{threading.get_native_id()}/comm").read_text().rstrip("\n")
+
+
 def block(index: int, n: int = 100) -> bytes:
     # Samples that compress poorly, so that the disk fills after a known, modest number of messages.
     return serialize_message(SampleBlock(first_index=index * n, sample_rate=2000.0, unit="m",
@@ -166,7 +171,9 @@ def test_the_writer_thread_runs_calls_after_the_messages_before_them(tmp_path):
     for i in range(20):
         s.put(TOPIC, block(i), 10**18 + i, stamp=i)
     assert s.run_on_writer(lambda: s.bag.written[TOPIC], timeout=10) == 20
-    assert threading.current_thread().name != "rimd_recorder_writer"
+    # The writer is a thread of its own, named for Python and for the kernel (what `top -H` shows).
+    assert s.run_on_writer(lambda: (threading.current_thread().name, os_name()), timeout=10) == ("rimd-recorder",) * 2
+    assert threading.current_thread().name != "rimd-recorder"
     info = s.split()
     assert info is not None and info.message_count == 20 and info.finished
     s.close(timeout=10)

@@ -48,6 +48,7 @@ from rimd_sim.errors import CommandError
 from rimd_sim.io.bag import BagWriter, FileInfo, WriteFailure
 from rimd_sim.io.cdr import BLOCK_TYPES, block_span, cut_block, read_block, samples_before
 from rimd_sim.io.msgdefs import MessageDefinitionError
+from rimd_sim.runtime.threads import named_thread
 from rimd_sim.settings.recording import LOSS_METADATA, STOP_METADATA
 
 __all__ = ["LOSS_METADATA", "STOP_METADATA", "LossCounter", "RecordingSession", "StopRefused", "TopicLoss"]
@@ -272,7 +273,7 @@ class RecordingSession:
     # -- the writer -------------------------------------------------------------------------------------------
     def start(self) -> None:
         """Start the writer thread."""
-        self._thread = threading.Thread(target=self._loop, name="rimd_recorder_writer", daemon=True)
+        self._thread = named_thread(self._loop, "rimd-recorder")
         self._thread.start()
 
     def close(self, timeout: float = 60.0) -> None:

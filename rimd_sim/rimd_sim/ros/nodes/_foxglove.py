@@ -48,6 +48,7 @@ from std_srvs.srv import Trigger
 from rimd_msgs.srv import GetReplayState, Seek, SetRate
 from rimd_sim.runtime.playback_control import PlaybackControl, ReplayUnavailable
 from rimd_sim.runtime.replay import PlayerState
+from rimd_sim.runtime.threads import named_thread
 from rimd_sim.viz.foxglove_sink import (
     ForwardedService,
     FoxgloveError,
@@ -340,7 +341,7 @@ class FoxgloveRelay:
         self.discover()
         self._watcher = None
         if self.playback is not None:
-            self._watcher = threading.Thread(target=self._watch_playback, name="foxglove-playback", daemon=True)
+            self._watcher = named_thread(self._watch_playback, "rimd-foxglove")
             self._watcher.start()
 
     @property

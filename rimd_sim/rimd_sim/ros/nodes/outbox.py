@@ -42,6 +42,7 @@ from queue import SimpleQueue
 from typing import Any
 
 from rimd_sim.errors import RimdError
+from rimd_sim.runtime.threads import named_thread
 
 __all__ = ["GilFreeWriter", "Outbox", "PublishFailed", "compile_batch_writer", "gil_free_writer", "write_many"]
 
@@ -292,7 +293,7 @@ class Outbox:
                 write(data)
             return
         if self._thread is None:
-            self._thread = threading.Thread(target=self._loop, name=self._name, daemon=True)
+            self._thread = named_thread(self._loop, self._name)
             self._thread.start()
         self._room.acquire()   # at most max_waiting batches wait: a rig faster than its writes slows to them
         with self._lock:

@@ -43,6 +43,7 @@ from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.runtime.pacing import Hold, Wait
 from rimd_sim.runtime.replay import Finished, Paused, Player, ReplaySettings
+from rimd_sim.runtime.threads import named_thread
 from rimd_sim.settings.params import build, parameters
 
 __all__ = ["PARAMETERS", "ReplayError", "ReplayNode", "main"]
@@ -182,7 +183,7 @@ class ReplayNode(RimdNode):
                                    ("play_next", PlayNext, self._on_play_next), ("burst", Burst, self._on_burst),
                                    ("get_state", GetReplayState, self._on_get_state)):
             self.create_service(srv, f"~/{name}", handler)
-        self._thread = threading.Thread(target=self._run, name="rimd_replay", daemon=True)
+        self._thread = named_thread(self._run, "rimd-replay")
         window = (f" from {p.start_offset:g} s" if p.start_offset else "") + (
             f" for {p.playback_duration:g} s" if p.playback_duration else "")
         log.info(f"replaying {len(self._pubs)} topics of {p.file} ({self._recording.message_count} messages){window} "

@@ -40,6 +40,7 @@ from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.ros.nodes.feed import InProcessFeed
 from rimd_sim.ros.nodes.outbox import Outbox
 from rimd_sim.runtime.simulator import Answer, Qos, SimulatorRuntime, load_settings, outputs
+from rimd_sim.runtime.threads import named_thread
 from rimd_sim.settings.config import NODE_PARAMETERS, PARAMETERS
 
 __all__ = ["SimulatorNode", "main"]
@@ -128,7 +129,7 @@ class SimulatorNode(RimdNode):
         self.create_service(InjectFault, "inject_fault", self._on_inject_fault)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._publish_diagnostics)
-        self._thread = threading.Thread(target=self._run, name="rimd-pacing", daemon=True)
+        self._thread = named_thread(self._run, "rimd-pacing")
         self.get_logger().info(self._rt.describe())
 
     def _feeding(self, feed: InProcessFeed, latched: set[str]) -> Callable[[str, bytes], None]:
