@@ -31,7 +31,7 @@ from rimd_sim.model.rig_model import (
     StroboPoint,
     as_time,
     model_for,
-    samples_before,
+    samples_before_ratio,
 )
 from rimd_sim.settings.capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig
 from rimd_sim.settings.config import CHANNEL_NAMES, SimConfig
@@ -293,7 +293,7 @@ class RigSimulator:
         if not bounds or bounds[0] < t_start or any(b2 <= b1 for b1, b2 in zip(bounds, bounds[1:], strict=False)):
             raise CommandError("block boundaries must be increasing and not in the past")
         parts: list[ModelOutput] = []
-        motor: dict[Fraction, MotorState] = {}
+        motor: list[MotorState | None] = [None] * len(bounds)   # per boundary
         applied: list[AppliedCommand] = []
         extra: list[Impact] = []
 
@@ -304,9 +304,9 @@ class RigSimulator:
             for stop in (*steps, t):
                 start = self.time
                 parts.append(self._model.advance(stop))
-                for b in bounds:
-                    if start < b <= stop and b not in motor:
-                        motor[b] = self._model.motor_state(float(b))
+                for j, b in enumerate(bounds):
+                    if motor[j] is None and start < b <= stop:
+                        motor[j] = self._model.motor_state(float(b))
 
         while self._queue and self._queue[0][0] < bounds[-1]:
             when, _, kind, arg = heapq.heappop(self._queue)
@@ -319,10 +319,12 @@ class RigSimulator:
             extra.extend(done)
             applied.append(AppliedCommand(when, kind, detail))
         run_to(bounds[-1])
-        for b in bounds:  # a boundary equal to the start of the pass
-            motor.setdefault(b, self._model.motor_state(float(b)))
+        for j, b in enumerate(bounds):  # a boundary equal to the start of the pass
+            if motor[j] is None:
+                motor[j] = self._model.motor_state(float(b))
 
         rates, truth_rate = self._exact_rates()
+        ratios = [b.as_integer_ratio() for b in bounds]
         readings = {}
         for name in CHANNEL_NAMES:
             first = parts[0].channels[name][0]
@@ -331,7 +333,7 @@ class RigSimulator:
             x, clipped = self._instruments[name].measure_mask(self._faults.pre(name, first, raw))
             x, clipped = self._faults.post(name, first, x, clipped)
             reading = [((lo, hi), x[lo:hi], int(np.count_nonzero(clipped[lo:hi])) if clipped is not None else 0)
-                       for lo, hi in _split_index(first, raw.size, [samples_before(b, rate) for b in bounds])]
+                       for lo, hi in _split_index(first, raw.size, _cuts(ratios, rate))]
             readings[name] = (first, rate, reading)
         captures: list[CaptureRecord] = []
         if self._capture is not None:
@@ -351,7 +353,7 @@ class RigSimulator:
         if parts[0].truth is not None:
             truth_all = (parts[0].truth[0], np.concatenate([_truth(p)[1] for p in parts], axis=1))
             truth_cuts = _split_index(truth_all[0], truth_all[1].shape[1],
-                                      [samples_before(b, truth_rate) for b in bounds])
+                                      _cuts(ratios, truth_rate))
         impacts = sorted([i for p in parts for i in p.impacts] + extra, key=lambda i: i.index)
         strobe = [s for p in parts for s in p.strobe]
         blocks = []
@@ -372,7 +374,7 @@ class RigSimulator:
                 prev, b, channels, truth,
                 [i for i in impacts if (fp <= i.t_end or j == 0) and i.t_end < fb],
                 [s for s in strobe if fp <= s.t < fb],
-                motor[b],
+                motor[j],
                 [c for c in applied if prev <= c.time < b],
                 deliveries,
                 self._faults.events(prev, b),
@@ -388,6 +390,12 @@ def _truth(part: ModelOutput) -> tuple[int, np.ndarray]:
     """The truth of an advance of a model that gives it (every advance does when the first does)."""
     assert part.truth is not None
     return part.truth
+
+
+def _cuts(bounds: list[tuple[int, int]], rate: Fraction) -> list[int]:
+    """``samples_before(b, rate)`` of each boundary ``b``, given as its integer ratio."""
+    rate_num, rate_den = rate.as_integer_ratio()
+    return [samples_before_ratio(num, den, rate_num, rate_den) for num, den in bounds]
 
 
 def _split_index(first: int, n: int, cuts: list[int]) -> list[tuple[int, int]]:

@@ -34,7 +34,7 @@ from rimd_sim.settings.config import CHANNEL_NAMES, STRUCTURE_MODELS, SimConfig
 
 __all__ = [
     "MODELS", "ChatteringError", "Impact", "ModelOutput", "MotorState", "PhysicsModel", "RigModel", "StroboPoint",
-    "as_time", "model_for", "samples_before",
+    "as_time", "model_for", "samples_before", "samples_before_ratio",
 ]
 
 #: Channel name -> quantity computed by the kernel.
@@ -139,10 +139,19 @@ class ModelOutput:
 
 def samples_before(t: Fraction, rate: Fraction) -> int:
     """Number of samples ``n >= 0`` with ``n / rate < t`` (exact rational arithmetic)."""
-    num = t.numerator * rate.numerator
+    return samples_before_ratio(*t.as_integer_ratio(), *rate.as_integer_ratio())
+
+
+def samples_before_ratio(t_num: int, t_den: int, rate_num: int, rate_den: int) -> int:
+    """:func:`samples_before` of ``t = t_num / t_den`` and ``rate = rate_num / rate_den`` (positive denominators).
+
+    For the callers that hold the integers already: a Fraction's numerator and denominator are properties, and
+    the pacing loop asks for a dozen of these per pass.
+    """
+    num = t_num * rate_num
     if num <= 0:
         return 0
-    return -((-num) // (t.denominator * rate.denominator))
+    return -((-num) // (t_den * rate_den))
 
 
 def as_time(x: float | int | Fraction) -> Fraction:
@@ -308,6 +317,9 @@ class RigModel:
         self._ch_qty = np.array(qty, dtype=np.int64)
         self._ch_next = np.zeros(len(self._rates), dtype=np.int64)
         self._truth_rate = Fraction(config.truth_rate)
+        # The rates as integer pairs, for samples_before_ratio at every advance.
+        self._rate_ratios = [r.as_integer_ratio() for r in self._rates]
+        self._truth_ratio = self._truth_rate.as_integer_ratio()
         self._tr_next = np.zeros(1, dtype=np.int64)
         self._seg_prev: tuple[np.ndarray, int] | None = None
         self._init_state()
@@ -432,11 +444,12 @@ class RigModel:
                 f"cannot advance to t = {float(t_stop)} s: the model is already at {float(self._time)} s")
         t_start = self._time
         self._seg_prev = (self._fs[k.F_MT0:k.F_MWSET + 1].copy(), int(self._is[k.I_CYC]))
-        stops = np.array([samples_before(t_stop, r) for r in self._rates], dtype=np.int64)
+        t_num, t_den = t_stop.as_integer_ratio()
+        stops = np.array([samples_before_ratio(t_num, t_den, *r) for r in self._rate_ratios], dtype=np.int64)
         first = self._ch_next.copy()
         ch_out = np.empty((len(self._rates), int((stops - first).max()) if len(self._rates) else 0))
         if self._want_truth:
-            tr_stop = np.array([samples_before(t_stop, self._truth_rate)], dtype=np.int64)
+            tr_stop = np.array([samples_before_ratio(t_num, t_den, *self._truth_ratio)], dtype=np.int64)
         else:
             tr_stop = self._tr_next.copy()
         tr_first = int(self._tr_next[0])

@@ -116,8 +116,9 @@ def block_end_stamps(t0_ns: int, first: int, count: int, rate: Fraction) -> list
 
 def sample_stamp_ns(t0_ns: int, n: int, rate: Fraction) -> int:
     """Stamp of sample ``n`` of a channel at ``rate``: ``t0 + n / rate`` in exact integer nanoseconds."""
-    num = n * 1_000_000_000 * rate.denominator
-    return t0_ns + (2 * num + rate.numerator) // (2 * rate.numerator)
+    rate_num, rate_den = rate.as_integer_ratio()
+    num = n * 1_000_000_000 * rate_den
+    return t0_ns + (2 * num + rate_num) // (2 * rate_num)
 
 
 def show_stamp(ns: int) -> str:
