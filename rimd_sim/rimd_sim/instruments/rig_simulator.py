@@ -319,9 +319,11 @@ class RigSimulator:
             extra.extend(done)
             applied.append(AppliedCommand(when, kind, detail))
         run_to(bounds[-1])
-        for j, b in enumerate(bounds):  # a boundary equal to the start of the pass
-            if motor[j] is None:
-                motor[j] = self._model.motor_state(float(b))
+        motor_at: list[MotorState] = []
+        for j, b in enumerate(bounds):
+            state = motor[j]
+            motor_at.append(state if state is not None  # else a boundary equal to the start of the pass
+                            else self._model.motor_state(float(b)))
 
         rates, truth_rate = self._exact_rates()
         ratios = [b.as_integer_ratio() for b in bounds]
@@ -374,7 +376,7 @@ class RigSimulator:
                 prev, b, channels, truth,
                 [i for i in impacts if (fp <= i.t_end or j == 0) and i.t_end < fb],
                 [s for s in strobe if fp <= s.t < fb],
-                motor[j],
+                motor_at[j],
                 [c for c in applied if prev <= c.time < b],
                 deliveries,
                 self._faults.events(prev, b),
