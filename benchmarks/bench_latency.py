@@ -5,6 +5,7 @@ Three measurements, each a fresh process, each repeated ``--repeats`` times, all
 * ``help``: ``python -m rimd_sim.cli --help`` (wall seconds of the process);
 * ``sweep``: ``python -m rimd_sim.cli sweep --f-min 3 --f-max 3`` into a temporary directory (the whole
   process: imports, the cached kernel's load, the point, the plot and the files);
+* ``sweep-files``: the same with ``--no-plot`` (the files without the figure: a study scripting its points);
 * ``rig``: a fresh interpreter makes the ``rimd_rig`` fixture's call (``rimd_sim.ros.testing.RigFactory``:
   ``consumers=["bench_daq"]``, the fixture's defaults) and then ``rig.motor(4.0)``; the figure is the seconds
   from the call to the motor command answered (the interpreter's own start and imports are not in it: a pytest
@@ -19,7 +20,8 @@ round warms each tree's caches. The load average is printed before and after: on
 ratios of one run are comparable; absolute figures want an idle machine (docs/benchmarks.md, "Latency").
 
 Run after ``source env.sh``:
-    python benchmarks/bench_latency.py [--repeats 5] [--only help,sweep,rig] [--compare DIR] [--json out.json]
+    python benchmarks/bench_latency.py [--repeats 5] [--only help,sweep,sweep-files,rig] [--compare DIR]
+                                       [--json out.json]
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-KINDS = ("help", "sweep", "rig")
+KINDS = ("help", "sweep", "sweep-files", "rig")
 
 RIG_PROBE = r"""
 import json, sys, tempfile, time
@@ -83,6 +85,8 @@ def run_once(kind: str, tree: Path, work: Path) -> dict:
         stamps = json.loads(proc.stdout.strip().splitlines()[-1])
         return {"seconds": stamps["answered_s"], **stamps}
     argv = ["--help"] if kind == "help" else ["sweep", "--f-min", "3", "--f-max", "3", "--out", str(work / "sweep")]
+    if kind == "sweep-files":
+        argv.append("--no-plot")
     started = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "rimd_sim.cli", *argv], env=env, cwd=work, capture_output=True,
                           text=True, timeout=300)

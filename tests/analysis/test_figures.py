@@ -151,6 +151,33 @@ def test_the_rimd_executable_draws_a_one_point_sweeps_figure_in_a_worker(tmp_pat
 
 
 @pytest.mark.process
+def test_a_sweep_without_its_plot_loads_no_plotting_library_starts_no_worker_and_leaves_no_old_figure(tmp_path):
+    # What a study scripting many points through the CLI asks for: the files of the point, nothing else loaded.
+    out = tmp_path / "out"
+    out.mkdir()
+    out.joinpath("sweep.png").write_bytes(b"a figure of an earlier run")
+    code = ("import sys, multiprocessing\n"
+            "from rimd_sim import cli\n"
+            "from rimd_sim.analysis import figures\n"
+            "seen = []\n"
+            "made = figures.Figures.__init__\n"
+            "def spy(self, own=None):\n"
+            "    made(self, own)\n"
+            "    seen.append((self.in_own_process, len(multiprocessing.active_children())))\n"
+            "figures.Figures.__init__ = spy\n"
+            f"sys.argv = ['rimd', 'sweep', '--f-min', '3', '--f-max', '3', '--cycles', '20', '--measure-cycles', '10',"
+            f" '--no-plot', '--out', {str(out)!r}]\n"
+            "status = cli.entry()\n"
+            "print(status, 'matplotlib' in sys.modules, seen)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                            stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split("\n")[-2] == "0 False [(False, 0)]"   # drawn neither here nor in a worker
+    assert {p.name for p in out.iterdir()} == {"summary.json", "sweep.csv"}
+    assert json.loads(out.joinpath("summary.json").read_text())["points"]
+
+
+@pytest.mark.process
 def test_the_worker_ends_when_its_command_is_killed(tmp_path):
     # SIGKILL leaves the pool unclosed; the worker asked the kernel for SIGTERM at its parent's death.
     code = ("import os, sys, time, multiprocessing\n"

@@ -1,6 +1,7 @@
 """``rimd sweep``: simulated steady peak impact force F_i/mg and impacts per cycle versus Omega/omega.
 
-Writes ``DIR/summary.json`` (its keys: docs/interface.md, "Commands"), ``DIR/sweep.csv`` and ``DIR/sweep.png``.
+Writes ``DIR/summary.json`` (its keys: docs/interface.md, "Commands"), ``DIR/sweep.csv`` and ``DIR/sweep.png``
+(not with ``--no-plot``: no plotting library is then loaded, nor a figure worker started).
 """
 
 from __future__ import annotations
@@ -37,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="processes for rest sweeps (default: all cores)")
     add_scheduler_argument(parser)
     add_accept_invalid_argument(parser)
+    parser.add_argument("--no-plot", action="store_true",
+                        help="no sweep.png (one left by an earlier run is removed): the files only, without "
+                             "loading matplotlib (a study scripting many points)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -51,7 +55,7 @@ def main(args: argparse.Namespace) -> int:
     # The figure's worker only when the sweep runs in this process (no pool of its own forked beside the
     # worker's threads: up/down, or a rest sweep the executor runs inline, its tasks at most one per point);
     # made before the heavy imports, so that it loads the plots meanwhile.
-    here = scheduler_address(args.scheduler) is None and (
+    here = not args.no_plot and scheduler_address(args.scheduler) is None and (
         args.direction != "rest" or local_workers(args.workers, len(freqs)) == 1)
     with Figures(None if here else False) as figures:
         from rimd_sim.analysis.captions import describe
@@ -68,8 +72,11 @@ def main(args: argparse.Namespace) -> int:
             writer.writeheader()
             writer.writerows(rows)
         write_summary(args.out, result.summary())
-        figures.draw("plot_sweep", [result], args.out / "sweep.png",
-                     f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}", caption=describe(config))
+        if args.no_plot:
+            (args.out / "sweep.png").unlink(missing_ok=True)   # a figure of another run would not match the files
+        else:
+            figures.draw("plot_sweep", [result], args.out / "sweep.png",
+                         f"RIMD model, gap {args.gap_mm:g} mm, sweep {args.direction}", caption=describe(config))
     from rimd_sim.model.validity import Verdict, domain
 
     def band(p) -> str:
