@@ -120,15 +120,13 @@ def test_use_own_process_sets_what_a_new_block_does():
     assert not figures.own_process()
 
 
-@pytest.mark.process
-@pytest.mark.parametrize(("argv", "worker"), [
-    (["--f-min", "3", "--f-max", "3"], True),                              # one point: the sweep runs here
-    (["--f-min", "3", "--f-max", "3.5", "--f-step", "0.5", "--workers", "2"], False),   # a pool of its own
-])
-def test_the_rimd_executable_draws_a_one_point_sweeps_figure_in_a_worker(tmp_path, argv, worker):
-    # entry() turns the worker on: the process that runs ``rimd sweep`` has a child while it computes (not beside
-    # a pool of the sweep's own), and the files are all there when it returns.
-    code = ("import sys, multiprocessing\n"
+def rimd_sweep(argv: list[str], out: Path) -> tuple[int, bool, list[tuple[bool, int]]]:
+    """``rimd sweep ARGV`` (20 cycles) through the executable's ``cli.entry()`` in a fresh interpreter.
+
+    Returns its exit status, whether it imported matplotlib, and per :class:`Figures` it made: in a worker process
+    or not, and its process's children just after (the worker, when started).
+    """
+    code = ("import json, sys, multiprocessing\n"
             "from rimd_sim import cli\n"
             "from rimd_sim.analysis import figures\n"
             "seen = []\n"
@@ -138,13 +136,26 @@ def test_the_rimd_executable_draws_a_one_point_sweeps_figure_in_a_worker(tmp_pat
             "    seen.append((self.in_own_process, len(multiprocessing.active_children())))\n"
             "figures.Figures.__init__ = spy\n"
             f"sys.argv = ['rimd', 'sweep', *{argv!r}, '--cycles', '20', '--measure-cycles', '10',"
-            f" '--out', {str(tmp_path / 'out')!r}]\n"
+            f" '--out', {str(out)!r}]\n"
             "status = cli.entry()\n"
-            "print(status, seen)\n")
+            "print(json.dumps([status, 'matplotlib' in sys.modules, seen]))\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                             stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.split("\n")[-2] == f"0 [({worker}, {int(worker)})]"
+    status, plotted_here, seen = json.loads(result.stdout.split("\n")[-2])
+    return status, plotted_here, [tuple(s) for s in seen]
+
+
+@pytest.mark.process
+@pytest.mark.parametrize(("argv", "worker"), [
+    (["--f-min", "3", "--f-max", "3"], True),                              # one point: the sweep runs here
+    (["--f-min", "3", "--f-max", "3.5", "--f-step", "0.5", "--workers", "2"], False),   # a pool of its own
+])
+def test_the_rimd_executable_draws_a_one_point_sweeps_figure_in_a_worker(tmp_path, argv, worker):
+    # entry() turns the worker on: the process that runs ``rimd sweep`` has a child while it computes (not beside
+    # a pool of the sweep's own), and the files are all there when it returns.
+    status, _, seen = rimd_sweep(argv, tmp_path / "out")
+    assert status == 0 and seen == [(worker, int(worker))]
     out = Path(tmp_path / "out")
     assert {p.name for p in out.iterdir()} == {"summary.json", "sweep.csv", "sweep.png"}
     assert out.joinpath("sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -156,23 +167,8 @@ def test_a_sweep_without_its_plot_loads_no_plotting_library_starts_no_worker_and
     out = tmp_path / "out"
     out.mkdir()
     out.joinpath("sweep.png").write_bytes(b"a figure of an earlier run")
-    code = ("import sys, multiprocessing\n"
-            "from rimd_sim import cli\n"
-            "from rimd_sim.analysis import figures\n"
-            "seen = []\n"
-            "made = figures.Figures.__init__\n"
-            "def spy(self, own=None):\n"
-            "    made(self, own)\n"
-            "    seen.append((self.in_own_process, len(multiprocessing.active_children())))\n"
-            "figures.Figures.__init__ = spy\n"
-            f"sys.argv = ['rimd', 'sweep', '--f-min', '3', '--f-max', '3', '--cycles', '20', '--measure-cycles', '10',"
-            f" '--no-plot', '--out', {str(out)!r}]\n"
-            "status = cli.entry()\n"
-            "print(status, 'matplotlib' in sys.modules, seen)\n")
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                            stdin=subprocess.DEVNULL)
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.split("\n")[-2] == "0 False [(False, 0)]"   # drawn neither here nor in a worker
+    status, plotted_here, seen = rimd_sweep(["--f-min", "3", "--f-max", "3", "--no-plot"], out)
+    assert (status, plotted_here, seen) == (0, False, [(False, 0)])   # drawn neither here nor in a worker
     assert {p.name for p in out.iterdir()} == {"summary.json", "sweep.csv"}
     assert json.loads(out.joinpath("summary.json").read_text())["points"]
 
