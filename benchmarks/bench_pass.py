@@ -75,10 +75,12 @@ def measure(passes: int, rounds: int) -> dict:
 
 
 def other_tree(tree: Path, passes: int, rounds: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tree / "rimd_sim"), os.environ.get("PYTHONPATH", "")]))
+    """:func:`measure` in a process of its own with ``tree``'s package first on the import path."""
+    from bench_latency import environment
+
     out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--passes", str(passes), "--rounds",
-                          str(rounds), "--json-only"], env=env, capture_output=True, text=True, timeout=600,
-                         cwd=tree)
+                          str(rounds), "--json-only"], env=environment(tree), capture_output=True, text=True,
+                         timeout=600, cwd=tree)
     if out.returncode:
         raise SystemExit(f"bench_pass: the run of {tree} failed:\n{out.stderr[-2000:]}")
     return json.loads(out.stdout.splitlines()[-1])
@@ -102,6 +104,9 @@ def main() -> None:
         print(f"  {r['best_us']:.1f} us of CPU per pass ({', '.join(f'{x:.1f}' for x in r['runs_us'])}), "
               f"{r['messages']} messages, digest {r['digest']}")
         return
+    from bench_latency import check_tree
+
+    check_tree(args.compare.resolve())   # a checkout whose package is the one its runs import
     this_runs, other_runs, digests = [], [], set()
     for i in range(args.alternations):
         r = other_tree(ROOT, args.passes, args.rounds)   # this tree in a process of its own too, as the other
