@@ -544,7 +544,7 @@ def test_replay_of_damaged_recordings(sources, ros_processes, ros_executor, tmp_
     publishes exactly what the reader reads (a subscriber receives it, byte for byte, in order) and says what was
     damaged, or exits 1 with one line. A valid file with a foreign type: refused naming it, or (``skip_unknown``)
     the other topics replayed."""
-    from harness.rig import RIG_TOPICS, RawCollector
+    from harness.rig import RIG_TOPICS, RawCollector, resume_when_matched
     from harness.ros import spin_until
 
     source = sources["rig"]
@@ -591,9 +591,12 @@ def test_replay_of_damaged_recordings(sources, ros_processes, ros_executor, tmp_
         assert recording.message_count and set(read) <= set(RIG_TOPICS), (name, set(read))
         collector = RawCollector(ros_executor, topics={t: RIG_TOPICS[t] for t in read},
                                  name=f"collector_{name.split('.')[0]}")
+        # Paused until both sides of discovery have matched (the replay's wait, then the collector's), so that
+        # no first message can be lost to the load of a parallel run.
         node = nodes[name] = ros_processes.start_node(
             "rimd_replay", "--ros-args", "-p", f"file:={tmp_path / name}", "-p", "rate:=20.0",
-            "-p", "wait_for_subscribers:=1", name=name)
+            "-p", "wait_for_subscribers:=1", "-p", "start_paused:=true", name=name)
+        resume_when_matched(ros_executor, collector, node)
         count = recording.message_count
         total = lambda c=collector: sum(len(v) for v in c.messages.values())  # noqa: E731
         assert spin_until(ros_executor, lambda n=node, t=total, k=count: n.returncode is not None and t() >= k, 60), (

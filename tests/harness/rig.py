@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 from harness.ros import call_service, spin_until
@@ -41,6 +42,13 @@ class RawCollector:
             name = (remap or {}).get(topic, topic)
             self.subscriptions.append(
                 self.node.create_subscription(getattr(rimd_msgs.msg, kind), name, callback, qos, raw=True))
+
+    def matched(self, topics: Iterable[str] | None = None) -> bool:
+        """Whether the subscription of each of ``topics`` (default: all) has matched a publisher: this side of the
+        two-sided discovery (a volatile subscription drops what a publisher sends before it has matched it)."""
+        chosen = set(self.messages if topics is None else topics)
+        return all(sub.get_publisher_count() > 0 for topic, sub in zip(self.messages, self.subscriptions, strict=True)
+                   if topic in chosen)
 
 
 class Diagnostics:
@@ -128,6 +136,16 @@ def trigger(executor, node, service: str, timeout: float = 10.0):
 
     client = node.create_client(Trigger, service)
     return call_service(executor, node, client, Trigger.Request(), timeout)
+
+
+def resume_when_matched(executor, collector: RawCollector, replay, topics: Iterable[str] | None = None,
+                        timeout: float = 30.0) -> None:
+    """Resume a replay started with ``start_paused`` and ``wait_for_subscribers`` once both sides of discovery
+    have matched: the replay's (it logs ``subscribers matched on``) and the collector's (on ``topics``, the
+    collector's names; default all). Then no first message can be lost, whatever the load of a parallel run."""
+    replay.wait_for_output("subscribers matched on", timeout=timeout)
+    assert spin_until(executor, lambda: collector.matched(topics), timeout), replay.tail()
+    assert trigger(executor, collector.node, "/rimd_replay/resume").success, replay.tail()
 
 
 def run_for(executor, seconds: float) -> None:

@@ -16,7 +16,7 @@ import pytest
 
 from harness.domains import lease_domain_id
 from harness.processes import ProcessManager
-from harness.rig import RIG_TOPICS, Diagnostics, RawCollector, trigger
+from harness.rig import RIG_TOPICS, Diagnostics, RawCollector, resume_when_matched, trigger
 from harness.ros import call_service, spin_until
 from rimd_sim.io.reader import open_recording
 from rimd_sim.ros.clients.rig import RigClient
@@ -61,11 +61,13 @@ def _recorded(path: Path) -> dict[str, list[tuple[int, bytes]]]:
 
 def _replay(ros_processes, ros_executor, collector, *params: str, expected: int, timeout: float = 30.0):
     """Run a replay to its end; return it once the collector holds the ``expected`` messages it published (they
-    travel after the node has exited: a wait on what arrived, not on time)."""
-    args = ["--ros-args", "-p", "wait_for_subscribers:=1"]
+    travel after the node has exited: a wait on what arrived, not on time). It starts paused and is resumed once
+    both sides of discovery have matched: no first message is lost to the load of a parallel run."""
+    args = ["--ros-args", "-p", "wait_for_subscribers:=1", "-p", "start_paused:=true"]
     for param in params:
         args += ["-p", param]
     replay = ros_processes.start_node("rimd_replay", *args)
+    resume_when_matched(ros_executor, collector, replay)
     total = lambda: sum(len(v) for v in collector.messages.values())  # noqa: E731
     assert spin_until(ros_executor, lambda: replay.returncode is not None and total() >= expected, timeout), (
         total(), expected, replay.tail())
@@ -130,7 +132,8 @@ def test_loop_selection_remap_pause_and_clock(ros_processes, ros_executor, recor
     replay = ros_processes.start_node(
         "rimd_replay", "--ros-args", "-p", f"file:={recording}", "-p", "loop:=true", "-p", "rate:=3.0",
         "-p", "topics:=['/rig/truth']", "-p", "remap:=['/rig/truth:=/replayed/truth']", "-p", "clock:=true",
-        "-p", "wait_for_subscribers:=1")
+        "-p", "wait_for_subscribers:=1", "-p", "start_paused:=true")
+    resume_when_matched(ros_executor, collector, replay, topics=["/rig/truth"])
     truth = collector.messages["/rig/truth"]   # keyed by the original name, subscribed to /replayed/truth
     # 3 s at 3x: a pass takes about 1 s once the node runs (start-up takes longer on a loaded machine).
     assert spin_until(ros_executor, lambda: len(truth) > 1.5 * len(recorded["/rig/truth"]), 30), replay.tail()
@@ -210,3 +213,29 @@ def test_start_offset_skips_the_beginning(ros_processes, ros_executor, recording
                      "start_offset:=1.5", "topics:=['/rig/truth']", expected=len(expected))
     assert replay.returncode == 0, replay.tail()
     assert collector.messages["/rig/truth"] == expected and 0 < len(expected) < len(recorded["/rig/truth"])
+
+
+def test_a_subscriber_that_stops_acknowledging_is_named_and_the_replay_still_ends(ros_processes, recording,
+                                                                                    tmp_path):
+    """A reliable subscriber frozen mid-replay (SIGSTOP) never acknowledges the last messages: the replay waits
+    a bounded time for it at the end, names its topic, and exits 0 (it does not hang on a dead consumer)."""
+    import os
+
+    from harness import daq_client
+    from rimd_sim.ros.nodes.replay import ACKNOWLEDGE_WAIT_S
+
+    topic = "/rig/cart/displacement"
+    replay = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={recording}",
+                                      "-p", f"topics:=['{topic}']", "-p", "wait_for_subscribers:=1")
+    client = ros_processes.start_python(daq_client.__file__, str(tmp_path / "out.pkl"), "--until", "1e6",
+                                        "--topics", topic, "--extra", "--timeout", "60")
+    # Both sides of the match, before the replay's 3 s of messages have all left.
+    client.wait_for_output("daq ready", timeout=30)                          # the subscription's side
+    replay.wait_for_output(f"subscribers matched on {topic}", timeout=30)    # the publisher's side
+    os.kill(client.pid, signal.SIGSTOP)
+    try:
+        assert replay.wait(60) == 0, replay.tail()
+    finally:
+        os.kill(client.pid, signal.SIGCONT)
+    assert (f"not acknowledged within {ACKNOWLEDGE_WAIT_S:g} s by every subscriber: {topic}: they may miss the "
+            "last messages") in replay.output(), replay.tail()

@@ -17,7 +17,7 @@ import time
 import pytest
 from builtin_interfaces.msg import Time
 
-from harness.rig import RawCollector
+from harness.rig import RawCollector, resume_when_matched
 from harness.rig_mcap import write_rig_mcap
 from harness.ros import call_service, spin_until
 from rimd_sim.io.cdr import header_stamp
@@ -114,7 +114,8 @@ def test_restamp_and_playback_duration(ros_processes, ros_executor, recording):
     first = messages[0].log_time
     replay = ros_processes.start_node("rimd_replay", "--ros-args", "-p", f"file:={recording}", "-p", "rate:=4.0",
                                       "-p", "restamp:=true", "-p", "playback_duration:=1.0",
-                                      "-p", "wait_for_subscribers:=1")
+                                      "-p", "wait_for_subscribers:=1", "-p", "start_paused:=true")
+    resume_when_matched(ros_executor, collector, replay)
     started = time.time_ns()
     assert spin_until(ros_executor, lambda: replay.returncode is not None, 30), replay.tail()
     kept = [m for m in messages if m.log_time <= first + 10**9]

@@ -53,6 +53,12 @@ NODE_NAME = "rimd_replay"
 PARAMETERS = parameters(ReplaySettings)
 #: Longest wait for subscribers (wait_for_subscribers), s.
 SUBSCRIBER_WAIT_S = 10.0
+#: After the publishers have matched the subscriptions waited for, the time left to the subscriptions to match
+#: the publishers: discovery is two-sided, and a volatile subscription of Fast DDS drops what arrives from a
+#: publisher it has not matched yet (its first messages, never sent again).
+DISCOVERY_SETTLE_S = 0.5
+#: At the end, how long reliable subscribers get to acknowledge the last messages before the node goes away.
+ACKNOWLEDGE_WAIT_S = 5.0
 #: A lockstep hold is logged once it has lasted this long (s), then every 10 s.
 HOLD_REPORT_S = 0.5
 
@@ -213,10 +219,18 @@ class ReplayNode(RimdNode):
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
 
-    def wait_for_acknowledgements(self, timeout: float = 2.0) -> None:
-        """Give reliable subscribers the time to acknowledge the last messages before the node goes away."""
-        for pub in self._pubs.values():
-            pub.wait_for_all_acked(Duration(seconds=timeout))
+    def wait_for_acknowledgements(self, timeout: float = ACKNOWLEDGE_WAIT_S) -> list[str]:
+        """Give reliable subscribers the time to acknowledge the last messages before the node goes away.
+
+        Returns (and names in a warning) the topics whose subscribers did not acknowledge everything in time.
+        """
+        deadline = time.monotonic() + timeout
+        short = [pub.topic_name for pub in self._pubs.values()
+                 if not pub.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))]
+        if short:
+            self.get_logger().warning(f"not acknowledged within {timeout:g} s by every subscriber: "
+                                      f"{', '.join(sorted(short))}: they may miss the last messages")
+        return short
 
     # -- the thread -------------------------------------------------------------------------------------------
     def _wait_for_subscribers(self) -> None:
@@ -248,6 +262,7 @@ class ReplayNode(RimdNode):
                                for p in current.values()):
                 self.get_logger().info("subscribers matched on " + ", ".join(sorted(p.topic_name
                                                                                     for p in current.values())))
+                self._stop.wait(DISCOVERY_SETTLE_S)   # their side of the match
                 return
             time.sleep(0.02)
         short = sorted(p.topic_name for p in (waited() or pubs).values() if p.get_subscription_count() < wanted)
