@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import rimd_sim
 import rimd_sim.model.kernel as kernel
@@ -139,6 +141,38 @@ def test_the_compiled_functions_borrow_their_arrays():
             "advance", "run_cells", "map_one"} <= named
     wrong = {key: nrt for key, nrt in seen.items() if nrt is not (key.rsplit(".", 1)[1] in ALLOCATING)}
     assert not wrong, f"reference counting where it should not be (True) or missing where arrays are made: {wrong}"
+
+
+@pytest.mark.skipif(not kernel.JIT, reason="RIMD_NO_JIT=1: nothing is compiled")
+def test_only_the_runge_kutta_step_fuses_multiply_adds():
+    """The step is compiled with FMA contraction (``fastmath={"contract"}``) and nothing else is: a function fused
+    in one caller and not in another would make a trajectory depend on where a run is cut (with every kernel
+    function fused, tests/instruments/test_streaming.py's bit-identity across cuts fails)."""
+    from numba.core.registry import CPUDispatcher
+
+    from rimd_sim.model import ensemble, shooting
+
+    spaces = [kernel, ensemble]
+    for name, spec in MODELS.items():
+        spaces += [spec.physics, spec.driver, ensemble._loop(name), shooting._loop(name)]
+    fused, plain = set(), set()
+    for space in spaces:
+        for attr, fn in vars(space).items():
+            if isinstance(fn, CPUDispatcher):
+                flags = fn.targetoptions.get("fastmath")
+                (fused if flags else plain).add(f"{space.__name__}.{attr}")
+                assert not flags or set(flags) == {"contract"}, (space.__name__, attr, flags)
+    assert {key.rsplit(".", 1)[1] for key in fused} == {"rk_step"}, fused
+    assert len(fused) == len(MODELS) and "advance" in {key.rsplit(".", 1)[1] for key in plain}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(min_value=1e-300, max_value=1e300))
+def test_the_step_controls_fifth_root_is_pow_to_2e_5(x):
+    """``inv_fifth_root`` (the step control's factor without ``pow``) against ``x ** -0.2``, compiled and not."""
+    expected = x ** -0.2
+    for fn in (kernel.inv_fifth_root, getattr(kernel.inv_fifth_root, "py_func", kernel.inv_fifth_root)):
+        assert abs(fn(x) - expected) <= 2e-5 * expected, fn
 
 
 def test_a_physics_module_is_checked_against_the_contract():

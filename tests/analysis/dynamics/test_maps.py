@@ -55,7 +55,7 @@ def test_a_frequency_gap_map_is_the_peterka_maps_rest_start(paper):
     ``rest`` start (the same stop rule, the same compiled runs), with the no-impact cell at 0 N."""
     gaps, freqs = [0.0, 2.4e-3], [3.75, 5.25, 6.75]
     m = parameter_map(paper, "frequency", freqs, "gap", gaps, workers=1)
-    p = peterka(paper, gaps, freqs, starts=0, stop="window", workers=1)   # the map's stop rule
+    p = peterka(paper, gaps, freqs, starts=0, stop="window", rest_cycles=192, workers=1)   # the map's rule and cap
     assert m.labels.tolist() == p.primary.tolist()
     np.testing.assert_array_equal(m.peak_force, p.peak_force)
     np.testing.assert_array_equal(m.impact_velocity, p.impact_velocity)

@@ -80,8 +80,8 @@ def test_the_contraction_stop_classifies_as_a_run_ten_times_the_cap():
 
     config = load_config(None)
     gaps, freqs = [0.0, 0.8e-3, 1.6e-3, 2.4e-3], np.linspace(2.0, 8.0, 7)
-    new = peterka(config, gaps, freqs, starts=0, workers=1)
-    old = peterka(config, gaps, freqs, starts=0, stop="window", workers=1)
+    new = peterka(config, gaps, freqs, starts=0, rest_cycles=192, workers=1)   # the stop rule at the common cap
+    old = peterka(config, gaps, freqs, starts=0, stop="window", rest_cycles=192, workers=1)
     reference = rest_classes(config, gaps, freqs, cycles=1920, workers=1)
     assert new.stop == "contraction" and old.stop == "window"
     assert new.primary.tolist() == reference.tolist()
@@ -119,8 +119,9 @@ def test_rimd_peterka_stop_window_is_the_former_rule(tmp_path):
 @pytest.mark.process
 def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     """Every third gap row of the default map: >= 99 % of the cells (class from rest) as the fixed-length run
-    with twice the former 96 cycles; every differing cell listed in the summary with both classes and the class
-    of a run ten times the cap (1920 cycles), which is ``steady_orbit``'s over the same cycles (its last 72)."""
+    with the same caps (twice the former 96 cycles, 640 from rest); every differing cell listed in the summary with
+    both classes and the class of a run ten times the cap (1920 cycles), which is ``steady_orbit``'s over the same
+    cycles (its last 72)."""
     out = tmp_path / "pk"
     assert cli.main(["peterka", "--gaps", "11", "--compare-fixed", "--out", str(out)]) == 0
     summary = read_json(out / "summary.json")
@@ -140,7 +141,7 @@ def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
                                 transient_cycles=10 * 192 - 72, measure_cycles=72)
         assert cell["long_run"] == long_run.label, cell
     # Most trajectories stopped well before the cap.
-    assert summary["cycles_run"]["mean"] < 0.6 * 192
+    assert summary["cycles_run"]["mean"] < 0.6 * 192 and summary["rest_cycles"] == 640
 
 
 # ---- Dask ---------------------------------------------------------------------------------------------
@@ -364,17 +365,21 @@ def test_big_map_outputs_npz_and_a_png_with_a_pixel_per_cell(tmp_path, monkeypat
 def test_rest_cycles_classifies_each_cell_as_the_run_of_that_many_cycles_from_rest():
     """``rest_cycles=1920``: the starts from rest still unsettled at the cap of 192 run on, so the class of every
     cell of a 4 x 5 grid (chaotic, 2/4, 1/3 read at 1920 cycles, no impact among them) equals the fixed run of 1920
-    cycles from rest (``rest_classes``), where the default map differs in at least 4 cells. A start from rest that
+    cycles from rest (``rest_classes``), where the map with the common cap (192) differs in at least 4 cells. The
+    default is 640 (at least the common cap; the common cap without early stopping). A start from rest that
     settled before the cap is untouched (class and cycles), one that ran to it goes on past it; the other starts
     are the default map's, class and cycles."""
     from rimd_sim.analysis.dynamics.peterka import peterka, rest_classes
 
     config = load_config(None)
     gaps, freqs = [0.0, 0.7e-3, 1.3e-3, 2.3e-3], [4.25, 5.37, 7.23, 8.54, 9.1]
-    default = peterka(config, gaps, freqs, starts=0, workers=1)
+    default = peterka(config, gaps, freqs, starts=0, rest_cycles=192, workers=1)   # the common cap
     long = peterka(config, gaps, freqs, starts=0, rest_cycles=1920, workers=1)
     reference = rest_classes(config, gaps, freqs, cycles=1920, workers=1)
     assert (default.rest_cap, long.rest_cap) == (192, 1920)
+    assert peterka(config, gaps[:1], freqs[:1], starts=0, workers=1).rest_cap == 640   # the default
+    assert peterka(config, gaps[:1], freqs[:1], starts=0, transient_cycles=700, workers=1).rest_cap == 772
+    assert peterka(config, gaps[:1], freqs[:1], starts=0, early_stop=False, workers=1).rest_cap == 192
     assert long.primary.tolist() == reference.tolist()
     assert (default.primary != reference).sum() >= 4
     settled = default.cycles[0] <= 192
@@ -391,8 +396,8 @@ def test_rest_cycles_classifies_each_cell_as_the_run_of_that_many_cycles_from_re
 
 def test_rimd_peterka_rest_cycles_writes_its_cap_and_how_many_ran_to_it(tmp_path, capsys):
     """``--rest-cycles 1920``: ``summary.json`` gives the cap of the start from rest and the fraction of the cells
-    whose start from rest ran to it; the default gives the common cap. Both say how many cells were classified at
-    the cap without having settled, the default with the option that runs them on."""
+    whose start from rest ran to it; the default gives its cap, 640. Both say how many cells were classified at
+    the cap without having settled, the default with the option that runs them on (ten times the common cap)."""
     grid = ["--gap-min-mm", "0", "--gap-max-mm", "0", "--gaps", "1", "--f-min", "5.37", "--f-max", "8.54",
             "--freqs", "2", "--starts", "0", "--workers", "1"]
     assert cli.main(["peterka", *grid, "--rest-cycles", "1920", "--out", str(tmp_path / "long")]) == 0
@@ -401,11 +406,13 @@ def test_rimd_peterka_rest_cycles_writes_its_cap_and_how_many_ran_to_it(tmp_path
     assert "--rest-cycles" not in out
     assert cli.main(["peterka", *grid, "--out", str(tmp_path / "default")]) == 0
     out = capsys.readouterr().out
-    assert ("2 cell(s) (100.0 %) classified at the cap of 192 cycles from rest without having settled (chaotic, or a "
+    assert ("1 cell(s) (50.0 %) classified at the cap of 640 cycles from rest without having settled (chaotic, or a "
             "transient longer than the cap); --rest-cycles 1920 runs their start from rest on") in out
     long, default = read_json(tmp_path / "long" / "summary.json"), read_json(tmp_path / "default" / "summary.json")
-    assert (long["rest_cycles"], default["rest_cycles"]) == (1920, 192)
-    assert long["cycles_run"]["rest_cap"] == 1920 and default["cycles_run"]["rest_cap"] == 192
-    # Gap 0: 5.37 Hz is chaotic at 1920 cycles from rest, 8.54 Hz settles (2/4) after 247: both ran to 192.
-    assert default["cycles_run"]["rest_ran_to_cap"] == 1.0 and long["cycles_run"]["rest_ran_to_cap"] == 0.5
+    assert (long["rest_cycles"], default["rest_cycles"]) == (1920, 640)
+    assert long["cycles_run"]["rest_cap"] == 1920 and default["cycles_run"]["rest_cap"] == 640
+    # Gap 0: 5.37 Hz is chaotic at 1920 cycles from rest (it runs to each cap), 8.54 Hz settles (2/4) after more
+    # than the common cap of 192 and before 640.
+    assert default["cycles_run"]["rest_ran_to_cap"] == 0.5 and long["cycles_run"]["rest_ran_to_cap"] == 0.5
+    assert default["classes_from_rest"] == long["classes_from_rest"]
     assert long["classes_from_rest"] == {"chaotic/non-periodic": 1, "2/4": 1}
