@@ -149,7 +149,8 @@ def agreement(config, workers, size=None):
 
 def big(config, workers, n_big, skip_big):
     gaps, freqs = grid(200)
-    print(f"\n3. Big maps (early stop, cap 192, 640 from rest unless said), pool of {workers or os.cpu_count()}, {load()}")
+    print(f"\n3. Big maps (early stop, cap 192, 640 from rest unless said), pool of {workers or os.cpu_count()}, "
+          f"{load()}")
     t200, r200 = timed_map(config, gaps, freqs, workers=workers)
     print(f"  200 x 200, default (contraction stop): {t200:.1f} s on {r200.workers} processes (target <= 30 s on 2), "
           f"mean {r200.cycles.mean():.1f} cycles per trajectory   {load()}")
