@@ -27,6 +27,8 @@ __all__ = ["RigClient", "TRIGGERS"]
 
 #: The environment variable rcl takes a context's discovery range from.
 DISCOVERY_RANGE_ENV = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+#: Seconds a client gives a service it has just found to match it in turn, before its first request.
+SERVICE_SETTLE_S = 0.5
 #: The rig's Trigger services, by the name users type.
 TRIGGERS = ("pause", "resume", "reset", "clear_faults")
 
@@ -105,6 +107,7 @@ class RigClient:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._clients: dict[str, Any] = {}
+        self._ready_at: dict[str, float] = {}   # when this client first saw each service (monotonic s)
 
     def __enter__(self) -> RigClient:
         """The client."""
@@ -155,7 +158,20 @@ class RigClient:
         if not self.spin_until(client.service_is_ready, timeout):
             raise CommandError(f"no rig: service {name} not available after {timeout:g} s on ROS_DOMAIN_ID "
                                f"{self.domain_id} (start it with `rimd rig`, on the same ROS_DOMAIN_ID)")
+        self._ready_at.setdefault(name, time.monotonic())
         return name, client
+
+    def _let_the_service_see_us(self, name: str) -> None:
+        """Wait until :data:`SERVICE_SETTLE_S` has passed since this client first saw the service.
+
+        Discovery is two-sided: the client sees the service before the service may have matched the client's reader
+        of responses, and Fast DDS's service gives up on a response after 100 ms without that match ("failed to send
+        response (timeout)"): the request is then served and its answer lost. Only a client that has just found the
+        service waits (a one-shot command); one that found it a moment ago does not.
+        """
+        left = self._ready_at[name] + SERVICE_SETTLE_S - time.monotonic()
+        if left > 0:
+            self.spin_until(lambda: False, left)
 
     def service_ready(self, service: str, srv_type: Any = None) -> bool:
         """Whether ``service`` is served now, as far as this client has discovered (no wait)."""
@@ -191,6 +207,7 @@ class RigClient:
         limit = self.timeout if timeout is None else timeout
         deadline = time.monotonic() + limit
         name, client = self._client(service, srv_type, limit)
+        self._let_the_service_see_us(name)
         future = client.call_async(request)
         if not self.spin_until(future.done, max(0.0, deadline - time.monotonic())):
             client.remove_pending_request(future)
