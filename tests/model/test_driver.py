@@ -174,7 +174,12 @@ def test_the_step_controls_fifth_root_is_pow_to_2e_5(x):
     expected = x ** -0.2
     for fn in (kernel.inv_fifth_root, getattr(kernel.inv_fifth_root, "py_func", kernel.inv_fifth_root)):
         assert abs(fn(x) - expected) <= 2e-5 * expected, fn
-        assert fn(math.inf) == 0.0 == math.inf ** -0.2   # an overflowed step: cut by the most allowed, as with pow
+
+
+def test_the_step_controls_fifth_root_of_an_overflowed_error_is_0_as_pow_gives():
+    """An infinite error norm (a step that overflowed): 0, so the step is cut by the most allowed, as with pow."""
+    for fn in (kernel.inv_fifth_root, getattr(kernel.inv_fifth_root, "py_func", kernel.inv_fifth_root)):
+        assert fn(math.inf) == 0.0 == math.inf ** -0.2, fn
 
 
 def test_a_physics_module_is_checked_against_the_contract():
