@@ -47,11 +47,13 @@ class WrittenRecording:
 
 
 def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75, *, overrides: dict | None = None,
-                   skip: tuple[str, ...] = (), commands: tuple[tuple[float, float], ...] = ()) -> WrittenRecording:
+                   skip: tuple[str, ...] = (), commands: tuple[tuple[float, float], ...] = (),
+                   sessions: tuple[tuple[str, str], ...] = ()) -> WrittenRecording:
     """Run the core for ``seconds`` with the motor at ``frequency_hz`` from t = 0 and record it to ``path``.
 
     ``overrides``: parameters over the defaults; ``skip``: topics not written; ``commands``: motor setpoints
-    ``(time s, frequency Hz)`` at the configured ramp rate.
+    ``(time s, frequency Hz)`` at the configured ramp rate; ``sessions``: ``/rig/session`` messages
+    ``(run_id, reason)`` at t = 0, as the simulator publishes at its start (simulation time base).
     """
     from mcap_ros2.writer import Writer
 
@@ -77,7 +79,13 @@ def write_rig_mcap(path: Path, seconds: float = 3.0, frequency_hz: float = 3.75,
     with open(path, "wb") as fh:
         writer = Writer(fh)
         schemas = {name: writer.register_msgdef(f"rimd_msgs/msg/{name}", message_definition("rimd_msgs", name))
-                   for name in ("SampleBlock", "ImpactEvent", "MotorState", "RigState")}
+                   for name in ("SampleBlock", "ImpactEvent", "MotorState", "RigState", "RigSession")}
+        for sequence, (run_id, reason) in enumerate(sessions):
+            msg = {"header": {"stamp": stamp(0), "frame_id": ""}, "run_id": run_id, "reason": reason,
+                   "sequence": sequence, "start_stamp": stamp(0), "simulation_time": 0.0, "time_base": "simulation",
+                   "real_time_factor": 0.0, "lockstep": False, "seed": config.seed, "config_hash": "",
+                   "node": "/rig/rimd_simulator"}
+            writer.write_message("/rig/session", schemas["RigSession"], msg, log_time=0, publish_time=0)
         for block in blocks:
             for name, ch in block.channels.items():
                 if TOPIC_OF_CHANNEL[name] in skip:

@@ -62,13 +62,14 @@ class RecordedTopic:
 
 @dataclass(frozen=True)
 class RecordedMessage:
-    """One message: topic, times (ns) and the serialized (CDR) bytes."""
+    """One message: topic, times (ns), the serialized (CDR) bytes, and the file it was read from."""
 
     topic: str
     type_name: str
     log_time: int
     publish_time: int
     data: bytes
+    path: Path | None = None
 
 
 @dataclass
@@ -149,7 +150,7 @@ class Recording:
                         continue
                     schema = schemas.get(channel.schema_id)
                     yield RecordedMessage(channel.topic, schema.name if schema else "", record.log_time,
-                                          record.publish_time, record.data)
+                                          record.publish_time, record.data, path)
                 elif isinstance(record, DataEnd):
                     break   # the summary section holds no messages
 

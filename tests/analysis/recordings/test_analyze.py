@@ -36,6 +36,43 @@ def test_missing_recording_is_refused_in_one_line(tmp_path):
     assert result.returncode == 1 and result.stderr.strip() == f"rimd analyze: {tmp_path / 'nothing'} does not exist"
 
 
+def test_a_recording_of_several_runs_is_refused_naming_each_run_and_its_file(tmp_path):
+    """A directory recorded into twice holds two runs that each count their samples from 0: mixed, the first
+    run's channels would be kept and both runs' impacts counted (a newcomer saw 690 blocks "late" and 26
+    impacts "not covered"). The reader refuses it, naming each run and its file; each file alone is analysed,
+    and a reset within a run (its samples go on counting) is no second run."""
+    import contextlib
+    import io
+
+    from harness.rig_mcap import write_rig_mcap
+    from rimd_sim import cli
+    from rimd_sim.errors import AnalysisError
+
+    runs = tmp_path / "recordings"
+    runs.mkdir()
+    first, second = runs / "rimd_a_0.mcap", runs / "rimd_b_0.mcap"
+    write_rig_mcap(first, 1.5, sessions=(("aaaa1111" * 4, "start"), ("cccc3333" * 4, "reset")))
+    write_rig_mcap(second, 1.0, sessions=(("bbbb2222" * 4, "start"),))
+    with pytest.raises(AnalysisError) as refused:
+        rec.load(runs)
+    message = str(refused.value)
+    assert message.startswith(f"{runs} holds 2 runs of the rig, each counting its samples from 0: "), message
+    assert "run 1 aaaa1111 (start, from log time 0.000 s, in rimd_a_0.mcap)" in message
+    assert "run 2 bbbb2222 (start, from log time 0.000 s, in rimd_b_0.mcap)" in message
+    assert "cccc3333" not in message and "rimd rig --output-dir DIR" in message
+    # Each file alone: one run (the reset included), its channel whole from sample 0.
+    for path, seconds in ((first, 1.5), (second, 1.0)):
+        force = rec.load(path).channels[rec.FORCE]
+        assert force.index[0] == 0 and force.index.size == round(seconds * 20000) and force.lost_samples == 0
+    # rimd analyze and rimd identify say it in one line and write nothing.
+    for verb in ("analyze", "identify"):
+        err = io.StringIO()
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+            assert cli.main([verb, str(runs), "--out", str(tmp_path / verb)]) == 1
+        assert err.getvalue().strip() == f"rimd {verb}: {message}"
+        assert not any((tmp_path / verb).glob("*.json"))
+
+
 def _channel(values, rate=20000.0, first=0):
     index = np.arange(first, first + len(values))
     return rec.Channel("/rig/impact/force", rate, index, index / rate, np.asarray(values, dtype=float))

@@ -47,11 +47,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from rimd_sim.analysis.recordings.contact_pulse import PulseSamples, SpringDashpotPulse, pulse_of, pulse_peaks
+from rimd_sim.errors import AnalysisError
 from rimd_sim.io.decode import topic_decoder
 from rimd_sim.io.msgdefs import MessageDefinitionError
 from rimd_sim.io.reader import Recording, open_recording
@@ -65,6 +67,9 @@ CART_X = "/rig/cart/displacement"
 ACC = "/rig/rimd/acceleration"
 FAULTS = "/rig/faults"
 CAPTURE_FORCE = "/rig/capture/force"
+SESSION = "/rig/session"
+#: ``/rig/session`` reasons that start every channel's ``first_index`` from 0 again (a reset lets them go on).
+_COUNT_FROM_ZERO = ("start", "replay")
 BLOCK_TOPICS = (FORCE, RIMD_X, CART_X, ACC)
 #: The message type of each topic the analyses read.
 EXPECTED_TYPES = {**{topic: "rimd_msgs/msg/SampleBlock" for topic in BLOCK_TOPICS},
@@ -229,6 +234,10 @@ def load(path: str | Path) -> RecordedData:
 
     Raises:
         rimd_sim.io.reader.RecordingError: The path does not exist or is not MCAP at all.
+        rimd_sim.errors.AnalysisError: The recording holds several runs of the rig that each count their samples
+            from 0 (``/rig/session`` with reason ``start`` or ``replay``: a directory recorded into twice, a
+            simulator restarted under one recorder, a looped replay): their samples would be mixed; the
+            message lists each run, when it began and its file. A reset within a run is not a new count.
     """
     recording = open_recording(path)
     rows: dict[str, list] = {topic: [] for topic in EXPECTED_TYPES}
@@ -236,7 +245,17 @@ def load(path: str | Path) -> RecordedData:
     wrong_type: dict[str, dict] = {}
     counts: dict[str, int] = {}
     decoders: dict[str, Callable] = {}
-    for msg in recording.messages(list(EXPECTED_TYPES)):
+    starts: dict[str, tuple[int, str, str]] = {}
+    session_decoder = _decoder(recording, SESSION, "rimd_msgs/msg/RigSession")
+    for msg in recording.messages([*EXPECTED_TYPES, SESSION]):
+        if msg.topic == SESSION:
+            try:
+                session = session_decoder(msg.data)
+            except Exception:  # noqa: BLE001 - a damaged session message says nothing: the data still counts
+                continue
+            if session.reason in _COUNT_FROM_ZERO:
+                starts.setdefault(session.run_id, (msg.log_time, session.reason, msg.path.name if msg.path else ""))
+            continue
         expected = EXPECTED_TYPES[msg.topic]
         if msg.type_name and msg.type_name != expected:
             # Another type under a rig topic name: its bytes may well decode as the rig's type (garbage), so
@@ -256,6 +275,8 @@ def load(path: str | Path) -> RecordedData:
             continue
         counts[msg.topic] = counts.get(msg.topic, 0) + 1
         rows[msg.topic].append(row)
+    if len(starts) > 1:
+        raise AnalysisError(several_runs(Path(path), starts))
     blocks = {topic: rows[topic] for topic in BLOCK_TOPICS}
     events, motor, faults, captures = rows[EVENTS], rows[MOTOR], rows[FAULTS], rows[CAPTURE_FORCE]
     stamps = [b[0][0] for b in blocks.values() if b] + [e[0] for e in events[:1]] + [m[0] for m in motor[:1]]
@@ -276,6 +297,21 @@ def load(path: str | Path) -> RecordedData:
             data.captures.append(Capture(index, rate, trigger, trigger + (np.arange(samples.size) - pre) / rate,
                                          samples))
     return data
+
+
+def several_runs(path: Path, starts: dict[str, tuple[int, str, str]]) -> str:
+    """Why a recording of several runs of the rig is refused, and what to do instead (one line).
+
+    ``starts``: per run id, the log time (ns) of its first ``/rig/session`` message, its reason and its file.
+    """
+    runs = []
+    for n, (run_id, (log_ns, reason, file)) in enumerate(sorted(starts.items(), key=lambda r: r[1][0]), 1):
+        when = (datetime.fromtimestamp(log_ns * 1e-9, UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+                if log_ns > 10**18 else f"log time {log_ns * 1e-9:.3f} s")   # a recorder on simulation time
+        runs.append(f"run {n} {run_id[:8]} ({reason}, from {when}{', in ' + file if file else ''})")
+    return (f"{path} holds {len(starts)} runs of the rig, each counting its samples from 0: {'; '.join(runs)}. "
+            "Their samples would be mixed: analyse one run at a time (give its file, or record each run into "
+            "a directory of its own: rimd rig --output-dir DIR)")
 
 
 def _columns(rows: list[tuple], names: tuple[str, ...], origin: int) -> dict[str, np.ndarray]:
