@@ -178,3 +178,40 @@ def test_bifurcation_up_filled_down_hollow_coloured_by_class():
         assert {"1/1", "1/2", "sweep up (filled dots)", "sweep down (rings)"} <= set(legend)
     finally:
         plots.plt.close(fig)
+
+
+def test_the_impacts_figure_labels_its_steps_inside_the_axes_whatever_the_forces(tmp_path):
+    """Each steady step is labelled with its setpoint at the foot of the axes: with every peak near 79 N the label
+    once sat at 0 N, outside the figure, and matplotlib warned that the layout could not be made."""
+    import warnings
+
+    import matplotlib
+
+    from rimd_sim.analysis.recordings.recorded import Step
+
+    matplotlib.use("Agg")
+    t = np.linspace(0.2, 9.8, 40)
+    peaks = np.where(t < 5.0, 79.2, 76.7)
+    steps = [Step(0, 3.75, 0.0, 0.5, 1.5, 5.0), Step(1, 4.0, 5.0, 5.6, 6.5, 10.0)]
+    drawn = {}
+    real_save = plots._save
+
+    def keep(fig, path, *args, **kwargs):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        drawn["labels"] = [(t.get_text(), t.get_window_extent(renderer)) for t in fig.axes[0].texts]
+        drawn["axes"] = fig.axes[0].get_window_extent(renderer).frozen()   # before the layout moves it
+        return real_save(fig, path, *args, **kwargs)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # a layout that cannot be made is an error here
+        plots._save, saved = keep, plots._save
+        try:
+            plots.plot_recorded_impacts(t, peaks, t, peaks + 0.05, steps, tmp_path / "impacts.png", "impacts")
+        finally:
+            plots._save = saved
+    assert [text for text, _ in drawn["labels"]] == ["3.75 Hz", "4 Hz"]
+    box = drawn["axes"]
+    for text, extent in drawn["labels"]:
+        assert box.y0 <= extent.y0 and extent.y1 <= box.y1 and box.x0 <= extent.x0 <= box.x1, (text, extent, box)
+    assert (tmp_path / "impacts.png").stat().st_size > 0

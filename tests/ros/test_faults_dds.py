@@ -417,10 +417,10 @@ def test_analyze_reports_the_faults_seen_in_the_recording_and_the_captures(fault
     assert abs(drift["start_s"] - sc.SEQUENCE[-1][1]) <= BLOCK_S
     print_report(summary)
     out = capsys.readouterr().out
-    assert "faults (/rig/faults): 11 started, 11 ended" in out
-    assert "seen in the data, impact_force: gap 0.500-0.700 s" in out
-    seen = re.search(r"clock drift seen in the data: impact_force against rimd_acceleration: \+(\d+\.\d) ppm "
-                     r"from 3\.6\d\d s to 5\.(59|60)\d s", out)
+    assert "faults (/rig/faults, simulation time): 11 started, 11 ended" in out
+    assert "seen in the data, impact_force (simulation time): gap 0.500-0.700 s" in out
+    seen = re.search(r"clock drift seen in the data \(simulation time\): impact_force against rimd_acceleration: "
+                     r"\+(\d+\.\d) ppm from 3\.6\d\d s to 5\.(59|60)\d s", out)
     assert seen and float(seen.group(1)) == pytest.approx(1e4, rel=0.01), out
     # The captures against the 20 kHz channel, in the run without faults (with them, the channel's own
     # faults, offset, gain, drift, make it disagree, as they should; the scope is separate hardware).

@@ -625,11 +625,14 @@ def plot_recorded_impacts(events_t: np.ndarray, events_peak: np.ndarray, det_t: 
     for s in steps:
         if s.steady_from is not None:
             ax.axvspan(s.steady_from, s.end, color="#dddddd", alpha=0.5, lw=0)
-            ax.text(s.steady_from, 0, f"{s.setpoint:g} Hz", fontsize=7, va="bottom")
+            # At the foot of the axes whatever the forces' range (at y = 0 in data, a label left the figure
+            # when every peak was far above 0, and tight_layout could not make room for it).
+            ax.text(s.steady_from, 0.01, f"{s.setpoint:g} Hz", fontsize=7, va="bottom",
+                    transform=ax.get_xaxis_transform())
     drawn = _draw_windows(ax, windows)
     ax.plot(events_t, events_peak, "o", ms=4, mfc="none", label="/rig/impact/events peak_force")
     ax.plot(det_t, det_peak, "x", ms=4, label="detected in /rig/impact/force")
-    ax.set_xlabel("time (s, simulation)")
+    ax.set_xlabel("time (s from the recording's first stamp)")
     ax.set_ylabel("peak force (N)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
@@ -662,7 +665,7 @@ def plot_recorded_channels(channels: dict[str, Channel], windows: Sequence[Windo
         handles, labels = ax.get_legend_handles_labels()
         if handles:
             ax.legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("time (s, simulation)")
+    axes[-1, 0].set_xlabel("time (s from the recording's first stamp)")
     _save(fig, path, title, caption=caption)
     return drawn
 

@@ -258,7 +258,8 @@ def test_fault_and_gap_windows_are_left_out_said_and_drawn_on_every_time_plot(fa
     assert any(w["kind"] == "stuck" and w["source"] == "data" for w in cart), cart
     assert summary["figure_windows"]["impacts.png"] == len(windows)
     assert summary["figure_windows"]["channels.png"] >= len(force) + len(cart)
-    assert any(li.startswith(f"left out ({len(windows)} windows): ") for li in text.splitlines())
+    assert any(li.startswith(f"left out ({len(windows)} windows, s from the recording's first stamp): ")
+               for li in text.splitlines())
     # the force channel's impacts per cycle count only the cycles the sensor saw: the 3.75 Hz step holds the
     # dropout (3 of its ~26 cycles) and still reads one impact per cycle, as its events do
     row = next(r for r in summary["steps"] if r["frequency_hz"] == 3.75)

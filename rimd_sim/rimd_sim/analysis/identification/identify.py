@@ -309,7 +309,7 @@ def local_stages(data: rec.RecordedData, base: SimConfig, fixed: dict[str, float
                    if data.recording is not None else None, scan=data.recording is not None)
     windows = list(reading.windows)
     if windows:
-        say(f"left out: {reading.windows_text()}")
+        say(f"left out (s from the recording's first stamp): {reading.windows_text()}")
     detected = reading.detected
     force = data.channels.get(rec.FORCE)
     contact_free = [p for p in free if p in CONTACT_PARAMETERS]

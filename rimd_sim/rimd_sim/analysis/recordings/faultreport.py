@@ -117,23 +117,27 @@ def fault_report(recording, detected_peaks: np.ndarray, detected_times_s: np.nda
 
 
 def format_fault_report(report: dict) -> list[str]:
-    """The report as text lines (nothing when the recording holds no fault, finding or capture)."""
+    """The report as text lines (nothing when the recording holds no fault, finding or capture).
+
+    Their times are simulation time (a fault's own start, a channel's ``first_index / rate``), which each line
+    says: the analysis's other lines count from the recording's first stamp.
+    """
     lines = []
     starts = [f for f in report["faults"] if f["event"] == "start"]
     if starts:
-        lines.append(f"faults (/rig/faults): {len(starts)} started, "
+        lines.append(f"faults (/rig/faults, simulation time): {len(starts)} started, "
                      f"{sum(1 for f in report['faults'] if f['event'] == 'end')} ended: "
                      + "; ".join(f"{f['kind']} on {f['channel']} from {f['start_s']:.3f} s"
                                  + (f" for {f['duration_s']:g} s" if f["duration_s"] else " until cleared")
                                  for f in starts))
     for channel, findings in report["channels"].items():
         if findings:
-            lines.append(f"seen in the data, {channel}: " + "; ".join(
+            lines.append(f"seen in the data, {channel} (simulation time): " + "; ".join(
                 f"{f['kind']} {f['start_s']:.3f}-{f['end_s']:.3f} s ({f['detail']})" for f in findings))
     drift = report.get("drift")
     if drift and drift.get("start_s") is not None:
         end = "still drifting at the end" if drift["end_s"] is None else f"to {drift['end_s']:.3f} s"
-        lines.append(f"clock drift seen in the data: {drift['channel']} against {drift['against']}: "
+        lines.append(f"clock drift seen in the data (simulation time): {drift['channel']} against {drift['against']}: "
                      f"{drift['ppm']:+.1f} ppm from {drift['start_s']:.3f} s {end} "
                      f"({drift['impacts_paired']} impacts)")
     cap = report.get("captures")

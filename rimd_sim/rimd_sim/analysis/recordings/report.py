@@ -76,7 +76,7 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
     detected, events, match, steps = reading.detected, data.events, reading.match, reading.steps
     log(f"{len(detected['peak_time'])} impacts detected, {events['time'].size} events, {len(steps)} steps")
     if reading.windows:
-        log(f"left out: {reading.windows_text()}")
+        log(f"left out (s from the recording's first stamp): {reading.windows_text()}")
 
     write_csv(out / "impacts_detected.csv", [
         {"start_s": detected["start"][i], "peak_time_s": detected["peak_time"][i],
@@ -353,7 +353,7 @@ def format_report(summary: dict) -> list[str]:
     if windows:
         from rimd_sim.analysis.recordings.reading import CHANNEL_OF_TOPIC
 
-        lines.append(f"left out ({len(windows)} windows): " + "; ".join(
+        lines.append(f"left out ({len(windows)} windows, s from the recording's first stamp): " + "; ".join(
             f"{CHANNEL_OF_TOPIC.get(w['topic'], w['topic'])} {w['kind']} {w['start_s']:.3f}-{w['end_s']:.3f} s "
             f"({w['source']})" for w in windows))
     lines += format_fault_report(summary.get("faults") or {"faults": [], "channels": {}})
