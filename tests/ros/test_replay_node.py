@@ -94,7 +94,15 @@ def test_replay_at_1x_keeps_timing_and_bytes(ros_processes, ros_executor, record
     collector = RawCollector(ros_executor)
     replay = _replay(ros_processes, ros_executor, collector, f"file:={recording}", expected=_count(recorded))
     assert replay.returncode == 0, replay.tail()
-    assert "replay finished" in replay.output()
+    # Its first line counts the recording's messages and names the topics it does not replay (the recorded
+    # /rig/session: the replay names its own runs): the last line's count is the difference.
+    out = replay.output()
+    started = re.search(r"\((\d+) messages in the recording; not replayed: ([^)]*)\)", out)
+    finished = re.search(r"replay finished: (\d+) messages published", out)
+    assert started and finished, out
+    left = started.group(2).split(", ")
+    assert "/rig/session" in left and int(started.group(1)) == sum(len(v) for v in recorded.values())
+    assert int(finished.group(1)) == int(started.group(1)) - sum(len(recorded.get(t, [])) for t in left)
     for topic in RIG_TOPICS:
         assert collector.messages[topic] == [data for _, data in recorded[topic]], topic   # identical bytes
     errors = _timing_errors(recorded, collector, 1.0)

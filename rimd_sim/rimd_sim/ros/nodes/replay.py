@@ -192,7 +192,12 @@ class ReplayNode(RimdNode):
         self._thread = named_thread(self._run, "rimd-replay")
         window = (f" from {p.start_offset:g} s" if p.start_offset else "") + (
             f" for {p.playback_duration:g} s" if p.playback_duration else "")
-        log.info(f"replaying {len(self._pubs)} topics of {p.file} ({self._recording.message_count} messages){window} "
+        # The count is the recording's: name what of it is not replayed, so that the end's count adds up.
+        left = sorted(set(self._recording.topics) - set(self._pubs))
+        more = f" and {len(left) - 5} more" if len(left) > 5 else ""
+        not_replayed = f"; not replayed: {', '.join(left[:5])}{more}" if left else ""
+        log.info(f"replaying {len(self._pubs)} topics of {p.file} ({self._recording.message_count} messages in the "
+                 f"recording{not_replayed}){window} "
                  f"at {p.rate:g}x" + (", looping" if p.loop else "") + (", restamped" if p.restamp else "")
                  + (f", in lockstep with {', '.join(p.lockstep.consumers)}" if self._lockstep else "")
                  + (", kept alive at the end" if p.keep_alive else "")
