@@ -276,7 +276,7 @@ def load(path: str | Path) -> RecordedData:
         counts[msg.topic] = counts.get(msg.topic, 0) + 1
         rows[msg.topic].append(row)
     if len(starts) > 1:
-        raise AnalysisError(several_runs(Path(path), starts))
+        raise AnalysisError(_several_runs(Path(path), starts))
     blocks = {topic: rows[topic] for topic in BLOCK_TOPICS}
     events, motor, faults, captures = rows[EVENTS], rows[MOTOR], rows[FAULTS], rows[CAPTURE_FORCE]
     stamps = [b[0][0] for b in blocks.values() if b] + [e[0] for e in events[:1]] + [m[0] for m in motor[:1]]
@@ -299,7 +299,7 @@ def load(path: str | Path) -> RecordedData:
     return data
 
 
-def several_runs(path: Path, starts: dict[str, tuple[int, str, str]]) -> str:
+def _several_runs(path: Path, starts: dict[str, tuple[int, str, str]]) -> str:
     """Why a recording of several runs of the rig is refused, and what to do instead (one line).
 
     ``starts``: per run id, the log time (ns) of its first ``/rig/session`` message, its reason and its file.
