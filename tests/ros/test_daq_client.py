@@ -103,6 +103,28 @@ def test_my_daq_names_the_faults_and_loses_nothing(rimd_rig, tmp_path):
         assert found == pytest.approx(recorded, abs=0.5), (t, found, recorded)
 
 
+@pytest.mark.timeout(180)
+def test_against_a_rig_at_real_time_joined_late_the_client_counts_the_runs_seconds(ros_processes, tmp_path):
+    """``rimd rig`` runs at real time and stamps in wall-clock time; the client, started after it, acquires
+    ``--until`` seconds from the first sample it gets, and its times are the run's simulation seconds (it took the
+    stamps for simulation time: a lab engineer's first run stopped at once, one block per channel, exit 0)."""
+    sim = ros_processes.start_node("rimd_simulator", name="sim_wall_clock")
+    sim.wait_for_output(r"rig ready: .* stamps: wall clock", timeout=90)
+    report_file = tmp_path / "report.json"
+    client = ros_processes.start_python("-m", "rimd_sim.ros.examples.daq_client", "--until", "1.5", "--json",
+                                        str(report_file), "--timeout", "90", name="daq_wall_clock")
+    assert client.wait(120) == 0, client.tail()
+    sim.stop()
+    report = json.loads(report_file.read_text())
+    assert report["acquired_s"] >= 1.5 and 1.5 <= report["reached_s"] < 300, report["reached_s"]   # not 1.8e9
+    assert report["reached_s"] - report["acquired_s"] > 0   # it joined a running rig: its first sample was not 0
+    for name, channel in report["channels"].items():
+        assert channel["blocks"] >= 150 and channel["lost_blocks"] == 0, (name, channel)
+    (step,) = report["steps"]
+    assert step["setpoint_hz"] == 3.75 and 0 <= step["from_s"] <= report["reached_s"]
+    assert all(0 <= p["at"] <= report["reached_s"] for p in report["peaks"]) and report["peaks"]
+
+
 def test_two_rigs_in_one_test_do_not_hear_each_other(rimd_rig):
     a = rimd_rig(consumers=["nobody"], seed=1, record=False)   # held before its first block: cheap
     b = rimd_rig(consumers=["nobody"], seed=2, record=False)

@@ -18,8 +18,14 @@ injects) and ``/rig/session`` (the run's identity), and keeps, per channel:
   ``settle`` seconds, with its spread.
 
 With ``--lockstep NAME`` it reports its progress (:class:`rimd_sim.ros.clients.progress.ProgressReporter`): a rig
-in lockstep never runs ahead of it. At ``--until`` seconds of simulation time it prints one JSON report (also to
-``--json FILE``) and exits 0.
+in lockstep never runs ahead of it. Once it has ``--until`` seconds of simulation time on every channel, counted
+from the first sample it received (sample 0 on a rig that waits for it: lockstep, or started paused), it prints one
+JSON report (also to ``--json FILE``) and exits 0; a client that joins a running rig late acquires as long.
+
+Its times are the run's simulation seconds whatever the rig's time base: a block's from its ``first_index /
+sample_rate``, a stamped message's (motor state, fault) from its stamp less the stamp of the run's sample 0 (a
+block's stamp less its ``first_index / sample_rate``). A rig at real time stamps in wall-clock time: taken for
+simulation time, its first block's stamp was already past ``--until`` and the client stopped at once.
 """
 
 from __future__ import annotations
@@ -224,7 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the client until ``--until`` seconds of simulation time; print the JSON report."""
     parser = argparse.ArgumentParser(prog="python -m rimd_sim.ros.examples.daq_client",
                                      description=__doc__.split("\n")[0])
-    parser.add_argument("--until", type=float, required=True, help="simulation seconds to acquire")
+    parser.add_argument("--until", type=float, required=True,
+                        help="simulation seconds to acquire, from the first sample received")
     parser.add_argument("--lockstep", default="", metavar="NAME", help="report progress under NAME (a lockstep rig)")
     parser.add_argument("--threshold", type=float, default=10.0, help="N above the baseline that make an impact")
     parser.add_argument("--settle", type=float, default=2.0, help="s after a motor step before its peaks count")
@@ -251,15 +258,25 @@ def main(argv: list[str] | None = None) -> int:
     continuity = {t: Continuity(args.reorder_window) for t in CHANNELS}
     watch = {t: FaultWatch() for t in CHANNELS}
     peaks = PeakDetector(args.threshold)
-    steps: list[dict[str, float]] = []       # motor steps: setpoint and the time it was first seen
+    steps: list[dict[str, Any]] = []         # motor steps: setpoint and the stamp it was first seen at
     truth: list[dict[str, Any]] = []         # /rig/faults: the faults that really happened
     reached = dict.fromkeys(CHANNELS, 0.0)
     runs: list[str] = []
+    zero_ns: list[int] = []   # the stamp of the run's sample 0 (ns), from the first block
+    first_s: list[float] = []  # the run's simulation time of the first sample received
+
+    def run_seconds(ns: int) -> float:
+        """A stamp as the run's simulation seconds (as the raw stamp until a block has given sample 0's)."""
+        return (ns - zero_ns[0]) / 1e9 if zero_ns else ns / 1e9
 
     def on_block(msg: SampleBlock, topic: str) -> None:
         rate = msg.sample_rate
         samples = np.asarray(msg.samples)
-        t0 = _ns(msg.header.stamp) / 1e9
+        t0 = msg.first_index / rate   # the run's simulation seconds, in either time base
+        if not zero_ns:
+            zero_ns.append(_ns(msg.header.stamp) - round(msg.first_index * 1e9 / rate))
+        if not first_s:
+            first_s.append(t0)
         lost = continuity[topic].add(msg.first_index, samples.size, rate)
         watch[topic].add(t0, samples, msg.range_min, msg.range_max, msg.saturated_count, lost, rate)
         if topic == "/rig/impact/force":
@@ -272,17 +289,18 @@ def main(argv: list[str] | None = None) -> int:
 
     def on_motor(msg: MotorState) -> None:
         if not steps or steps[-1]["setpoint"] != msg.frequency_setpoint:
-            steps.append({"setpoint": msg.frequency_setpoint, "from": _ns(msg.header.stamp) / 1e9})
+            steps.append({"setpoint": msg.frequency_setpoint, "from_ns": _ns(msg.header.stamp)})
 
     def on_session(msg: RigSession) -> None:
         if runs and msg.reason == "start":   # the rig restarted: its indices start again
             for c in continuity.values():
                 c.restart()
+            zero_ns.clear()
         runs.append(msg.run_id)
 
     def on_fault(m: FaultEvent) -> None:
         truth.append({"event": m.event, "id": m.id, "channel": m.channel, "kind": m.kind,
-                      "at": _ns(m.header.stamp) / 1e9})
+                      "at_ns": _ns(m.header.stamp)})
 
     subs = {t: node.create_subscription(SampleBlock, t, functools.partial(on_block, topic=t), qos)
             for t in CHANNELS}
@@ -291,21 +309,28 @@ def main(argv: list[str] | None = None) -> int:
     node.create_subscription(RigSession, "/rig/session", on_session, latched)
     reporter = ProgressReporter(node, args.lockstep, subscriptions=list(subs.values())) if args.lockstep else None
     deadline = time.monotonic() + args.timeout
-    while min(reached.values()) < args.until and time.monotonic() < deadline:
+    def acquired() -> float:
+        return min(reached.values()) - (first_s[0] if first_s else 0.0)
+
+    while acquired() < args.until and time.monotonic() < deadline:
         rclpy.spin_once(node, timeout_sec=0.05)
 
     report: dict[str, Any] = {
         "reached_s": min(reached.values()),
+        "acquired_s": acquired(),
         "runs": runs,
         "channels": {CHANNELS[t]: {"blocks": c.blocks, "lost_blocks": c.lost_blocks, "lost_samples": c.lost_samples,
                                    "reordered": c.reordered, "duplicates": c.duplicates}
                      for t, c in continuity.items()},
         "faults_detected": [{"channel": CHANNELS[t], "kind": kind, "at": at}
                             for t, w in watch.items() for kind, at in w.detections],
-        "faults_truth": [f for f in truth if f["event"] == "start"],
+        "faults_truth": [{**{k: v for k, v in f.items() if k != "at_ns"}, "at": run_seconds(f["at_ns"])}
+                         for f in truth if f["event"] == "start"],
         "peaks": [{"at": t, "height_n": h} for t, h in peaks.peaks],
         "steps": [],
     }
+    for step in steps:
+        step["from"] = run_seconds(step["from_ns"])
     for i, step in enumerate(steps):
         end = steps[i + 1]["from"] if i + 1 < len(steps) else report["reached_s"]
         heights = [h for t, h in peaks.peaks if step["from"] + args.settle <= t < end]
@@ -321,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         reporter.leave()   # a rig in lockstep stops waiting for this client
     node.destroy_node()
     rclpy.try_shutdown()
-    return 0 if report["reached_s"] >= args.until else 1
+    return 0 if report["acquired_s"] >= args.until else 1
 
 
 if __name__ == "__main__":
