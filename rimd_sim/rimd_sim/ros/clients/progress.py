@@ -19,7 +19,10 @@ tells it how far it is with ``rimd_msgs/msg/ConsumerProgress`` on ``/rig/progres
 What :class:`ProgressReporter` does for you:
 
 * it *joins* (reports "nothing taken yet") once every subscription you gave it has matched a publisher and a
-  lockstep publisher listens, so the rig waits for you before its first block and you miss none;
+  lockstep publisher listens, so the rig waits for you before its first block and you miss none; while a lockstep
+  publisher listens but a subscription has matched no publisher (a misspelt topic: the rig waits for you, and
+  nothing comes), it logs a warning after ``unmatched_warning`` seconds naming that topic and the published topics
+  of its type;
 * it reports per topic (the rig does not wait for you on a topic where you have everything published, a
   fault's dropout for instance), at most every ``min_interval`` seconds, and again from a timer so that the
   last report always goes out;
@@ -140,11 +143,13 @@ class ProgressReporter(LedgerState):
         ready: A further condition to join (for consumers that subscribe over time, such as the recorder).
         min_interval: Shortest time between two reports (s); the timer sends the last one.
         topic: The progress topic.
+        unmatched_warning: Seconds a subscription may go without a publisher, while a lockstep publisher listens,
+            before the node's logger warns which (once).
     """
 
     def __init__(self, node: Node, name: str, *, subscriptions: Sequence[Any] = (),
                  ready: Callable[[], bool] | None = None, min_interval: float = 0.005,
-                 topic: str = PROGRESS_TOPIC) -> None:
+                 topic: str = PROGRESS_TOPIC, unmatched_warning: float = 5.0) -> None:
         if not name or name != name.strip():
             raise ValueError(f"ProgressReporter name {name!r} refused: must be a non-empty name without surrounding "
                              "spaces (an entry of the rig's lockstep.consumers)")
@@ -155,6 +160,9 @@ class ProgressReporter(LedgerState):
         self._ready = ready
         self._ledger = ProgressLedger(min_interval)
         self._run_id = ""
+        self._unmatched_warning = unmatched_warning
+        self._unmatched_since: float | None = None
+        self._warned = False
         self._pub = node.create_publisher(ConsumerProgress, topic, PROGRESS_QOS)
         node.create_subscription(RigSession, SESSION_TOPIC, self._on_session, SESSION_QOS)
         self._timer = node.create_timer(0.02, self._tick)
@@ -220,9 +228,36 @@ class ProgressReporter(LedgerState):
         if not ledger.joined:
             if self._can_join() and ledger.join():
                 self.flush(join=True)
+            elif not self._warned:
+                self._warn_unmatched()
             return
         if ledger.dirty or time.monotonic() - ledger.last_sent > 1.0:
             self.flush()       # the last report of a burst, or a heartbeat (which is no progress for the rig)
+
+    def _warn_unmatched(self) -> None:
+        """Once: the subscriptions that have matched no publisher while a lockstep publisher waits for this one."""
+        missing = [sub for sub in self._subscriptions if sub.get_publisher_count() == 0]
+        if not missing or self._pub.get_subscription_count() == 0:
+            self._unmatched_since = None
+            return
+        now = time.monotonic()
+        if self._unmatched_since is None:
+            self._unmatched_since = now
+        if now - self._unmatched_since < self._unmatched_warning:
+            return
+        self._warned = True
+        published = dict(self._node.get_topic_names_and_types())
+        parts = []
+        for sub in missing:
+            kind = f"{sub.msg_type.__module__.split('.')[0]}/msg/{sub.msg_type.__name__}"
+            same = sorted(t for t, types in published.items()
+                          if kind in types and t != sub.topic_name and self._node.count_publishers(t) > 0)
+            parts.append(f"{sub.topic_name} ({kind}; published topics of that type: "
+                         f"{', '.join(same) if same else 'none'})")
+        self._node.get_logger().warning(
+            f"{self.name}: no publisher after {self._unmatched_warning:g} s on {'; '.join(parts)}. A rig in lockstep "
+            "waits for this consumer to join, and it joins once every subscription it was given has matched a "
+            "publisher: is the topic name right?")
 
     def _on_session(self, msg: RigSession) -> None:
         """A new run (the rig restarted, or a replay started a pass): join it from scratch."""
