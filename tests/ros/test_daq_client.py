@@ -125,6 +125,17 @@ def test_against_a_rig_at_real_time_joined_late_the_client_counts_the_runs_secon
     assert all(0 <= p["at"] <= report["reached_s"] for p in report["peaks"]) and report["peaks"]
 
 
+def test_a_consumer_that_never_joins_is_named_when_the_rig_does_not_advance(rimd_rig):
+    """``wait_until_simulated`` on a rig held by a consumer that never joined (a misspelt topic, a wrong name)
+    says where the rig stands, the rig's last report of what holds it, and why a consumer may never join."""
+    rig = rimd_rig(consumers=["nobody"], record=False)
+    with pytest.raises(AssertionError) as held:
+        rig.wait_until_simulated(0.5, timeout=5)
+    message = str(held.value)
+    assert message.startswith("the rig is at ") and "not 0.5 s, after 5 s; the rig's last lockstep report:" in message
+    assert "waiting for nobody (not joined" in message and "one on a misspelt topic never does" in message, message
+
+
 def test_two_rigs_in_one_test_do_not_hear_each_other(rimd_rig):
     a = rimd_rig(consumers=["nobody"], seed=1, record=False)   # held before its first block: cheap
     b = rimd_rig(consumers=["nobody"], seed=2, record=False)

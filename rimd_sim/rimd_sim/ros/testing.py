@@ -528,8 +528,13 @@ class RigHandle:
         target = round(seconds * 1e9)
         if not self._spin_until(lambda: self._clock_ns >= target, timeout):
             waiting = [line for line in self.log().splitlines() if "lockstep: holding" in line]
+            # Its last report (repeated every 10 s): the time it states is the hold's length then, not now.
+            said = f"; the rig's last lockstep report: {waiting[-1]}" if waiting else ""
+            if "not joined" in said:
+                said += (" (a consumer joins once every subscription it gave its ProgressReporter has matched a "
+                         "publisher: one on a misspelt topic never does, and its node warns after 5 s)")
             raise AssertionError(f"the rig is at {self._clock_ns / 1e9:.3f} s, not {seconds:g} s, after {timeout:g} s"
-                                 + (f"; {waiting[-1]}" if waiting else ""))
+                                 + said)
 
     def stop(self) -> int:
         """Stop the rig (the recorder finishes its file) and give the domain back; the rig's exit status."""
