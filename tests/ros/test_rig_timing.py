@@ -66,10 +66,20 @@ class Arrivals:
         return statistics.median(self.lateness)
 
 
-def _diagnosed_p50(executor, node, seen: list) -> float:
-    """The simulator's next /diagnostics lateness_p50_ms."""
+def _diagnosed_p50(executor, seen: list, subscriber_ms: float, tolerance_ms: float = 3.0) -> float:
+    """The simulator's /diagnostics lateness_p50_ms once it agrees with what a subscriber saw, within the tolerance.
+
+    The rig's figure covers its last 1000 blocks (10 s at 100 blocks/s) from its start, the subscriber's its 3 s
+    window after the blocks that waited: a start made late by a loaded machine is in the first and not the second
+    (a CI run: 352 ms against 1.26 ms). They must agree once the start has left the rig's window: a wait of at most
+    12 s on the diagnostics, each a second apart. A figure that is not what subscribers see never agrees.
+    """
     start = len(seen)
     assert spin_until(executor, lambda: len(seen) > start, timeout=5), "no /diagnostics from the simulator"
+    agrees = lambda: abs(float(seen[-1]["lateness_p50_ms"]) - subscriber_ms) <= tolerance_ms  # noqa: E731
+    assert spin_until(executor, agrees, timeout=12), (
+        f"/diagnostics says {[s['lateness_p50_ms'] for s in seen[start:]]} ms, "
+        f"a subscriber sees {subscriber_ms:.2f} ms")
     return float(seen[-1]["lateness_p50_ms"])
 
 
@@ -100,8 +110,7 @@ def test_blocks_arrive_on_time_however_the_rig_starts_and_each_run_is_named(ros_
     assert (first.reason, first.time_base) == ("start", "wall_clock")
     unpaused = arrivals.measure(MEASURE_S)
     assert unpaused <= 5.0, f"unpaused start: blocks {unpaused:.1f} ms late (median)"
-    diag = _diagnosed_p50(ros_executor, node, diagnostics)
-    assert abs(diag - unpaused) <= 3.0, f"/diagnostics says {diag} ms, a subscriber sees {unpaused:.2f} ms"
+    _diagnosed_p50(ros_executor, diagnostics, unpaused)
 
     # 2. After a reset: a new run, the same timing.
     trigger = node.create_client(Trigger, "/rig/reset")
