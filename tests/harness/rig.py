@@ -32,13 +32,15 @@ class RawCollector:
         self.node = Node(name, context=executor.context)
         executor.add_node(self.node)
         self.messages: dict[str, list[bytes]] = {t: [] for t in topics}
+        # When DDS received each (its reader's timestamp, s): not when this process's executor took it, which a
+        # loaded test process delays (a CI run measured a 2x replay at 0.82 of the recorded span so).
         self.times: dict[str, list[float]] = {t: [] for t in topics}
         qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
         self.subscriptions = []
         for topic, kind in topics.items():
-            def callback(data, topic=topic):
+            def callback(data, info, topic=topic):
                 self.messages[topic].append(data)
-                self.times[topic].append(time.monotonic())
+                self.times[topic].append(info["received_timestamp"] / 1e9)
             name = (remap or {}).get(topic, topic)
             self.subscriptions.append(
                 self.node.create_subscription(getattr(rimd_msgs.msg, kind), name, callback, qos, raw=True))
