@@ -2,6 +2,8 @@
 
 Both reporters (over ``/rig/progress`` and in the composed rig's process) keep their books here; the ROS tests
 (tests/ros/test_lockstep.py, tests/ros/test_composed_rig.py) show them reporting; these the books themselves.
+And the publisher's side, :class:`ReportOrder`: of the reports that come twice (a transient local writer matches
+both of its subscriptions) each counts once, in the order written (tests/ros/test_lockstep_join.py over DDS).
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import threading
 from types import SimpleNamespace
 
-from rimd_sim.runtime.progress import ProgressLedger, stamp_ns
+from rimd_sim.runtime.progress import ProgressLedger, ReportOrder, stamp_ns
 
 
 def test_stamp_ns_of_a_time_and_of_an_integer():
@@ -72,3 +74,36 @@ def test_concurrent_done_calls_keep_the_largest_stamp():
     for t in threads:
         t.join(timeout=30)
     assert ledger.take_report() == (0, {"/a": 19_999})
+
+
+def test_a_volatile_writers_reports_all_count():
+    order = ReportOrder()
+    assert all(order.take("daq", "a", latched=False) for _ in range(3))   # repeats too: a heartbeat is no progress
+
+
+def test_a_transient_local_writers_reports_count_once_on_the_transient_local_subscription():
+    order = ReportOrder()
+    # Its join, written before the match, comes on the transient local subscription alone: it counts.
+    assert order.take("daq", "a", latched=True)
+    # From then on each report comes on both: the transient local copy counts, the volatile one is a copy,
+    # whichever comes first (a leave then a late copy of the report before it would make the consumer join again).
+    assert not order.take("daq", "a", latched=False)
+    assert order.take("daq", "a", latched=True)
+    assert order.take("daq", "a", latched=True)        # the leave
+    assert not order.take("daq", "a", latched=False)   # the late copy of the report before it
+    assert not order.take("daq", "a", latched=False)
+
+
+def test_before_its_first_transient_local_report_a_writers_volatile_reports_count():
+    order = ReportOrder()
+    assert order.take("daq", "a", latched=False)       # the volatile subscription matched the writer first
+    assert order.take("daq", "a", latched=True)        # the same report's transient local copy: a repeat (no-op)
+    assert not order.take("daq", "a", latched=False)
+
+
+def test_each_consumer_and_instance_is_counted_apart():
+    order = ReportOrder()
+    assert order.take("daq", "a", latched=True)
+    assert order.take("daq", "b", latched=False)       # a restart with a volatile writer: a new instance
+    assert order.take("recorder", "a", latched=False)  # another consumer
+    assert not order.take("daq", "a", latched=False)

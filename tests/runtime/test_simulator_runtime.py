@@ -210,6 +210,26 @@ def test_lockstep_holds_until_the_consumer_joins_then_by_its_progress_and_report
     assert sum("beyond what was published" in line for _, line in rig.logs) == 1
 
 
+def test_a_join_waits_for_the_readers_of_the_topics_it_names_or_else_those_of_its_node():
+    """What the node is asked to wait for when a consumer joins (tests/ros/test_lockstep_join.py: over DDS)."""
+    rig = make_rig(**lockstep(**{"lockstep.consumers": ["daq", "pair", "anon"]}))
+    rt = rig.rt
+    force = rt.topics["impact/force"]
+    rt.progress("daq", 0, instance="a", topics=[force, "/elsewhere"], topics_done_ns=[0, 0], node="/my/daq")
+    rt.progress("pair", 0, instance="b", node="/pair")    # no topics named: those the graph shows it reading
+    rt.progress("anon", 0, instance="c")                  # no node: every reader the graph shows
+    rig.run(1)
+    assert rig.matches == [{}, {}, {"/my/daq": [force], "/pair": None}]   # the start, "anon", the named nodes
+
+
+def test_joins_before_a_paused_rigs_first_resume_wait_after_every_reader():
+    rig = make_rig(start=False, start_paused=True, **lockstep())
+    rig.rt.start()
+    rig.rt.progress("daq", 0, instance="a", node="/my/daq")
+    assert rig.rt.resume().success
+    assert rig.matches == [{}, {"/my/daq": None}]   # sample 0: every reader, then the joining node's
+
+
 @pytest.mark.parametrize("policy", ["drop", "wait"])
 def test_a_silent_consumer_is_dropped_or_waited_for_on_timeout(policy):
     rig = make_rig(**lockstep(**{"lockstep.timeout": 2.0, "lockstep.on_timeout": policy}))

@@ -5,6 +5,9 @@ from another process (:class:`rimd_sim.ros.clients.progress.ProgressReporter`) a
 the composed rig (:class:`rimd_sim.ros.nodes.feed.DirectProgress`). How a report travels is theirs; what it holds,
 and when one is due, is decided here once. Thread-safe: a consumer may finish messages on any thread (the recorder
 does on its writer thread).
+
+On the publisher's side, :class:`ReportOrder` decides which of the reports that come over ``/rig/progress`` count:
+each once, in the order it was written.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import threading
 import time
 from typing import Any
 
-__all__ = ["PACING_STATUS", "PUBLISHED_KEY", "LedgerState", "ProgressLedger", "stamp_ns"]
+__all__ = ["PACING_STATUS", "PUBLISHED_KEY", "LedgerState", "ProgressLedger", "ReportOrder", "stamp_ns"]
 
 #: The end of the name of a lockstep publisher's status on ``/diagnostics`` (``rimd_simulator: pacing``): what a
 #: consumer reads to learn what it publishes and whether it waits for it.
@@ -115,3 +118,34 @@ class LedgerState:
     def reports(self) -> int:
         """Reports sent so far."""
         return self._ledger.reports
+
+
+class ReportOrder:
+    """Which progress reports a lockstep publisher takes: each once, in the order its writer wrote them.
+
+    A lockstep publisher listens on ``/rig/progress`` with two subscriptions: a volatile one, which matches every
+    writer, and a transient local one, which matches transient local writers only and receives, at the match, the
+    last report such a writer wrote before it (a join published once, before the publisher had matched the
+    writer). A transient local writer's reports therefore come twice, once on each, and the executor may hand
+    over the copy of an older report after a newer one (a leave, then a copy of the report before it, would make
+    the consumer join again). So, per consumer and instance: every report of the transient local subscription is
+    taken (its stream has everything from the last report before the match on, in the order written); a report
+    of the volatile subscription is taken until the transient local one has brought a report of that consumer and
+    instance (a volatile writer never does: all of its reports are taken), and dropped after (a copy). Thread-safe.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._latched: set[tuple[str, str]] = set()
+
+    def take(self, consumer: str, instance: str, *, latched: bool) -> bool:
+        """Whether a report of ``consumer`` (its ``instance``) counts.
+
+        ``latched``: it came on the transient local subscription.
+        """
+        key = (consumer, instance)
+        with self._lock:
+            if latched:
+                self._latched.add(key)
+                return True
+            return key not in self._latched

@@ -386,9 +386,10 @@ class SimulatorRuntime:
         clock: Monotonic clock (s).
         wall_ns: Wall clock (ns since the epoch): the stamps' ``t0`` at real time.
         alive: False once the caller's publishers are gone (the loop then stops quietly).
-        match: ``match(joining)``: before the first block, and when a lockstep consumer joins, wait (bounded)
-            until the transport has matched the readers; ``joining`` maps a joining consumer's node to its
-            topics (None: nothing to wait for).
+        match: ``match(joining)``: wait (bounded) until the transport has matched the readers: before the first
+            block with ``joining`` empty (every reader), and when lockstep consumers join with ``joining`` mapping
+            each one's node to the topics its report named, or to None when it named none (the readers the
+            graph shows for that node).
         warm_up: Load the compiled kernels now (a throwaway pass), so the first block is not late.
 
     Raises:
@@ -399,7 +400,7 @@ class SimulatorRuntime:
                  topics: Mapping[str, str] | None = None, node: str = "/rig/rimd_simulator",
                  log: Callable[[str, str], None] = _no_log, clock: Callable[[], float] = time.monotonic,
                  wall_ns: Callable[[], int] = time.time_ns, alive: Callable[[], bool] = lambda: True,
-                 match: Callable[[dict[str, list[str]]], None] | None = None, warm_up: bool = True) -> None:
+                 match: Callable[[dict[str, list[str] | None]], None] | None = None, warm_up: bool = True) -> None:
         self._config = config
         self._settings = settings
         self._lockstep = settings.lockstep if settings.lockstep.enabled else None
@@ -434,7 +435,8 @@ class SimulatorRuntime:
         self._run_id = ""
         self._hold_reported = 0.0  # monotonic time of the last hold report (0: not reported in this hold)
         self._match_pending = False  # a lockstep consumer joined: wait for the transport to match it
-        self._joining: dict[str, list[str]] = {}   # node -> its topics, of consumers that just joined
+        self._joining: dict[str, list[str] | None] = {}   # node -> its topics (None: unnamed), of new joins
+        self._match_all = False      # a consumer that did not name its node joined: wait for every reader
         self._rates = {ch.name: Fraction(repr(ch.sample_rate)) for ch in config.channels}
         self._truth_rate = Fraction(repr(config.truth_rate))
         self._truth_sample_rate = config.truth_rate
@@ -505,7 +507,7 @@ class SimulatorRuntime:
     def start(self) -> None:
         """Start the run now, unless it starts paused (then at the first :meth:`resume`)."""
         if not self._paused:
-            self._wait_for_matches()
+            self._wait_for_matches(start=True)
             with self._lock:
                 self._begin()
 
@@ -618,12 +620,20 @@ class SimulatorRuntime:
                 parts.append(f"{c.name} ({done}, {heard}" + (", timed out" if c.timed_out else "") + ")")
         return ", ".join(parts) or "nobody"
 
-    def _wait_for_matches(self) -> None:
-        """Let the caller wait until the transport matched the readers, the joining consumers' included."""
+    def _wait_for_matches(self, start: bool = False) -> None:
+        """Let the caller wait until the transport matched the readers.
+
+        Every one at the ``start`` (the first block) and after a join of a consumer that did not name its node;
+        the readers of the consumers that joined since the last wait.
+        """
         joining = dict(self._joining)   # a join that comes meanwhile sets _match_pending again
+        everyone, self._match_all = start or self._match_all, False
         self._match_pending = False
         if self._match is not None:
-            self._match(joining)
+            if everyone:
+                self._match({})
+            if joining:
+                self._match(joining)
         for node in joining:
             self._joining.pop(node, None)
 
@@ -642,9 +652,11 @@ class SimulatorRuntime:
         with self._pace_lock:
             verdict = self._pacer.lockstep.progress(consumer, done_ns, instance, per_topic, leaving=leaving)
         if verdict.joined:   # its subscriptions may be newer than its report: let the transport match them first
-            if node:
+            if node:   # the topics it names, or (None) those the graph shows it reading
                 published = set(self._topics.values())
-                self._joining[node] = [t for t in (topics or published) if t in published]
+                self._joining[node] = [t for t in topics if t in published] if topics else None
+            else:      # its readers are unknown: every reader the graph shows
+                self._match_all = True
             self._match_pending = True
         if verdict.log and verdict.accepted and verdict.reason != "topics":
             self._log("info", f"lockstep: {verdict.log}")
@@ -931,7 +943,7 @@ class SimulatorRuntime:
     def resume(self) -> Answer:
         """Go on from where the run was paused; the first resume of a run started paused starts it."""
         if not self._started and self._paused:
-            self._wait_for_matches()   # sample 0 goes once the transport has matched the readers the caller saw
+            self._wait_for_matches(start=True)   # sample 0 goes once the transport matched the readers the caller saw
         with self._lock:
             if not self._paused:
                 return Answer(False, "not paused")

@@ -26,11 +26,14 @@ What :class:`ProgressReporter` does for you:
 * it reports per topic (the rig does not wait for you on a topic where you have everything published, a
   fault's dropout for instance), at most every ``min_interval`` seconds, and again from a timer so that the
   last report always goes out;
+* it publishes on a reliable, transient local writer with a history of one (:data:`PROGRESS_QOS`): a report
+  written before a lockstep publisher matched the writer, the join above all, reaches it at the match;
 * it joins again when a new run starts (``/rig/session``: the rig restarted, or a replay started a pass), with
   a new ``instance`` for each process, so a restarted consumer resumes where the run stands.
 
 Clients in other languages publish the message themselves: it is documented field by field in
-``rimd_msgs/msg/ConsumerProgress.msg``.
+``rimd_msgs/msg/ConsumerProgress.msg``, and the protocol (QoS, join, reports, leave) in docs/rig.md, "Pacing:
+lockstep". :func:`listen_for_progress` is the publishers' side (the simulator, the replay).
 
 This module is what a user's DAQ node imports: it imports rclpy, ``rimd_msgs`` and the standard library only
 (and the ``rimd_sim``, ``rimd_sim.ros`` and ``rimd_sim.ros.clients`` package modules, which import nothing), so a
@@ -51,16 +54,26 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
-from rimd_sim.runtime.progress import LedgerState, ProgressLedger, stamp_ns
+from rimd_sim.runtime.progress import LedgerState, ProgressLedger, ReportOrder, stamp_ns
 
-__all__ = ["PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter"]
+__all__ = ["PROGRESS_QOS", "PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter", "listen_for_progress"]
 
 #: Where lockstep publishers listen for progress, and where the rig names its runs.
 PROGRESS_TOPIC = "/rig/progress"
 SESSION_TOPIC = "/rig/session"
 
-#: QoS of the progress topic: reliable (a lost report would hold the run until the next one).
-PROGRESS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: QoS of a consumer's progress writer: reliable (a lost report would hold the run until the next one), transient
+#: local with a history of one (a report written before the lockstep publisher matched the writer, the join above
+#: all, reaches it at the match; each report is the consumer's whole progress, so the last one is all it needs).
+PROGRESS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: QoS of a lockstep publisher's two subscriptions of the progress topic (:func:`listen_for_progress`): volatile
+#: (it matches every writer, a volatile one too) and transient local (it matches transient local writers only, and
+#: receives their last report at the match), reliable, deep enough for a burst of reports of many consumers.
+PROGRESS_SUBSCRIPTION_QOS = (
+    QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+    QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+               durability=DurabilityPolicy.TRANSIENT_LOCAL))
 #: QoS of the session topic: transient local (the current run reaches a late joiner).
 SESSION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -128,6 +141,33 @@ def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str
     w.boolean(leaving)
     w.string(node)
     return w.message()
+
+
+def listen_for_progress(node: Node, on_report: Callable[[ConsumerProgress], None],
+                        topic: str = PROGRESS_TOPIC) -> list[Any]:
+    """A lockstep publisher's subscriptions of the progress topic: ``on_report(msg)`` once per report, in order.
+
+    Two subscriptions (:data:`PROGRESS_SUBSCRIPTION_QOS`): the volatile one hears every writer, the transient local
+    one also hears the last report a transient local writer wrote before the match (a client that published its
+    join once, before it had matched the publisher). A transient local writer's reports come on both: which copy
+    counts is :class:`~rimd_sim.runtime.progress.ReportOrder`'s decision.
+    """
+    order = ReportOrder()
+
+    def taker(latched: bool) -> Callable[[ConsumerProgress], None]:
+        def take(msg: ConsumerProgress) -> None:
+            if order.take(msg.consumer, msg.instance, latched=latched):
+                on_report(msg)
+        return take
+
+    from rclpy.event_handler import SubscriptionEventCallbacks
+
+    volatile, latched = PROGRESS_SUBSCRIPTION_QOS
+    # A volatile writer cannot match the transient local subscription, by design (the volatile one hears it):
+    # without a handler of its own, rclpy would log that as an incompatible QoS warning.
+    expected = SubscriptionEventCallbacks(incompatible_qos=lambda event: None)
+    return [node.create_subscription(ConsumerProgress, topic, taker(False), volatile),
+            node.create_subscription(ConsumerProgress, topic, taker(True), latched, event_callbacks=expected)]
 
 
 class ProgressReporter(LedgerState):

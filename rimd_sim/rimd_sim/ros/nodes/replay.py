@@ -38,7 +38,7 @@ from rimd_msgs.msg import ConsumerProgress, RigSession
 from rimd_msgs.srv import Burst, GetRate, GetReplayState, IsPaused, PlayNext, Seek, SetRate
 from rimd_sim.errors import ConfigError, InputError
 from rimd_sim.io.reader import Recording, RecordingError, open_recording
-from rimd_sim.ros.clients.progress import PROGRESS_QOS, PROGRESS_TOPIC, SESSION_QOS, SESSION_TOPIC
+from rimd_sim.ros.clients.progress import PROGRESS_TOPIC, SESSION_QOS, SESSION_TOPIC, listen_for_progress
 from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.runtime.pacing import Hold, Wait
@@ -173,9 +173,8 @@ class ReplayNode(RimdNode):
             raise ReplayError(str(exc)) from None
         self._clock_pub = self.create_publisher(Clock, "/clock", 1000) if self._with_clock else None
         self._session_pub = self.create_publisher(RigSession, remap.get(SESSION_TOPIC, SESSION_TOPIC), SESSION_QOS)
-        if self._lockstep:
-            self.create_subscription(ConsumerProgress, remap.get(PROGRESS_TOPIC, PROGRESS_TOPIC), self._on_progress,
-                                     PROGRESS_QOS)
+        if self._lockstep:   # a transient local writer's join reaches it at the match, too
+            listen_for_progress(self, self._on_progress, remap.get(PROGRESS_TOPIC, PROGRESS_TOPIC))
         self._stop = threading.Event()
         self._wake = threading.Event()
         self.finished = threading.Event()

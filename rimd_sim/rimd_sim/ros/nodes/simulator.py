@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from builtin_interfaces.msg import Time
@@ -35,6 +35,7 @@ from std_srvs.srv import Trigger
 from rimd_msgs.msg import ConsumerProgress
 from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.errors import ConfigError
+from rimd_sim.ros.clients.progress import listen_for_progress
 from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.ros.nodes.feed import InProcessFeed
@@ -47,11 +48,15 @@ __all__ = ["SimulatorNode", "main"]
 
 NODE_NAME = "rimd_simulator"
 DEFAULT_NAMESPACE = "rig"
-#: Longest the rig waits for DDS to match the readers the graph already shows (s): before its first block, and
-#: in lockstep whenever a consumer joins.
+#: Longest the rig waits for DDS to match the readers the graph already shows before its first block (s).
 MATCH_TIMEOUT_S = 2.0
-#: The same in lockstep, where nothing may be lost however loaded the machine (s): a consumer that joined waits
-#: for its readers to be matched rather than miss the first blocks.
+#: The same in lockstep (s), before the first block and whenever a consumer joins, where nothing may be lost
+#: however loaded the machine: a reader that misses the first block after its consumer joined holds the run until
+#: lockstep.timeout, with on_timeout wait for good (the slow start sends that block alone and waits for its
+#: confirmation). A join waits only for the readers that consumer has (named in its report, or those the graph
+#: shows for its node) and ends as soon as they are matched, a few milliseconds; the bound is reached only when
+#: they never match (a ``node`` the graph does not show, a reader whose QoS its writer cannot serve), and the
+#: warning then names them.
 MATCH_TIMEOUT_LOCKSTEP_S = 15.0
 
 
@@ -118,9 +123,8 @@ class SimulatorNode(RimdNode):
             log=self.log, alive=self.context.ok, match=self._wait_for_matches)
         if feed is not None:
             feed.bind(self._rt.progress)
-        if settings.lockstep.enabled:
-            self.create_subscription(ConsumerProgress, "progress", self._on_progress, QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+        if settings.lockstep.enabled:   # a transient local writer's join reaches it at the match, too
+            listen_for_progress(self, self._on_progress, "progress")
         self.create_service(SetMotorFrequency, "set_motor_frequency", self._on_set_motor_frequency)
         self.create_service(Perturb, "perturb", self._on_perturb)
         for name, call in (("reset", self._rt.reset), ("pause", self._rt.pause), ("resume", self._rt.resume),
@@ -221,39 +225,70 @@ class SimulatorNode(RimdNode):
                 self.get_logger().error(f"simulation stopped by an internal error (please report it):\n"
                                         f"{traceback.format_exc()}")
 
-    def _wait_for_matches(self, joining: dict[str, list[str]]) -> None:
-        """Wait (bounded) until DDS has matched every subscription the graph shows to its publisher.
+    def _wait_for_matches(self, joining: Mapping[str, list[str] | None]) -> None:
+        """Wait (bounded) until DDS has matched the readers the graph shows to their publishers.
 
         A volatile topic reaches only the readers its writer has matched, and the graph can show a new
         subscriber some milliseconds before the match: without this wait a reader the caller saw (`rimd rig`, a
-        lockstep consumer that just joined) could miss the first blocks. This node's own view of the graph can
-        lag the consumer's too (under load, by more than the match): a joining consumer names its node and
-        topics, and the wait lasts until the graph here shows that node's readers of them, and they are matched.
+        lockstep consumer that just joined) could miss the first blocks. With ``joining`` empty (before the first
+        block): every subscription of a published topic. Otherwise only the joining consumers' readers: ``joining``
+        maps each one's node to the topics its report named, or to None (it named none): the published topics the
+        graph shows that node reading. This node's own view of the graph can lag the consumer's (under load, by
+        more than the match): the wait lasts until the graph here shows the node and its readers, and they are
+        matched. A join's wait is logged with the readers it waited for.
         """
         timeout = MATCH_TIMEOUT_LOCKSTEP_S if self._lockstep else MATCH_TIMEOUT_S
+        start = time.monotonic()
         if self._outbox is not None:   # the blocks before the match reach the readers matched before it only
             self._outbox.drain(timeout)
-        deadline = time.monotonic() + timeout
-        while (unmatched := self._unmatched(joining)) and time.monotonic() < deadline and not self._stop.is_set():
+        deadline = start + timeout
+        while True:
+            unmatched, readers = self._unmatched(joining)
+            if not unmatched or time.monotonic() >= deadline or self._stop.is_set():
+                break
             time.sleep(0.005)
+        if self._stop.is_set():
+            return
         if unmatched:
             self.get_logger().warning(f"publishing although readers of {', '.join(unmatched)} are not matched after "
                                       f"{timeout:g} s: they may miss blocks")
+            return
+        for node, topics in readers.items():
+            self.get_logger().info(f"lockstep: the readers of {node} are matched after {time.monotonic() - start:.3f} "
+                                   f"s: {', '.join(topics) if topics else 'none of the published topics'}")
 
-    def _unmatched(self, joining: dict[str, list[str]]) -> list[str]:
-        """Topics whose publisher has not matched every subscription the graph shows yet (DDS discovery).
+    def _unmatched(self, joining: Mapping[str, list[str] | None]) -> tuple[list[str], dict[str, list[str]]]:
+        """What is not matched yet, and per joining node the published topics whose readers are waited for.
 
-        Also the topics of a joining consumer whose reader this node's graph does not show yet.
+        Unmatched: the topics whose publisher has matched fewer subscriptions than the graph shows (every published
+        topic with ``joining`` empty, else the joining nodes' topics), the topics a joining node names whose reader
+        this node's graph does not show yet, and a joining node that named no topics and that graph does not show.
         """
-        out = [p.topic_name for p in self._pubs.values()
-               if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
-        for node, topics in joining.items():
+        pubs = {p.topic_name: p for p in self._pubs.values()}
+        if not joining:
+            return [t for t, p in pubs.items() if p.get_subscription_count() < self.count_subscribers(t)], {}
+        out: list[str] = []
+        readers: dict[str, list[str]] = {}
+        for node, named in joining.items():
+            topics = named if named is not None else self._reads(node)
+            if topics is None:
+                out.append(f"the topics of {node} (a node this node's graph does not show)")
+                continue
+            readers[node] = topics = sorted(t for t in topics if t in pubs)
             for topic in topics:
-                readers = {(i.node_namespace.rstrip("/") + "/" + i.node_name)
-                           for i in self.get_subscriptions_info_by_topic(topic)}
-                if node not in readers:
+                infos = self.get_subscriptions_info_by_topic(topic)
+                shown = {i.node_namespace.rstrip("/") + "/" + i.node_name for i in infos}
+                if node not in shown or pubs[topic].get_subscription_count() < len(infos):
                     out.append(f"{topic} (by {node})")
-        return out
+        return out, readers
+
+    def _reads(self, node: str) -> list[str] | None:
+        """The topics the graph shows ``node`` (``/ns/name``) subscribing to; None when it does not show the node."""
+        namespace, _, name = node.rpartition("/")
+        try:
+            return [topic for topic, _ in self.get_subscriber_names_and_types_by_node(name, namespace or "/")]
+        except Exception:  # noqa: BLE001 - rclpy's NodeNameNonExistentError (not exported), or a name it refuses
+            return None
 
     def _on_progress(self, msg: ConsumerProgress) -> None:
         self._rt.progress(msg.consumer, from_time(msg.done_through), instance=msg.instance, topics=list(msg.topics),
