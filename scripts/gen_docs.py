@@ -64,6 +64,8 @@ VERB_PAGES = {
     "analyze": "docs/analyses.md",
     "identify": "docs/identification.md",
     "fit-table": "docs/identification.md",
+    "fit-paper": "docs/validation.md",
+    "paper": "docs/validation.md",
     "pulse": "docs/physics.md",
     "info": "docs/development.md",
     "warmup": "docs/development.md",
@@ -289,6 +291,48 @@ def render_verb(name: str) -> str:
     return f"`{_cell(usage)}`\n\n" + _table(["option", "default", "help"], rows)
 
 
+def render_validation_table() -> str:
+    """docs/validation.md's table of findings, from docs/validation/validation.csv (what `rimd paper` wrote)."""
+    import csv
+
+    with open(ROOT / "docs" / "validation" / "validation.csv", newline="") as fh:
+        checks = list(csv.DictReader(fh))
+    passed = sum(c["passed"] == "True" for c in checks)
+    rows = [[_cell(c["finding"]), _cell(c["source"]),
+             _cell(f"{c['paper']} {c['unit']}".strip() if c["paper"].replace(".", "", 1).isdigit() else c["paper"]),
+             _cell(f"{c['twin']} {c['unit']}".strip() if c["twin"] not in ("", "None") else "-"),
+             _cell(c["tolerance"]), "pass" if c["passed"] == "True" else "**FAIL**", _cell(c["detail"])]
+            for c in checks]
+    return (f"**{passed} of {len(checks)} findings reproduced** by the default configuration.\n\n"
+            + _table(["finding", "source", "paper", "twin", "tolerance", "result", "how"], rows))
+
+
+def render_presets() -> str:
+    """docs/configuration.md's table of what each preset reproduces.
+
+    From docs/validation/presets.csv, which scripts/validate_presets.py writes.
+    """
+    import csv
+
+    with open(ROOT / "docs" / "validation" / "presets.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    presets = list(dict.fromkeys(r["preset"] for r in table))
+    findings = list(dict.fromkeys((r["key"], r["finding"], r["paper"], r["unit"]) for r in table))
+    cell = {(r["preset"], r["key"]): r for r in table}
+    rows = []
+    for key, finding, paper, unit in findings:
+        numeric = paper.replace(".", "", 1).isdigit()
+        row = [_cell(finding), _cell(f"{paper} {unit}".strip() if numeric else paper)]
+        for p in presets:
+            r = cell.get((p, key))
+            twin = "-" if r is None or r["twin"] in ("", "None") else f"{r['twin']} {unit}".strip()
+            row.append(_cell(twin + (" (pass)" if r is not None and r["passed"] == "True" else " (**fail**)")))
+        rows.append(row)
+    passed = [sum(cell[(p, k)]["passed"] == "True" for k, *_ in findings if (p, k) in cell) for p in presets]
+    rows.append(["**findings reproduced**", "", *[f"**{n} of {len(findings)}**" for n in passed]])
+    return _table(["finding", "paper", *[f"`{p}`" for p in presets]], rows)
+
+
 def render_verbs() -> str:
     """The overview of the verbs (``rimd_sim.cli.VERBS``) with the page that documents each."""
     from rimd_sim import cli
@@ -330,6 +374,8 @@ def sections() -> list[Section]:
         Section("rerun-parameters", "docs/rerun.md", render_rerun_parameters, "Rerun bridge parameters"),
         Section("node-parameters", "docs/configuration.md", render_node_parameters, "Simulator node parameters"),
         Section("pip-only", "docs/ros-install.md", render_pip_only, "The pip-only packages"),
+        Section("validation-table", "docs/validation.md", render_validation_table, "The findings"),
+        Section("presets", "docs/configuration.md", render_presets, "Presets"),
     ]
     for verb in cli.VERBS:
         if verb.module is None:

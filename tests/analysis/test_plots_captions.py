@@ -111,8 +111,9 @@ def test_bifurcation_png_names_the_design_in_its_metadata(tmp_path):
 
 
 def _point(f: float, force: float, per_cycle: float) -> SweepPoint:
+    label = {1.0: "1/1", 0.5: "1/2"}.get(per_cycle, "chaotic/non-periodic")
     return SweepPoint(frequency_hz=f, frequency_ratio=f / 10.5, peak_force_n=force, force_ratio=force / 9.81,
-                      impacts_per_cycle=per_cycle, simulated_seconds=1.0)
+                      impacts_per_cycle=per_cycle, simulated_seconds=1.0, motion_class=label)
 
 
 def _sweep(points) -> SweepResult:

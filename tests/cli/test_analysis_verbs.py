@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from harness.outputs import read_json
+from harness.presets import FORMER_DEFAULT_ARGS
 from rimd_sim import cli
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -40,25 +41,24 @@ def _reference_class(frequency: float) -> str:
 
 @pytest.mark.process
 def test_bifurcation_gap0_shows_the_doubling_window_up_and_down(tmp_path, capsys):
-    """Default preset, gap 0: 1/1 at 4.8 Hz and the period-doubled 2/2 motion (alternating peaks) at 5.0 Hz in both
-    sweeps, as the independent reference integrator finds from rest (the paper-model preset has the doubling from
-    4.85 Hz: tests/analysis/dynamics/test_dynamics.py)."""
-    low, high = _reference_class(4.8), _reference_class(5.0)    # where the expected classes come from
+    """Default preset, gap 0: 1/1 at 4.7 Hz and the period-doubled 2/2 motion (alternating peaks) at 4.9 Hz in both
+    sweeps, as the independent reference integrator finds from rest (the multiplier crosses -1 at 4.805 Hz)."""
+    low, high = _reference_class(4.7), _reference_class(4.9)    # where the expected classes come from
     assert (low, high) == ("1/1", "2/2")
     out = tmp_path / "bif"
-    status = cli.main(["bifurcation", "--f-min", "4.8", "--f-max", "5.0", "--f-step", "0.1",
+    status = cli.main(["bifurcation", "--f-min", "4.7", "--f-max", "4.9", "--f-step", "0.1",
                        "--transient-cycles", "60", "--sample-cycles", "24", "--out", str(out)])
     assert status == 0
     summary = _files(out, "bifurcation.png", "bifurcation.csv", "summary.json")
     for direction in ("up", "down"):
         runs = summary["branches"][direction]
-        assert [(r["class"], r["f_from_hz"]) for r in runs][0] == (low, 4.8)
-        assert runs[-1]["class"] == high and runs[-1]["f_to_hz"] == 5.0
+        assert [(r["class"], r["f_from_hz"]) for r in runs][0] == (low, 4.7)
+        assert runs[-1]["class"] == high and runs[-1]["f_to_hz"] == 4.9
     rows = list(csv.DictReader(open(out / "bifurcation.csv")))
-    at5 = {round(float(r["displacement_ratio"]), 2) for r in rows
-           if r["direction"] == "up" and r["frequency_hz"] == "5.0"}
-    assert len(at5) == 2  # two stroboscopic values: period 2
-    assert "2/2 (period doubling) at 5-5 Hz" in capsys.readouterr().out
+    at_high = {round(float(r["displacement_ratio"]), 2) for r in rows
+               if r["direction"] == "up" and r["frequency_hz"] == "4.9"}
+    assert len(at_high) == 2  # two stroboscopic values: period 2
+    assert "2/2 (period doubling) at" in capsys.readouterr().out
 
 
 def test_poincare_reproduces_fig10_period_half(tmp_path):
@@ -74,13 +74,13 @@ def test_poincare_reproduces_fig10_period_half(tmp_path):
 
 
 def test_peterka_small_map_has_period_1_and_half_and_marks_coexistence(tmp_path):
-    """A 2 x 3 map: at gap 0 the 3.75 Hz cell is 1/1 (band A) and 6.75 Hz 1/2 (band B region); at gap 2.4 mm and
-    5.25 Hz rest reaches 1/2 while the upward continuation stays without impact (the coexisting attractors
-    of the paper's Fig. 12; docs/interface.md, "What the twin must reproduce"), so that cell is marked."""
+    """A 2 x 3 map of the former default (harness.presets): at gap 0 the 3.75 Hz cell is 1/1 (band A) and 6.75 Hz 1/2
+    (band B region); at gap 2.4 mm and 5.25 Hz rest reaches 1/2 while the upward continuation stays without impact
+    (the coexisting attractors of the paper's Fig. 12), so that cell is marked."""
     out = tmp_path / "pk"
     assert cli.main(["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3.75",
                      "--f-max", "6.75", "--freqs", "3", "--transient-cycles", "60", "--measure-cycles", "24",
-                     "--workers", "1", "--out", str(out)]) == 0
+                     "--workers", "1", "--out", str(out), *FORMER_DEFAULT_ARGS]) == 0
     summary = _files(out, "peterka.png", "peterka.csv", "summary.json")
     cells = {(float(r["gap_mm"]), float(r["frequency_hz"])): r for r in csv.DictReader(open(out / "peterka.csv"))}
     assert cells[(0.0, 3.75)]["class_rest"] == "1/1"
@@ -123,11 +123,13 @@ def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
 
 
 def test_basins_give_each_initial_condition_its_attractor(tmp_path, capsys):
-    """Gap 2.4 mm, 2.548 Hz (config/rimd.yaml): two attractors, the 1/1 impact motion and the motion without
-    impact (33 of 576 initial conditions); each initial condition's attractor id in basins.csv, the attractors
-    listed in summary.json with a stroboscopic point and the peak force, their points drawn on the plot."""
+    """Gap 2.4 mm, 2.548 Hz (the former default, harness.presets): two attractors, the 1/1 impact motion and the
+    motion without impact (33 of 576 initial conditions); each initial condition's attractor id in basins.csv, the
+    attractors listed in summary.json with a stroboscopic point and the peak force, their points drawn on the
+    plot."""
     out = tmp_path / "b"
-    assert cli.main(["basins", "--frequency", "2.548", "--size", "24", "--workers", "1", "--out", str(out)]) == 0
+    assert cli.main(["basins", "--frequency", "2.548", "--size", "24", "--workers", "1", "--out", str(out),
+                     *FORMER_DEFAULT_ARGS]) == 0
     summary = _files(out, "basins.png", "basins.csv", "summary.json")
     rows = list(csv.DictReader(open(out / "basins.csv")))
     attractors = {a["id"]: a for a in summary["attractors"]}
@@ -146,7 +148,7 @@ def test_basins_give_each_initial_condition_its_attractor(tmp_path, capsys):
     (["bifurcation", "--f-min", "5", "--f-max", "3"], "--f-min 5 > --f-max 3"),
     (["bifurcation", "--direction", "sideways"], "--direction 'sideways' refused"),
     (["poincare", "--frequency", "30"], "--frequency 30 refused: above motor.max_frequency"),
-    (["poincare", "--ratio", "20"], "--frequency 36.4 refused: above motor.max_frequency"),
+    (["poincare", "--ratio", "20"], "--frequency 35.26 refused: above motor.max_frequency"),
     (["peterka", "--f-min", "8", "--f-max", "2"], "--f-min 8 > --f-max 2"),
     (["peterka", "--rest-cycles", "100"], "--rest-cycles 100 refused: must be at least the cap of the other starts, "
                                           "--transient-cycles + --measure-cycles = 192"),
@@ -289,3 +291,49 @@ def test_a_short_pendulums_default_basin_region_is_one_basins_accepts():
     short = load_config(None, {"natural_frequency": 10.5, "gap": 0.25e-3})   # l = 2.25 mm, 3 A0 / l > 1.5
     (lo, hi), (rlo, rhi) = default_basin_ranges(short)
     assert lo == -MAX_BASIN_ANGLE and hi > 0 and rhi == pytest.approx(MAX_BASIN_ANGLE * short.rig.omega_n)
+
+
+def test_set_reaches_the_model_and_every_analysis_verb_takes_it(tmp_path):
+    """``--set natural_frequency=...`` changes the model a sweep runs: the pendulum's resonance without impact moves
+    with it (gap 2.4 mm, small amplitude: the sweep's largest response sits at the natural frequency set), and the
+    written summary's frequency ratio is the new one. Every analysis verb offers the option."""
+    import json
+
+    outs = {}
+    for f_n in ("1.6", "2.0"):
+        out = tmp_path / f_n
+        assert cli.main(["sweep", "--gap-mm", "20", "--f-min", "1.5", "--f-max", "2.1", "--f-step", "0.1",
+                         "--set", f"natural_frequency={f_n}", "--set", "amplitude=1e-4",
+                         "--set", "damping_ratio=0.05", "--out", str(out)]) == 0
+        rows = list(csv.DictReader(open(out / "sweep.csv")))
+        outs[f_n] = {float(r["frequency_hz"]): float(r["frequency_ratio"]) for r in rows}
+    assert outs["1.6"][1.6] == pytest.approx(1.0) and outs["2.0"][2.0] == pytest.approx(1.0)
+    summary = json.loads((tmp_path / "2.0" / "summary.json").read_text())
+    assert summary["gap_mm"] == 20
+    for verb in ("sweep", "bifurcation", "continue", "peterka", "map", "poincare", "basins", "pulse", "paper",
+                 "fit-paper", "fit-table"):
+        status = cli.main([verb, "--set", "no_such_parameter=1", "--out", str(tmp_path / "x" / verb),
+                           *(["--velocity", "1"] if verb == "pulse" else []),
+                           *(["--x", "mass", "--x-values", "0.1", "--y", "gap", "--y-values", "0"] if verb == "map"
+                             else [])])
+        assert status == 1, verb
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(("setting", "message"), [
+    ("natural_frequency=-1", "parameter 'natural_frequency' = -1.0 refused: must be > 0"),
+    ("natural_frequncy=1.8", "unknown parameter; did you mean natural_frequency"),
+    ("contact.model=rubber", "parameter 'contact.model' = 'rubber' refused: must be one of"),
+])
+def test_set_refuses_a_bad_name_or_value_in_one_line(tmp_path, capsys, setting, message):
+    status = cli.main(["sweep", "--set", setting, "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert status == 1 and message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_set_without_a_value_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as usage:
+        cli.main(["sweep", "--set", "mass", "--out", str(tmp_path / "o")])
+    assert usage.value.code == 2
+    assert "--set 'mass' refused: must be NAME=VALUE" in capsys.readouterr().err

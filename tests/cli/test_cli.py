@@ -12,9 +12,10 @@ import pytest
 from rimd_sim import cli
 
 #: The verbs of the interface (docs/interface.md, Commands), in the order of ``rimd --help``.
-INTERFACE_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "sweep", "bifurcation", "continue",
-                   "peterka", "map", "poincare", "basins", "pulse", "faults", "motor", "perturb", "inject", "pause",
-                   "resume", "reset", "clear-faults", "status", "rerun", "replay", "crop", "node", "info", "warmup")
+INTERFACE_VERBS = ("rig", "experiment", "analyze", "identify", "fit-table", "fit-paper", "paper", "sweep",
+                   "bifurcation", "continue", "peterka", "map", "poincare", "basins", "pulse", "faults", "motor",
+                   "perturb", "inject", "pause", "resume", "reset", "clear-faults", "status", "rerun", "replay", "crop",
+                   "node", "info", "warmup")
 #: Verbs listed without a module, and what their refusal says is missing: none left.
 NOT_IMPLEMENTED: dict[str, str] = {}
 

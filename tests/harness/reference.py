@@ -23,10 +23,13 @@ class RefImpact:
     impact_velocity: float
 
 
-def simulate(*, frequency: float, gap: float, duration: float, mass: float = 0.15, zeta: float = 0.08,
-             amplitude: float = 1e-3, f_n: float = 1.82, k: float = 5.5e6, c: float = 1.2e3, g: float = 9.81,
+def simulate(*, frequency: float, gap: float, duration: float, mass: float = 0.15, zeta: float = 0.088,
+             amplitude: float = 1.044e-3, f_n: float = 1.763, k: float = 5.5e6, c: float = 1.2e3, g: float = 9.81,
              rtol: float = 1e-10, atol: float = 1e-12) -> list[RefImpact]:
-    """Integrate from rest at a constant motor frequency; return the impacts."""
+    """Integrate from rest at a constant motor frequency; return the impacts.
+
+    The defaults are the values of config/rimd.yaml (the paper's rig), written here, not read from the twin.
+    """
     length = g / (2 * math.pi * f_n) ** 2
     w = 2 * math.pi * frequency
     wn = 2 * math.pi * f_n

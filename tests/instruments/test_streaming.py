@@ -110,8 +110,9 @@ def test_truth_matches_cart_kinematics_and_phase_is_continuous_through_a_ramp():
     ramp = (t > 1.0) & (t < 2.0)
     np.testing.assert_allclose(freq[ramp], 3.0 + 2.0 * (t[ramp] - 1.0), atol=1e-12)
     np.testing.assert_allclose(freq[(t >= 2.0) & (t < 3.0)], 5.0)
-    assert np.max(np.abs(np.diff(xc))) < 1e-3 * 2 * np.pi * 5.0 / 10000.0 * 1.01
-    np.testing.assert_allclose(xc, 1e-3 * np.sin(phase), atol=1e-12)
+    a0 = cfg.rig.amplitude
+    assert np.max(np.abs(np.diff(xc))) < a0 * 2 * np.pi * 5.0 / 10000.0 * 1.01
+    np.testing.assert_allclose(xc, a0 * np.sin(phase), atol=1e-12)
     stopped = t > 3.5  # 5 Hz at 10 Hz/s: stopped at 3.5 s
     assert np.ptp(xc[stopped]) == 0.0 and np.all(freq[stopped] == 0.0)
     assert out.motor.frequency == 0.0 and out.motor.frequency_setpoint == 0.0

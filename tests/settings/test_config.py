@@ -17,16 +17,19 @@ def test_default_yaml_equals_code_defaults():
     assert load_config(find_config_file("rimd.yaml")) == SimConfig()
 
 
-def test_paper_model_preset_differs_only_in_mass_and_damping():
+def test_paper_model_preset_differs_in_the_paper_values_mass_and_damping():
+    """paper_model.yaml: the paper's equations with its A0 and natural frequency, no damping, an assumed 1 kg."""
     paper = load_config(find_config_file("paper_model.yaml")).to_parameters()
     default = SimConfig().to_parameters()
-    assert {k for k in default if default[k] != paper[k]} == {"mass", "damping_ratio"}
-    assert paper["mass"] == 1.0 and paper["damping_ratio"] == 0.0
+    assert {k for k in default if default[k] != paper[k]} == {"mass", "damping_ratio", "amplitude",
+                                                              "natural_frequency"}
+    assert (paper["mass"], paper["damping_ratio"], paper["amplitude"], paper["natural_frequency"]) == (
+        1.0, 0.0, 1e-3, 1.82)
 
 
 def test_derived_length_from_natural_frequency():
-    """L = g / (2 pi 1.82)^2 = 0.0750 m (docs/physics.md, Model)."""
-    assert SimConfig().rig.length == pytest.approx(0.07502, abs=1e-5)
+    """L = g / (2 pi 1.763)^2 = 0.0799 m (docs/physics.md, Model)."""
+    assert SimConfig().rig.length == pytest.approx(0.07995, abs=1e-5)
 
 
 BAD_VALUES = [

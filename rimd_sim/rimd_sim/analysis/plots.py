@@ -221,24 +221,22 @@ def plot_sweep(results: list[SweepResult], path: Path, title: str = "", caption:
 CLASS_COLOURS = {
     "no impact": "#e8e8e8", "1/1": "#d62728", "1/2": "#2ca02c", "2/2": "#ff7f0e", "1/3": "#1f77b4",
     "2/3": "#9467bd", "2/4": "#8c564b", "2/1": "#e377c2", "chaotic/non-periodic": "#000000",
-    "integration failed": "#ffff00", "inside the stop": "#ffffff",
+    "integration failed": "#ffff00", "inside the stop": "#ffffff", "unsettled": "#9ecae1",
 }
-_SPARE = ["#17becf", "#bcbd22", "#7f7f7f", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94"]
 OTHER_PERIODIC = "other periodic"
-_OTHER_COLOUR = "#555555"
+_OTHER_COLOUR = "#7570b3"
 
 
 def class_palette(labels) -> dict[str, str]:
-    """Colour per class present: fixed ones first, then spare colours by frequency, the rest 'other periodic'."""
-    from collections import Counter
+    """Colour per class present: the fixed ones (:data:`CLASS_COLOURS`), every other class one colour.
 
-    counts = Counter(labels)
-    palette = {c: CLASS_COLOURS[c] for c in CLASS_COLOURS if c in counts}
-    spare = iter(_SPARE)
-    for c, _ in counts.most_common():
-        if c not in palette:
-            colour = next(spare, None)
-            palette[c] = colour if colour is not None else _OTHER_COLOUR
+    The other classes share one colour, named once in the legend as 'other periodic (N classes)': a map has up to
+    twenty rare classes, and as many shades of grey and brown could not be told apart (the CSV keeps each class).
+    """
+    present = set(labels)
+    palette = {c: CLASS_COLOURS[c] for c in CLASS_COLOURS if c in present}
+    for c in sorted(present - set(palette)):
+        palette[c] = _OTHER_COLOUR
     return palette
 
 
@@ -343,6 +341,8 @@ def bifurcation_figure(branches) -> tuple[Figure, Axes]:
         style = _SWEEP_MARKERS.get(b.direction, _SWEEP_MARKERS["up"])
         if b.direction == "down":
             ax.scatter(xs, ys, facecolors="none", edgecolors=cs, **style)
+        elif b.direction == "rest":   # crosses over both sweeps: each frequency started from rest
+            ax.scatter(xs, ys, c=cs, marker="x", s=14, linewidths=0.8, zorder=4)
         else:
             ax.scatter(xs, ys, c=cs, **style)
         invalid = [p for p in b.points if not p.valid]
@@ -362,8 +362,9 @@ def bifurcation_figure(branches) -> tuple[Figure, Axes]:
     if f_n:
         _hz_axis(ax, f_n)
     sweeps = [Line2D([], [], ls="", marker="o", ms=4.5, mfc="0.3", mec="0.3", label="sweep up (filled dots)"),
-              Line2D([], [], ls="", marker="o", ms=8, mfc="none", mec="0.3", label="sweep down (rings)")]
-    sweeps = [h for h, d in zip(sweeps, ("up", "down"), strict=True) if any(b.direction == d for b in branches)]
+              Line2D([], [], ls="", marker="o", ms=8, mfc="none", mec="0.3", label="sweep down (rings)"),
+              Line2D([], [], ls="", marker="x", ms=6, color="0.3", label="each frequency from rest (crosses)")]
+    sweeps = [h for h, d in zip(sweeps, ("up", "down", "rest"), strict=True) if any(b.direction == d for b in branches)]
     _class_legend(ax, colours, [*sweeps, *ax.get_legend_handles_labels()[0]])
     return fig, ax
 
@@ -372,16 +373,21 @@ def plot_bifurcation(branches, path: Path, title: str = "", caption: str = "") -
     """Stroboscopic ``l sin(theta) / A0`` versus Omega/omega_n, up and down sweeps (the paper's Fig. 11).
 
     Each sample is coloured by the class of its point's motion (:func:`class_palette`); the up sweep is drawn as
-    small filled dots over the down sweep's larger rings. The motor frequency in Hz on top.
+    small filled dots over the down sweep's larger rings, the from-rest reading as crosses. The motor frequency in
+    Hz on top.
     """
     fig, ax = bifurcation_figure(branches)
     return _save(fig, path, title, ax, caption=caption)
 
 
-#: Marker and colour of each bifurcation kind in :func:`plot_continuation`.
-_BIFURCATION_STYLE = {"period_doubling": ("v", "tab:red", "period doubling"), "fold": ("s", "tab:purple", "fold"),
-                      "neimark_sacker": ("D", "tab:green", "Neimark-Sacker"), "grazing": ("X", "k", "grazing"),
-                      "branch_point": ("P", "tab:orange", "branch point")}
+#: Marker and colour of each bifurcation kind in :func:`plot_continuation`: black and grey, told apart by shape, so
+#: that no mark takes a branch's colour (:data:`_PERIOD_COLOURS`).
+_BIFURCATION_STYLE = {"period_doubling": ("v", "k", "period doubling"), "fold": ("s", "k", "fold"),
+                      "neimark_sacker": ("D", "k", "Neimark-Sacker"), "grazing": ("X", "0.45", "grazing"),
+                      "branch_point": ("P", "k", "branch point")}
+#: Colour of a continued branch by its period (1, 2, 4, 8, ... then others), none of them black or grey.
+_PERIOD_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive",
+                   "tab:cyan")
 
 
 def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: float, length_m: float,
@@ -404,10 +410,9 @@ def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: f
             # Large enough to show around a branch drawn over them (where they agree, they are under it).
             ax.scatter(xs, ys, s=14 if b.direction == "up" else 6, c="0.6" if b.direction == "up" else "0.8",
                        linewidths=0, label=f"brute force, sweep {b.direction}", zorder=1)
-    colours = plt.get_cmap("tab10")
     seen_periods: set[int] = set()
     for br in result.branches:
-        colour = colours((br.period.bit_length() - 1) % 10)
+        colour = _PERIOD_COLOURS[(br.period.bit_length() - 1) % len(_PERIOD_COLOURS)]
         x = np.array([p.parameter for p in br.points]) * scale_x
         stable = np.array([p.stable for p in br.points])
         valid = np.array([p.valid for p in br.points])
@@ -447,7 +452,12 @@ def plot_continuation(result, path: Path, title: str, *, natural_frequency_hz: f
         _hz_axis(ax, natural_frequency_hz)
     for a in (ax, ax2):
         a.grid(alpha=0.3)
-    ax.legend(fontsize=8, markerscale=1.0, loc="best", ncols=2)
+    from matplotlib.lines import Line2D
+
+    styles = [Line2D([], [], ls="-", color="k", lw=1.6, label="stable orbit (solid)"),
+              Line2D([], [], ls="--", color="k", lw=1.6, label="unstable orbit (dashed)")]
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=[*handles, *styles], fontsize=8, markerscale=1.0, loc="best", ncols=2)
     return _save(fig, path, title, None, caption=caption)
 
 
@@ -475,8 +485,9 @@ def plot_poincare(t, x_rimd, x_cart, u, v, strobe_u, strobe_v, path: Path, title
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")
     ax2.plot(u, v, "-", color="0.6" if invalid else "b", lw=0.6, label="phase plane")
-    ax2.plot(strobe_u, strobe_v, "o", mfc="none" if invalid else "r", mec="0.5" if invalid else "r", ms=5,
-             label="Poincare map (motor phase 0)")
+    # Few points (a periodic orbit) as dots, many (a chaotic section) small enough for its structure to show.
+    ax2.plot(strobe_u, strobe_v, "o", mfc="none" if invalid else "r", mec="0.5" if invalid else "r",
+             ms=5 if len(strobe_u) <= 60 else 1.5, label="Poincare map (motor phase 0)")
     if invalid:
         for a in (ax, ax2):
             a.add_patch(plt.Rectangle((0, 0), 1, 1, transform=a.transAxes, fill=False, hatch="//", ec="0.85",

@@ -138,10 +138,10 @@ class RigParams:
                        relation="< l/2, half the pendulum length")
     # At least 1 g: a lighter hammer (1e-9 kg) made the contact so stiff that the integrator hung.
     mass: float = param(0.15, "hammer mass m", unit="kg", ge=1e-3, le=1000)
-    amplitude: float = param(1e-3, "cart displacement amplitude A0", unit="m", ge=0, le=0.05)
-    natural_frequency: float = param(1.82, "pendulum natural frequency without impact (sets l = g / (2 pi f)^2)",
+    amplitude: float = param(1.044e-3, "cart displacement amplitude A0", unit="m", ge=0, le=0.05)
+    natural_frequency: float = param(1.763, "pendulum natural frequency without impact (sets l = g / (2 pi f)^2)",
                                      unit="Hz", gt=0, le=1000)
-    damping_ratio: float = param(0.08, "structural damping ratio zeta", ge=0, le=2)
+    damping_ratio: float = param(0.088, "structural damping ratio zeta", ge=0, le=2)
     gravity: float = param(9.81, "gravitational acceleration", unit="m/s^2", gt=0, le=100)
     # A hammer on wires is a gravity pendulum, l = g / omega_n^2: 18-22 Hz designs (f_n near 10 Hz) would need a
     # 2.5 mm pendulum. A longer pendulum with a torsional spring at its pivot keeps g real; the spring is not a

@@ -290,6 +290,16 @@ def to_flat(settings: Any) -> dict[str, Any]:
     return out
 
 
+def unknown_name(name: str, known) -> str:
+    """The rule of an unknown parameter name: the closest known names, else where every name is listed."""
+    import difflib
+
+    close = difflib.get_close_matches(name, list(known), n=3, cutoff=0.6)
+    if close:
+        return "unknown parameter; did you mean " + " or ".join(close) + "? (every parameter: docs/configuration.md)"
+    return "unknown parameter (every parameter: docs/configuration.md)"
+
+
 def validate_all(cls: type, values: Mapping[str, Any], *, ignore: Callable[[str], bool] | None = None
                  ) -> dict[str, Any]:
     """Check every value of ``values`` against its parameter of ``cls``; return them converted.
@@ -304,7 +314,7 @@ def validate_all(cls: type, values: Mapping[str, Any], *, ignore: Callable[[str]
         if p is None:
             if ignore is not None and ignore(name):
                 continue
-            raise ConfigError(name, value, "unknown parameter (known: " + ", ".join(table) + ")")
+            raise ConfigError(name, value, unknown_name(str(name), table))
         out[name] = p.validate(value)
     return out
 

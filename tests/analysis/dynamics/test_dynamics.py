@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimd_sim.analysis.dynamics.steady import CHAOTIC, NO_IMPACT, classify, steady_orbit
+from rimd_sim.analysis.dynamics.steady import CHAOTIC, NO_IMPACT, UNSETTLED, classify, steady_orbit
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
@@ -35,6 +35,38 @@ def test_classify_tolerance_separates_converged_from_drifting():
     u = 1.0 + 1e-2 * np.arange(24)
     assert classify(u, np.zeros(24), np.ones(24, int))[0] == CHAOTIC
     assert classify(u, np.zeros(24), np.ones(24, int), tolerance=0.02)[0] == "1/1"
+
+
+def test_a_slowly_decaying_alternation_is_unsettled_never_2_2():
+    """About a period-1 orbit whose Floquet multiplier is -0.998, the points alternate and the alternation
+    decays by 0.2 % a cycle: it repeats every two cycles within 1e-3 long before it dies out. The class is
+    what the motion converges to (1/1) or unsettled, never 2/2; a converged alternation is 2/2."""
+    k = np.arange(48)
+    decaying = 1.0 + 0.2 * (-0.998) ** k
+    assert classify(decaying, np.zeros(48), np.ones(48, int))[0] == UNSETTLED
+    steady = 1.0 + 0.2 * (-1.0) ** k
+    assert classify(steady, np.zeros(48), np.ones(48, int))[0] == "2/2"
+    growing = 1.0 + 0.01 * np.where(k % 2, -1.0, 1.0) * np.minimum(1.0, 0.5 + k / 40)
+    assert classify(growing, np.zeros(48), np.ones(48, int))[0] != "1/1"
+
+
+def test_the_former_defaults_4_95_hz_gap_0_orbit_is_1_1_or_unsettled():
+    """The set m 0.15 kg, zeta 0.08, A0 1 mm, f_n 1.82 Hz at gap 0, 4.95 Hz: its period-1 orbit is stable with a
+    multiplier of -0.998, and the up sweep came to it on a slowly dying alternation that read 2/2. From rest
+    after 100 or 1000 cycles, and on the up, down and from-rest sweeps of ``rimd bifurcation``'s grid, it is
+    1/1 or unsettled; after 5000 cycles, 1/1."""
+    from rimd_sim.analysis.dynamics.bifurcation import bifurcation
+
+    former = SimConfig().with_parameters({"amplitude": 1e-3, "natural_frequency": 1.82, "damping_ratio": 0.08,
+                                          "gap": 0.0})
+    for transient in (100, 1000):
+        assert steady_orbit(former, 4.95, transient_cycles=transient).label in ("1/1", UNSETTLED)
+    assert steady_orbit(former, 4.95, transient_cycles=5000).label == "1/1"
+    freqs = [round(4.5 + 0.05 * i, 2) for i in range(13)]
+    branches, _, _ = bifurcation(former, freqs, "all", workers=1)
+    for b in branches:
+        (point,) = [p for p in b.points if p.frequency_hz == 4.95]
+        assert point.label in ("1/1", UNSETTLED), (b.direction, point.label)
 
 
 def test_band_a_at_gap0_is_period_1_and_band_b_period_half():
@@ -70,13 +102,12 @@ def test_period_doubling_window_at_gap0_paper_model(paper_gap0):
     assert abs(peaks[0::2].mean() - peaks[1::2].mean()) > 0.03 * peaks.mean()  # alternating magnitudes
 
 
-def test_period_doubling_with_the_defaults_starts_at_4_95_hz():
-    """With the default preset (m = 0.15 kg, zeta = 0.08) the same doubling appears only from 4.95 Hz
-    (up to 5.2 Hz): gap 0 between 4.75 and 4.9 Hz is still 1/1. This pins the known difference from the
-    paper (README, analysis section)."""
+def test_period_doubling_with_the_defaults_near_4_8_hz():
+    """The defaults (the paper's rig) double at the end of band A near 4.8 Hz (paper 4.75 Hz; the multiplier
+    crosses -1 at 4.805 Hz): 4.75 Hz is still 1/1, 4.85 Hz is 2/2."""
     cfg = SimConfig()
-    assert steady_orbit(cfg, 4.9).label == "1/1"
-    assert steady_orbit(cfg, 5.0).label == "2/2"
+    assert steady_orbit(cfg, 4.75).label == "1/1"
+    assert steady_orbit(cfg, 4.85).label == "2/2"
 
 
 @pytest.mark.parametrize("name", ["paper_model.yaml", "rimd.yaml"])

@@ -253,9 +253,10 @@ def test_identify_refuses_what_the_recording_cannot_give(tmp_path):
     report = read_json(tmp_path / "id" / "identification.json")
     assert set(report["estimates"]) == {"amplitude", "natural_frequency", "damping_ratio"}
     assert report["fixed"]["mass"] == 0.15
-    assert abs(report["estimates"]["amplitude"]["value"] / 1e-3 - 1) < 0.01
-    assert abs(report["estimates"]["natural_frequency"]["value"] / 1.82 - 1) < 0.01
-    assert abs(report["estimates"]["damping_ratio"]["value"] / 0.08 - 1) < 0.05
+    rig = SimConfig().rig   # the recording's rig: the defaults
+    assert abs(report["estimates"]["amplitude"]["value"] / rig.amplitude - 1) < 0.01
+    assert abs(report["estimates"]["natural_frequency"]["value"] / rig.natural_frequency - 1) < 0.01
+    assert abs(report["estimates"]["damping_ratio"]["value"] / rig.damping_ratio - 1) < 0.05
 
 
 def test_identify_uses_the_valid_part_of_a_damaged_recording_without_motor_states(tmp_path):
@@ -273,7 +274,9 @@ def test_identify_uses_the_valid_part_of_a_damaged_recording_without_motor_state
     assert "no /rig/motor/state: one constant motor frequency fitted to the cart laser, 3.7500" in err, err
     report = read_json(tmp_path / "id" / "identification.json")
     assert not report["data"]["recording_loss"]["complete"]
-    truth = {"amplitude": 1e-3, "natural_frequency": 1.82, "damping_ratio": 0.08, "mass": 0.15,
-             "contact.stiffness": 5.5e6, "contact.damping": 1.2e3, "gap": 0.0}
+    rig = SimConfig().rig   # the recording's rig: the defaults
+    truth = {"amplitude": rig.amplitude, "natural_frequency": rig.natural_frequency,
+             "damping_ratio": rig.damping_ratio, "mass": 0.15, "contact.stiffness": 5.5e6, "contact.damping": 1.2e3,
+             "gap": 0.0}
     _check_identified(report, truth, target=0.01)
     assert math.isfinite(report["estimates"]["mass"]["interval_95"])

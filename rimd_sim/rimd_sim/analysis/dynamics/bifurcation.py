@@ -8,7 +8,10 @@ samples are classified (:func:`rimd_sim.analysis.dynamics.steady.classify`). The
 sampled cycles (those the classification counts) give the point's steady peak force and impact velocity (the
 approach speed at contact onset).
 
-Both directions are independent runs: ``both`` runs them in two processes, one per core.
+A third reading, ``rest``, starts every frequency from rest (the hammer at rest, the motor at that frequency
+from t = 0), as Table 1 was measured: it finds the attractors a continued sweep never reaches (at gap 2.4 mm,
+band B lies on an attractor the up and down sweeps pass by, the paper's coexisting motions). The directions
+are independent runs: ``both`` (up and down) and ``all`` (up, down and rest) run them in parallel processes.
 
 Every frequency is checked against the model's valid domain (:mod:`rimd_sim.model.validity`) over its ramp,
 transient and samples; a point outside it is marked (``valid``, ``invalid_rule``). Where the chattering guard
@@ -31,7 +34,10 @@ from rimd_sim.model.rig_model import ChatteringError, RigModel
 from rimd_sim.model.validity import PointMeasures, Verdict, domain
 from rimd_sim.settings.config import SimConfig
 
-__all__ = ["BifurcationBranch", "BifurcationPoint", "bifurcation"]
+__all__ = ["DIRECTIONS", "BifurcationBranch", "BifurcationPoint", "bifurcation"]
+
+#: The readings :func:`bifurcation` takes: one sweep, ``both`` (up and down) or ``all`` (up, down and rest).
+DIRECTIONS = ("up", "down", "rest", "both", "all")
 
 
 @dataclass(frozen=True)
@@ -51,6 +57,9 @@ class BifurcationPoint:
         peak_force_n: Largest peak force of the impacts started in the sampled cycles (N); 0 without impact,
             NaN where the chattering guard fired.
         impact_velocity_m_s: Largest impact velocity of the same impacts (m/s); 0 without impact.
+        final_state: ``(theta, theta_dot)`` (rad, rad/s) at the last sampled stroboscopic instant (motor phase
+            0): a start on the attractor the sweep is on, for :func:`~rimd_sim.analysis.dynamics.lyapunov.
+            largest_lyapunov` or a continuation; NaN where the chattering guard fired.
     """
 
     frequency_hz: float
@@ -64,6 +73,7 @@ class BifurcationPoint:
     invalid_rule: str = ""
     peak_force_n: float = math.nan
     impact_velocity_m_s: float = math.nan
+    final_state: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -83,7 +93,8 @@ class BifurcationBranch:
 
 def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> BifurcationBranch:
     config, freqs, direction, transient_cycles, sample_cycles, ramp_rate = args
-    order = sorted(freqs) if direction == "up" else sorted(freqs, reverse=True)
+    order = sorted(freqs, reverse=direction == "down")
+    from_rest = direction == "rest"   # every frequency from rest: the attractors a sweep may never reach
     cfg = config.with_parameters({"motor.initial_frequency": order[0], "motor.initial_setpoint": order[0]})
     rig = cfg.rig
     rules = domain(cfg)
@@ -98,7 +109,10 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
     simulated = 0.0
     fresh = True
     for i, f in enumerate(order):
-        if model is None:
+        if from_rest and i:
+            simulated += float(model.time) if model is not None else 0.0
+            model, fresh = start(f), True
+        elif model is None:
             model, fresh = start(f), True
             restarts.append(f)
         spans = []
@@ -135,7 +149,9 @@ def _branch(args: tuple[SimConfig, list[float], str, int, int, float]) -> Bifurc
         points.append(BifurcationPoint(f, f / rig.natural_frequency, u, label, rate, max_theta, max_force,
                                        verdict.valid, verdict.invalid_rule,
                                        max((i.peak_force for i in sampled), default=0.0),
-                                       max((i.impact_velocity for i in sampled), default=0.0)))
+                                       max((i.impact_velocity for i in sampled), default=0.0),
+                                       (float(strobe[-1].theta), float(strobe[-1].theta_dot)) if strobe
+                                       else (math.nan, math.nan)))
     points.sort(key=lambda p: p.frequency_hz)
     if model is not None:
         simulated += float(model.time)
@@ -150,11 +166,11 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
     Args:
         config: Rig configuration (gap, mass, ...).
         frequencies: Motor frequencies (Hz).
-        direction: ``up``, ``down`` or ``both``.
+        direction: ``up``, ``down``, ``rest`` (each frequency from rest), ``both`` (up and down) or ``all``.
         transient_cycles: Cycles run at each frequency before sampling.
         sample_cycles: Cycles sampled at each frequency.
         ramp_rate: Motor ramp between frequencies (Hz/s).
-        workers: Local processes for ``both`` (default 2: one per direction).
+        workers: Local processes for ``both`` and ``all`` (default 2).
         scheduler: Dask scheduler address (default ``$RIMD_DASK_SCHEDULER``, else local): each branch is a task.
 
     Returns:
@@ -163,8 +179,8 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
     Raises:
         ConfigError: For a bad direction, frequency or cycle count.
     """
-    if direction not in ("up", "down", "both"):
-        raise ConfigError("direction", direction, "must be up, down or both")
+    if direction not in DIRECTIONS:
+        raise ConfigError("direction", direction, f"must be one of {', '.join(DIRECTIONS)}")
     freqs = check_frequencies(config, frequencies)
     if transient_cycles < 0 or sample_cycles < 3:
         raise ConfigError("cycles", (transient_cycles, sample_cycles),
@@ -172,7 +188,7 @@ def bifurcation(config: SimConfig, frequencies, direction: str = "both", *, tran
     if not ramp_rate > 0:
         raise ConfigError("ramp_rate", ramp_rate, "must be > 0 Hz/s")
     start = time.perf_counter()
-    dirs = ["up", "down"] if direction == "both" else [direction]
+    dirs = {"both": ["up", "down"], "all": ["up", "down", "rest"]}.get(direction, [direction])
     jobs = [(config, freqs, d, transient_cycles, sample_cycles, ramp_rate) for d in dirs]
     branches, n, _ = run_tasks(_branch, jobs, workers=workers or 2, scheduler=scheduler)
     return branches, time.perf_counter() - start, n

@@ -511,15 +511,18 @@ def peterka_table(result: PeterkaResult) -> list[dict]:
     rows = []
     cell_rules = result.invalid_rule
     found = result.classes_found
+    # Each read once: these properties join every start's arrays (read per cell, the table is quadratic in cells).
+    every_start = _AllStarts(result)
+    coexisting = result.coexisting
     for i, g in enumerate(result.gaps_mm):
         for j, f in enumerate(result.frequencies_hz):
             row = {"gap_mm": float(g), "gap_ratio": float(result.gap_ratio[i]), "frequency_hz": float(f),
                    "frequency_ratio": float(result.frequency_ratio[j])}
             row.update({f"class_{name}": result.labels[k, i, j] for k, name in enumerate(START_NAMES)})
-            row["coexisting"] = bool(result.coexisting[i, j])
+            row["coexisting"] = bool(coexisting[i, j])
             row["classes_found"] = found[i, j]
             row["starts"] = result.starts
-            row.update(_validity_columns(_AllStarts(result), (slice(None), i, j), cell_rules[i, j]))
+            row.update(_validity_columns(every_start, (slice(None), i, j), cell_rules[i, j]))
             if result.peak_force is not None and result.impact_velocity is not None:
                 row["peak_force_n"] = float(result.peak_force[i, j])
                 row["impact_velocity_m_s"] = float(result.impact_velocity[i, j])

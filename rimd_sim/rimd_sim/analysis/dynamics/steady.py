@@ -14,6 +14,13 @@ Over the ``measure_cycles`` after the transient:
   after ``n`` cycles within ``tolerance`` and the number of impacts of every cycle repeats too:
   ``p/n`` with ``p`` the impacts in ``n`` cycles. The fraction is not reduced: ``2/2`` is the period-1
   motion with alternating impact magnitudes (a period doubling of ``1/1``), distinct from ``1/1``;
+* ``unsettled``: the motion has not converged within the window to what it will be, so no class can be given
+  yet. Either it repeats after ``n`` cycles while the distance between points ``m`` cycles apart, ``m`` a
+  proper divisor of ``n``, shrinks at every step (by 1 % over the window): it converges to a period-``m``
+  orbit (the alternation about a period-1 orbit whose multiplier is near -1 repeats every two cycles to the
+  tolerance long before it dies out, and would read ``2/2``); or no period repeats, but such distances shrink
+  for some ``n``. Run longer to classify it. (A ``p/n`` motion still converging to that same ``p/n`` orbit
+  keeps its class: it is what the motion converges to.);
 * otherwise ``chaotic/non-periodic``: the Poincare points do not converge to a finite set of at most
   ``max_period`` points. Whether the motion is chaotic is decided by the largest Lyapunov exponent
   (:mod:`rimd_sim.analysis.dynamics.lyapunov`).
@@ -36,12 +43,13 @@ from rimd_sim.model.validity import PointMeasures, domain
 from rimd_sim.settings.config import SimConfig
 
 __all__ = [
-    "CHAOTIC", "NO_IMPACT", "Orbit", "check_frequencies", "check_frequency", "classify", "class_label",
+    "CHAOTIC", "NO_IMPACT", "UNSETTLED", "Orbit", "check_frequencies", "check_frequency", "classify", "class_label",
     "cluster_orbits", "constant_frequency", "orbit_points", "same_orbit", "steady_orbit",
 ]
 
 NO_IMPACT = "no impact"
 CHAOTIC = "chaotic/non-periodic"
+UNSETTLED = "unsettled"
 
 
 @dataclass(frozen=True)
@@ -120,11 +128,27 @@ def classify(u: np.ndarray, v: np.ndarray, impacts_per_cycle: np.ndarray, *, max
         spread = float(d.max()) if len(d) else 0.0
         if spread <= tolerance and np.array_equal(counts[n:], counts[:-n]):
             impacts = int(counts[-n:].sum())
+            if impacts and any(_contracting(u, v, m) for m in range(1, n) if n % m == 0):
+                return UNSETTLED, 0, 0, spread
             return class_label(impacts, n), (0 if impacts == 0 else n), impacts, spread
     spread = float(np.hypot(np.diff(u), np.diff(v)).max()) if len(u) > 1 else 0.0
     if total == 0:
         return NO_IMPACT, 0, 0, spread
+    if any(_contracting(u, v, n) for n in range(1, max_period + 1)):
+        return UNSETTLED, 0, 0, spread
     return CHAOTIC, 0, 0, spread
+
+
+def _contracting(u: np.ndarray, v: np.ndarray, n: int) -> bool:
+    """Whether the distance between points ``n`` cycles apart shrinks at every step, by 1 % over the window.
+
+    A chaotic motion's distances rise and fall; a motion converging to a period-``n`` orbit (slowly, or from
+    far) shrinks them cycle after cycle; a converged orbit's stay equal (to 1e-9), and never shrink by 1 %.
+    """
+    d = np.hypot(u[n:] - u[:-n], v[n:] - v[:-n])
+    if len(d) < 6 or not np.isfinite(d).all() or d[0] <= 0.0:
+        return False
+    return bool(np.all(d[1:] <= d[:-1] + 1e-9) and d[-1] < 0.99 * d[0])
 
 
 def check_frequency(config: SimConfig, frequency_hz: float) -> float:

@@ -82,17 +82,26 @@ class SweepResult:
                 "workers": self.workers, "validity": self.validity, "restarts_from_rest_hz": list(self.restarts)}
 
 
-def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float, tolerance: float = 0.03) -> SweepPoint | None:
-    """Valid point of largest peak force among those with ``impacts_per_cycle`` (1 = band A, 0.5 = band B).
+def band_peak(points: tuple[SweepPoint, ...], impacts_per_cycle: float | str) -> SweepPoint | None:
+    """Valid point of largest peak force among those whose motion is the band's class.
+
+    Band A is the ``1/1`` motion (one impact per cycle), band B the ``1/2`` motion (one impact every two
+    cycles), as the paper's bands are: a ``2/2``, ``3/3`` or chaotic point whose impacts average one per cycle is
+    in neither band, nor is an ``unsettled`` one.
 
     Args:
         points: The sweep's points.
-        impacts_per_cycle: The band's impacts per cycle.
-        tolerance: Relative tolerance on ``impacts_per_cycle``.
+        impacts_per_cycle: The band: ``1.0`` (band A, class ``1/1``) or ``0.5`` (band B, ``1/2``), or a class
+            label such as ``"1/3"``.
 
     Returns:
-        The point, or None when no valid point has that many impacts per cycle.
+        The point, or None when no valid point has that class.
     """
-    sel = [p for p in points
-           if p.valid and abs(p.impacts_per_cycle - impacts_per_cycle) <= tolerance * impacts_per_cycle]
+    if isinstance(impacts_per_cycle, str):
+        label = impacts_per_cycle
+    elif impacts_per_cycle >= 1.0:
+        label = f"{round(impacts_per_cycle)}/1"
+    else:
+        label = f"1/{round(1.0 / impacts_per_cycle)}"
+    sel = [p for p in points if p.valid and p.motion_class == label]
     return max(sel, key=lambda p: p.peak_force_n, default=None)

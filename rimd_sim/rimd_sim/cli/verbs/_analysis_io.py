@@ -37,20 +37,67 @@ def add_model_arguments(parser, out: str, *, gap: float | str | None = None,
         parser.add_argument("--gap-mm", type=gap_mm(), default=None, help=f"gap (mm), default {default}{gap_note}")
         parser.set_defaults(verb_gap_mm=gap)
     add_frequency_grid(parser, f_range, f_step)
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    add_config_arguments(parser)
     parser.add_argument("--out", type=Path, default=Path(out), help="output directory")
 
 
-def load_model_config(args):  # SimConfig
-    """The verb's configuration: ``--config`` with the gap of ``--gap-mm`` (or the verb's default gap).
+def parameter_setting(text: str) -> tuple[str, Any]:
+    """``NAME=VALUE`` of ``--set``, the value typed.
 
-    Sets ``args.gap_mm`` to the gap used (mm), for the verb's titles and files.
+    A number as Python reads one (``1.8``, ``1e-4``: YAML 1.1 reads the latter as text), else as YAML does
+    (``hertz``, ``true``, ``[a, b]``).
+    """
+    import argparse
+
+    import yaml
+
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep or not name or not value.strip():
+        raise argparse.ArgumentTypeError(f"--set {text!r} refused: must be NAME=VALUE, for example "
+                                         "natural_frequency=1.8 or contact.model=hertz")
+    for number in (int, float):   # 1e-4 is a number here (YAML 1.1 would read it as text)
+        try:
+            return name, number(value)
+        except ValueError:
+            pass
+    try:
+        parsed = yaml.safe_load(value)
+    except yaml.YAMLError:
+        parsed = value
+    return name, parsed
+
+
+def add_config_arguments(parser, help_text: str = "ROS parameter YAML (default config/rimd.yaml)") -> None:
+    """``--config FILE`` and ``--set NAME=VALUE`` (repeatable): the configuration, read by :func:`read_config`."""
+    parser.add_argument("--config", type=Path, default=None, help=help_text)
+    parser.add_argument("--set", dest="settings", action="append", type=parameter_setting, default=[],
+                        metavar="NAME=VALUE",
+                        help="a parameter over the file's, named as in the file with dots (mass=0.2, "
+                             "contact.stiffness=6e6); repeatable; checked as the file is")
+
+
+def read_config(args, extra: dict | None = None):  # SimConfig
+    """``--config`` with every ``--set`` over it (then ``extra``), validated as a parameter file is.
+
+    Raises:
+        ConfigError: For an unknown name or a refused value, naming it (and the closest names).
     """
     from rimd_sim.settings.config import load_config
 
+    overrides = dict(getattr(args, "settings", None) or [])
+    overrides.update(extra or {})
+    return load_config(args.config, overrides or None)
+
+
+def load_model_config(args):  # SimConfig
+    """The verb's configuration: ``--config`` and ``--set``, with the gap of ``--gap-mm`` (or the verb's default gap).
+
+    Sets ``args.gap_mm`` to the gap used (mm), for the verb's titles and files.
+    """
     given = getattr(args, "gap_mm", None)
     verb_default = getattr(args, "verb_gap_mm", None)
-    config = load_config(args.config)
+    config = read_config(args)
     if given is None and verb_default not in (None, CONFIG_GAP):
         if args.config is not None and config.rig.gap != verb_default * 1e-3:
             print(f"note: gap {verb_default:g} mm, this verb's default, instead of the configuration's "

@@ -1,4 +1,4 @@
-"""``rimd bifurcation``: stroboscopic ``l sin(theta) / A0`` versus Omega/omega, up and down (paper Fig. 11).
+"""``rimd bifurcation``: stroboscopic ``l sin(theta) / A0`` versus Omega/omega, up, down, from rest (paper Fig. 11).
 
 Writes ``DIR/bifurcation.png``, ``DIR/bifurcation.csv`` (one row per stroboscopic sample) and
 ``DIR/summary.json`` (the classes along each sweep as frequency runs).
@@ -27,7 +27,9 @@ from rimd_sim.cli.verbs._analysis_io import (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd bifurcation``."""
     add_model_arguments(parser, "out/bifurcation", gap=CONFIG_GAP, f_range=(2.0, 9.5), f_step=0.05)
-    parser.add_argument("--direction", default="both", help="up, down or both (default; one process each)")
+    parser.add_argument("--direction", default="both",
+                        help="up, down, rest (every frequency from rest), both (up and down: the default) or all "
+                             "(up, down and rest); one process per sweep")
     parser.add_argument("--transient-cycles", type=count("--transient-cycles", 0), default=100,
                         help="cycles before sampling, default 100")
     parser.add_argument("--sample-cycles", type=count("--sample-cycles", 3), default=48,
@@ -43,12 +45,12 @@ def main(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rimd_sim.analysis.captions import describe
-    from rimd_sim.analysis.dynamics.bifurcation import bifurcation, branch_table
+    from rimd_sim.analysis.dynamics.bifurcation import DIRECTIONS, bifurcation, branch_table
     from rimd_sim.analysis.plots import plot_bifurcation
     from rimd_sim.model.validity import domain
 
-    if args.direction not in ("up", "down", "both"):
-        raise CommandError(f"--direction {args.direction!r} refused: must be up, down or both")
+    if args.direction not in DIRECTIONS:
+        raise CommandError(f"--direction {args.direction!r} refused: must be one of {', '.join(DIRECTIONS)}")
     check_range("f", args.f_min, args.f_max)
     config = load_model_config(args)
     freqs = np.round(np.arange(args.f_min, args.f_max + args.f_step / 2, args.f_step), 6)

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from rimd_sim.cli import count
-from rimd_sim.cli.verbs._analysis_io import add_accept_invalid_argument
+from rimd_sim.cli.verbs._analysis_io import add_accept_invalid_argument, add_config_arguments, read_config
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="CSV with gap_mm, band (A, B or natural), frequency_hz, optional peak_force_n "
                              "(default: the paper's Table 1, config/paper_table1.csv)")
     parser.add_argument("--out", type=Path, default=Path("out/fit_table"), help="output directory")
-    parser.add_argument("--config", type=Path, default=None, help="base parameter file (default config/rimd.yaml)")
+    add_config_arguments(parser, "base parameter file (default config/rimd.yaml)")
     parser.add_argument("--parameters", nargs="+", default=["damping_ratio", "mass"],
                         help="parameters fitted (default: damping_ratio mass; the others are held at the base)")
     parser.add_argument("--max-evaluations", type=count("--max-evaluations"), default=20,
@@ -38,7 +38,7 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.cli import CommandError
     from rimd_sim.cli.verbs._analysis_io import validity_exit, write_csv, write_summary
     from rimd_sim.model.validity import Verdict, domain
-    from rimd_sim.settings.config import find_config_file, load_config
+    from rimd_sim.settings.config import find_config_file
 
     for p in args.parameters:
         if p not in SCALES:
@@ -48,7 +48,7 @@ def main(args: argparse.Namespace) -> int:
     table = args.table or find_config_file("paper_table1.csv")
     base_path = args.config or find_config_file()
     entries, natural = read_table(table)
-    base = load_config(base_path, {"natural_frequency": natural} if natural else None)
+    base = read_config(args, {"natural_frequency": natural} if natural else None)
     start = time.perf_counter()
     result = fit_table(base, entries, tuple(args.parameters), max_evaluations=args.max_evaluations,
                        log=lambda text: print(f"rimd fit-table: {text}", file=sys.stderr, flush=True))

@@ -20,6 +20,7 @@ from rimd_sim.cli.verbs._analysis_io import (
     add_model_arguments,
     check_range,
     progress_printer,
+    read_config,
     validity_exit,
     write_csv,
     write_summary,
@@ -80,7 +81,6 @@ def main(args: argparse.Namespace) -> int:
     )
     from rimd_sim.analysis.plots import plot_peterka
     from rimd_sim.model.validity import Verdict, domain
-    from rimd_sim.settings.config import load_config
 
     check_range("gap", args.gap_min_mm, args.gap_max_mm, allow_zero=True, unit="-mm")
     check_range("f", args.f_min, args.f_max)
@@ -88,7 +88,7 @@ def main(args: argparse.Namespace) -> int:
     if args.rest_cycles is not None and args.rest_cycles < cap:
         raise CommandError(f"--rest-cycles {args.rest_cycles} refused: must be at least the cap of the other starts, "
                            f"--transient-cycles + --measure-cycles = {cap}")
-    config = load_config(args.config)
+    config = read_config(args)
     gaps = np.linspace(args.gap_min_mm, args.gap_max_mm, args.gaps) * 1e-3
     freqs = np.linspace(args.f_min, args.f_max, args.freqs)
     result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,

@@ -12,12 +12,12 @@ import sys
 from pathlib import Path
 
 from rimd_sim.cli import number
-from rimd_sim.cli.verbs._analysis_io import add_accept_invalid_argument
+from rimd_sim.cli.verbs._analysis_io import add_accept_invalid_argument, add_config_arguments, read_config
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd pulse``."""
-    parser.add_argument("--config", type=Path, default=None, help="ROS parameter YAML (default config/rimd.yaml)")
+    add_config_arguments(parser)
     parser.add_argument("--velocity", type=number("--velocity", "m/s", gt=0, le=10), required=True,
                         help="impact velocity (m/s, > 0, <= 10); the structural preset's at 3.75 Hz, gap 0: 0.066")
     parser.add_argument("--rate", type=number("--rate", "Hz", ge=1e3, le=1e6), default=1e6,
@@ -33,9 +33,8 @@ def main(args: argparse.Namespace) -> int:
     from rimd_sim.analysis.dynamics.pulse import plot_pulse, pulse
     from rimd_sim.cli.verbs._analysis_io import validity_exit, write_summary
     from rimd_sim.model.validity import Verdict, domain
-    from rimd_sim.settings.config import load_config
 
-    config = load_config(args.config)
+    config = read_config(args)
     result = pulse(config, args.velocity, rate=args.rate)
     args.out.mkdir(parents=True, exist_ok=True)
     np.savetxt(args.out / "pulse.csv", np.column_stack([result.t, result.force, result.acceleration]),
