@@ -17,7 +17,7 @@ DIST_PYTHONS ?= 3.11 3.12
 
 help:
 	@echo "make run        set up, build and run the rig (rimd rig)"
-	@echo "make test       set up, build and run the whole test suite (pytest tests, on every core)"
+	@echo "make test       set up, build and run the whole test suite (pytest tests, on every core; SKIP_SLOW=1: not the slow tier)"
 	@echo "make test-fast  the tests that start no process (core, recording, analyses, config): under a minute"
 	@echo "make setup      only create/refresh the venv ($(VENV)) and build ros_ws"
 	@echo "make lint       ruff check, lint-imports (the layer contracts) and mypy (the package's types)"
@@ -32,9 +32,10 @@ setup:
 run: setup
 	@source ./env.sh && rimd rig
 
-# scripts/run_tests.sh turns pytest's exit 5 (no test collected) into a failure.
+# scripts/run_tests.sh turns pytest's exit 5 (no test collected) into a failure. SKIP_SLOW=1 leaves out the tests
+# marked slow (the whole identifications, the presets' table: a developer's quicker run); .ci/run runs them all.
 test: setup
-	@bash scripts/run_tests.sh $(PYTEST_ARGS)
+	@bash scripts/run_tests.sh $(if $(SKIP_SLOW),-m "not slow") $(PYTEST_ARGS)
 
 # The inner loop: every test that starts no process (no node, CLI or worker; one that does fails here, naming the
 # marker it lacks: tests/conftest.py) and is not marked slow (two whole identifications, 40 s between them; make

@@ -14,7 +14,6 @@ Hypotheses:
 
 from __future__ import annotations
 
-import statistics
 import struct
 import time
 
@@ -78,8 +77,11 @@ def test_the_composed_rig_records_what_separate_processes_record_in_lockstep(rim
     assert len(separate[FORCE]) == STOP_NS // 10_000_000   # 100 blocks a second from sample 0 to the stop
 
 
-def test_a_subscriber_in_another_process_gets_the_composed_rigs_blocks_on_time(ros_domain_id, rclpy_context,
-                                                                             tmp_path):
+def test_a_subscriber_in_another_process_gets_the_composed_rigs_blocks_in_order_on_their_grid(
+        ros_domain_id, rclpy_context, tmp_path):
+    """The composed rig at real time writes its blocks to a reader in another process (this one) contiguous, each
+    stamped ``t0 + first_index / rate`` with one ``t0``. How late they arrive is a speed figure
+    (benchmarks/bench_rig.py, bench_latency.py), not asserted here."""
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -91,33 +93,27 @@ def test_a_subscriber_in_another_process_gets_the_composed_rigs_blocks_on_time(r
     node = rclpy.create_node("composed_timing_probe", context=rclpy_context)
     sub = node.create_subscription(SampleBlock, FORCE, lambda _: None,
                                    QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE), raw=True)
-    late: list[float] = []
+    blocks: list[tuple[int, int, int, float]] = []   # (stamp ns, first_index, samples, rate)
 
     def take(data: bytes, info: dict) -> None:
         block = read_block(data, arrays=1)
         stamp = block.header.stamp.sec * 1_000_000_000 + block.header.stamp.nanosec
-        due = stamp + round((len(block.samples) - 1) * 1e9 / block.sample_rate)
-        late.append((info["received_timestamp"] - due) / 1e6)
+        blocks.append((stamp, block.first_index, len(block.samples), block.sample_rate))
 
     plan = plan_rig(output_dir=tmp_path / "recording", real_time_factor=1.0,
                     parameters={"rimd_rerun": {"sink": "save", "save_path": str(tmp_path / "rig.rrd")}})
     assert not plan.separate and [p.name for p in plan.processes] == ["rimd_composed"]
     with Rig(plan, log_dir=tmp_path / "logs") as rig:
         deadline = time.monotonic() + 90.0   # a cold numba cache compiles first
-        while len(late) < 20 and time.monotonic() < deadline:
+        while len(blocks) < 260 and time.monotonic() < deadline:
             assert rig.failed() is None, (tmp_path / "logs" / "rimd_composed.log").read_text()
-            PolledSubscriptions.take(sub, take)
-            time.sleep(0.005)
-        assert len(late) >= 20, "no blocks from the composed rig"
-        PolledSubscriptions.take(sub, lambda d, i: None)
-        late.clear()
-        end = time.monotonic() + 3.0
-        while time.monotonic() < end:
             PolledSubscriptions.take(sub, take)
             time.sleep(0.005)
         assert rig.failed() is None
     assert rig.stop() == 0
-    assert len(late) >= 240, f"only {len(late)} blocks in 3 s"
-    median = statistics.median(late)
-    assert median <= 5.0, f"blocks {median:.1f} ms late (median)"
+    assert len(blocks) >= 260, f"only {len(blocks)} blocks from the composed rig"
+    t0s = {stamp - round(first * 1e9 / rate) for stamp, first, _, rate in blocks}
+    assert len(t0s) == 1, sorted(t0s)[:3]
+    for (_, first, n, _), (_, nxt, _, _) in zip(blocks, blocks[1:], strict=False):
+        assert nxt == first + n, (first, n, nxt)
     node.destroy_node()

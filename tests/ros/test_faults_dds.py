@@ -214,13 +214,12 @@ def test_same_seed_and_scenario_give_bit_identical_messages(fault_runs):
 
 
 @pytest.mark.timeout(120)
-def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
-    """A delay is a matter of arrival time: at real time, blocks of the window arrive the latency (plus up
-    to half of it in jitter, so partly out of order) after their last sample; before and after, on time.
-
-    The latency (1 s) and the threshold (50 blocks, 0.5 s) leave 0.5 s on each side: a block of the window
-    arrives at least 1 s late, and a block outside it is flagged only if the machine stalls the rig or the
-    client for 0.5 s (CI runs flagged blocks next to the window after stalls of 70 ms and of 200 ms)."""
+def test_a_delay_publishes_its_window_after_the_blocks_sampled_within_the_latency(tmp_path, ros_processes):
+    """A delay is a matter of when a block is written: at real time, a block of the window goes out the latency
+    (plus up to half of it in jitter) after it is due, so after every block on time that was due in that latency;
+    the blocks outside the window go out in order. A reliable reader
+    receives one writer's blocks in the order written, so the order of arrival shows it whatever the load on the
+    machine (how late, in seconds, is the core's test on its clock: tests/instruments/test_faults.py)."""
     start, duration, latency = 0.6, 0.3, 1.0
     sim_args = ["-p", "real_time_factor:=1.0", "-p", "start_paused:=true",
                 "-p", f"faults:=['channel=impact_force kind=delay start={start} duration={duration} "
@@ -229,24 +228,19 @@ def test_delay_is_seen_against_the_wall_clock(tmp_path, ros_processes):
     from rclpy.serialization import deserialize_message
 
     from rimd_msgs.msg import SampleBlock
-    from rimd_sim.analysis.recordings.faultscan import Block, scan_channel
-    from rimd_sim.settings.config import SimConfig
 
-    blocks = []
-    for d, _now, wall_ns in data[FORCE]:
-        m = deserialize_message(d, SampleBlock)
-        t0_ns = m.header.stamp.sec * 10**9 + m.header.stamp.nanosec - round(m.first_index * 1e9 / RATE)
-        blocks.append(Block(m.first_index, np.asarray(m.samples), m.saturated_count, (wall_ns - t0_ns) * 1e-9))
-    ch = SimConfig().channel("impact_force")
-    findings = [f for f in scan_channel(blocks, RATE, ch.range_min, ch.range_max, late_blocks=50.0)
-                if f.kind == "late"]
-    # Coarse (arrival times on a shared machine): a late stretch where the window is, within 3 blocks at each
-    # end. The exact release times of the delayed blocks are tests/instruments/test_faults.py's, on the core's clock.
-    assert any(abs(f.start - start) <= 3 * BLOCK_S + 1e-9 and abs(f.end - (start + duration)) <= 3 * BLOCK_S + 1e-9
-               for f in findings), findings
-    order = [b.first_index for b in blocks]
-    assert sorted(order) == list(range(0, order and max(order) + 1, 200))   # nothing lost, only late
-    assert order != sorted(order)   # jitter beyond a block period: out of order
+    arrival = [deserialize_message(d, SampleBlock).first_index for d, _now, _wall in data[FORCE]]
+    assert sorted(arrival) == list(range(0, arrival and max(arrival) + 1, 200))   # nothing lost, only reordered
+    position = {first: k for k, first in enumerate(arrival)}
+    due = {first: first / RATE for first in arrival}   # the block's first sample (s of the run)
+    # Within a block of either end of the window a block may or may not be delayed: neither side counts it.
+    delayed = [f for f in arrival if start + BLOCK_S <= due[f] < start + duration - BLOCK_S]
+    on_time = [f for f in arrival if due[f] < start - BLOCK_S or due[f] >= start + duration + BLOCK_S]
+    assert len(delayed) >= 25 and [position[f] for f in on_time] == sorted(position[f] for f in on_time)
+    for d in delayed:
+        before = [f for f in on_time if due[d] < due[f] <= due[d] + latency - 2 * BLOCK_S]
+        assert all(position[f] < position[d] for f in before), d
+    assert arrival != sorted(arrival)   # the window's blocks went out after later ones
 
 
 @pytest.mark.timeout(240)

@@ -95,16 +95,11 @@ def test_player_services_as_rosbag2(ros_processes, ros_executor, recording):
     assert _call(ros_executor, node, Trigger, "toggle_paused").message == "resumed"
     assert not _call(ros_executor, node, IsPaused, "is_paused").paused
     assert not _call(ros_executor, node, PlayNext, "play_next").success        # playing: refused
-    # The rest at 4x from where it stands: a coarse bound on its pace (the exact pace: tests/runtime/test_player.py).
+    # The rest at 4x from where it stands, to its end (its pace on a clock: tests/runtime/test_player.py).
     assert _call(ros_executor, node, SetRate, "set_rate", SetRate.Request(rate=4.0)).success
-    started = time.monotonic()
     state = _call(ros_executor, node, GetReplayState, "get_state")
     assert not state.ended and state.rate == 4.0
-    position = state.position.sec * 10**9 + state.position.nanosec
     assert spin_until(ros_executor, lambda: replay.returncode is not None, 30), replay.tail()
-    took = time.monotonic() - started
-    span = (messages[-1].log_time - position) / 1e9
-    assert 0.5 * span / 4.0 < took < span / 4.0 + 5.0, (took, span)
     assert replay.returncode == 0 and "replay finished" in replay.output()
 
 

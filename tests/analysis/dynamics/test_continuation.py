@@ -324,3 +324,17 @@ def test_bad_ranges_are_refused_with_the_parameter_named():
         continuation(config, 3.0, 3.0)
     with pytest.raises(Exception, match="frequency"):
         continuation(config, 0.0, 1e-3, parameter="gap")
+
+
+def test_a_fold_at_its_branch_start_is_flagged_as_suspect():
+    """A fold within 1 % of the range from its branch's first orbit is flagged (the predictor may have turned back
+    there); one further on is not."""
+    from types import SimpleNamespace
+
+    from rimd_sim.cli.verbs.continuation import suspect_fold
+
+    point = SimpleNamespace(parameter=3.0)
+    result = SimpleNamespace(start=3.0, end=5.0, branches=[SimpleNamespace(points=[point])])
+    assert suspect_fold(result, SimpleNamespace(kind="fold", branch=0, parameter=3.001))
+    assert not suspect_fold(result, SimpleNamespace(kind="fold", branch=0, parameter=3.5))
+    assert not suspect_fold(result, SimpleNamespace(kind="period_doubling", branch=0, parameter=3.001))

@@ -576,6 +576,12 @@ class _Continuer:
             graze = self.graze_ahead(problem, index, nodes[-2], nodes[-1])
             if graze is not None:
                 end = "grazing: the orbit touches the stop (the corrector does not pass the non-smooth point)"
+        if end.startswith("the corrector failed") and not end.startswith("grazing"):
+            last = nodes[-1].point
+            end += (f" after {self.parameter} {last.parameter:.6g}: the last orbit has {last.impacts_per_period} "
+                    f"impact(s) per period and a largest |multiplier| of {last.max_multiplier:.3g}; Newton's method "
+                    "does not pass a non-smooth point of the branch there (a new contact grazing, a dwell on the "
+                    "stop): continue from the other side, or look with rimd bifurcation")
         self.branches[index] = Branch(index, problem.period, tuple(n.point for n in nodes), parent, end)
         for kind, a, b in pending:
             self.locate(problem, index, kind, a, b)

@@ -25,6 +25,18 @@ from rimd_sim.cli.verbs._analysis_io import (
     write_summary,
 )
 
+#: What the verb says of a fold found right at its branch's start.
+SUSPECT = (" (suspect: within 1 % of the range from the branch's first orbit, where the predictor may have turned "
+           "back on the branch rather than found a fold: check with a start on either side)")
+
+
+def suspect_fold(result, bif) -> bool:
+    """Whether a fold lies within 1 % of the range from its branch's first orbit."""
+    if bif.kind != "fold":
+        return False
+    first = result.branches[bif.branch].points[0].parameter
+    return abs(bif.parameter - first) < 0.01 * abs(result.end - result.start)
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``rimd continue``."""
@@ -133,6 +145,7 @@ def main(args: argparse.Namespace) -> int:
                       "from": b.points[0].parameter, "to": b.points[-1].parameter, "end": b.end,
                       "stable_points": sum(p.stable for p in b.points)} for b in result.branches],
         "bifurcations": {kind: len(result.of_kind(kind)) for kind in sorted({b.kind for b in result.bifurcations})},
+        "suspect_folds": [b.parameter for b in result.bifurcations if suspect_fold(result, b)],
         "settings": {"ds_max": settings.ds_max, "max_points": settings.max_points,
                      "max_period": settings.max_period, "switch": settings.switch,
                      "newton_tolerance": settings.newton_tolerance, "locate_tolerance": settings.locate_tolerance},
@@ -162,7 +175,8 @@ def main(args: argparse.Namespace) -> int:
         to = f", switched to branch {bif.new_branch}" if bif.new_branch is not None else ""
         print(f"{bif.kind.replace('_', ' ')} at {args.parameter} {bif.parameter:.6g}"
               + (f" ({bif.frequency_hz / rig.natural_frequency:.5g} omega_n)" if freq else "")
-              + f" on branch {bif.branch} (period {bif.period}){to}")
+              + f" on branch {bif.branch} (period {bif.period}){to}"
+              + (SUSPECT if suspect_fold(result, bif) else ""))
     print(f"{result.evaluations} periods integrated in {wall:.1f} s; files in {args.out}")
     return validity_exit("continue", rules.sentence(verdicts, "orbits"), args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'branch.csv'}")
