@@ -18,8 +18,8 @@
 #                 the venv, this script); stamp: .stamps/build-*.sha256
 #                 Python sources are symlinked, so editing a .py never needs a rebuild.
 #   warmup        `rimd warmup`: numba compiles the physics (the models' drivers, the sensors, the ensembles)
-#                 into its on-disk cache once, here, instead of in the first rig or test that runs (about 40 s
-#                 on a fresh clone; a second each later); stamp: .stamps/warmup-*.sha256 (the compiled sources)
+#                 into its on-disk cache once, here, instead of in the first rig or test that runs (the two
+#                 models in two processes; a second each later); stamp: .stamps/warmup-*.sha256 (the sources)
 # A failing step stops the set-up with "set-up step 'NAME' failed: WHY" and a non-zero exit status.
 set -uo pipefail
 
@@ -253,7 +253,7 @@ step_warmup() {
         WARMUP_STATUS="up to date"
         return 0
     fi
-    echo "set-up: compiling the physics into numba's cache (rimd warmup; about 40 s the first time)" >&2
+    echo "set-up: compiling the physics into numba's cache (rimd warmup; the first time takes a minute or so)" >&2
     env -u PYTHONPATH PYTHONPATH="$ROOT/rimd_sim" "$VENV/bin/python" -m rimd_sim.cli warmup >&2 \
         || fail "rimd warmup exited with an error (see above)"
     echo "$digest" > "$stamp"

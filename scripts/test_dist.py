@@ -15,10 +15,11 @@ VIRTUAL_ENV, LD_LIBRARY_PATH or anything else of env.sh; only the venv's ``bin``
 4. ``rimd rig --duration 3 --no-rerun`` in a ROS domain of its own (leased as the ``rimd_rig`` fixture leases
    them), then the recording read back with ``mcap`` (complete: a summary; samples on the four channels, with
    no hole) and its blocks decoded with the installed ``rimd_msgs``;
-5. ``python -m pytest`` of a lab's test file (docs/ci/example-lab: the ``rimd_rig`` fixture and a consumer that
-   reports progress with ``ProgressReporter``);
-6. the CI recipe ``docs/ci/run-daq-tests.sh`` (docs/testing.md) run in a copy of that lab repository: it makes its
-   own venv, installs from the wheels, warms up and runs the lab's tests.
+5. the CI recipe ``docs/ci/run-daq-tests.sh`` (docs/testing.md) run in a copy of a lab's repository
+   (docs/ci/example-lab: the ``rimd_rig`` fixture and a consumer that reports progress with ``ProgressReporter``)
+   on that same venv (``RIMD_VENV``: the recipe reuses a venv it finds, so its install finds everything there and
+   its warm-up finds numba's cache full): its install, ``rimd info``, warm-up and the lab's tests. The venv and
+   the warm-up are made once per Python; what the recipe does to a venv it makes itself is step 1 and 2.
 
 Prints each venv's install time and each step's time; a failing step fails the run naming the Python and the
 step (its output is in ``.dist-build/test-dist/<python>/<step>.log``). Every step has a timeout.
@@ -424,14 +425,10 @@ def run_steps(report: Report, wheels: dict[str, Path], version: str, keep: bool)
         output = runner.run("recording", [str(venv / "bin" / "python"), "-c", RECORDING_CHECK,
                                           str(work / "recording"), *CHANNEL_TOPICS], env=env, cwd=work)
         print("  " + output.strip().replace("\n", "\n  "))
-        lab = work / "lab"
-        shutil.copytree(LAB, lab, ignore=shutil.ignore_patterns("__pycache__", ".pytest_cache"))
-        runner.run("pytest", [str(venv / "bin" / "python"), "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                              "tests"], env=env, cwd=lab)
         recipe_lab = work / "lab-ci"
         shutil.copytree(LAB, recipe_lab, ignore=shutil.ignore_patterns("__pycache__", ".pytest_cache"))
-        recipe_env = dict(clean_environment(recipe_lab / ".venv-rimd"), RIMD_WHEELS=str(DIST),
-                          PYTHON=str(interpreter), RIMD_VERSION=version)
+        recipe_env = dict(env, RIMD_WHEELS=str(DIST), RIMD_VENV=str(venv), PYTHON=str(interpreter),
+                          RIMD_VERSION=version)
         runner.run("ci recipe", ["bash", str(RECIPE), "-q", "-p", "no:cacheprovider", "tests"], env=recipe_env,
                    cwd=recipe_lab)
         ok = True

@@ -55,3 +55,14 @@ def test_after_warmup_a_new_process_compiles_nothing():
     after = _cache_files()
     written = sorted(str(path.name) for path, mtime in after.items() if before.get(path) != mtime)
     assert written == [], f"compiled again after rimd warmup: {written}"
+
+
+@pytest.mark.process
+def test_warmup_rig_compiles_what_the_rig_runs_and_not_the_two_mass_model():
+    env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    run = subprocess.run([sys.executable, "-m", "rimd_sim.cli", "warmup", "--rig"], capture_output=True, text=True,
+                         env=env, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert "rimd warmup: rigid model and instruments: " in run.stderr
+    assert "rimd warmup: the composed rig's DDS batch writer: " in run.stderr
+    assert "two-mass" not in run.stderr

@@ -4,10 +4,13 @@ numba compiles the integration driver of each model, the instruments' filters an
 their first call and keeps the machine code in its cache (``__pycache__`` beside the sources, or
 ``NUMBA_CACHE_DIR``). On a fresh install that first call takes tens of seconds, paid by whatever runs first: a
 rig's simulator before it says ``rig ready``, a test, a sweep. ``rimd warmup`` pays it at set-up time instead
-(``scripts/setup.sh`` runs it after the build); later processes load the compiled code in about a second. It
-runs the rigid and the two-mass model through the simulator (the drivers and the sensors) and one cell of a
-Peterka map for each (the ensembles), compiles the composed rig's loop of DDS writes, and prints how long each
-took: a few tenths of a second each when the cache already held them.
+(``scripts/setup.sh`` runs it after the build); later processes load the compiled code in about a second.
+
+Two groups of steps, each timed: what a rig of the default configuration runs (the rigid model through the
+simulator, its sensors, the composed rig's loop of DDS writes, and the rigid ensemble of the maps), and the
+two-mass model (``config/structural.yaml``: its simulator and its ensemble). With two cores or more the groups
+compile in two processes at once (numba writes each cache file whole, so two writers of one file do no harm);
+``--rig`` compiles the first group alone (what a DAQ test against the rig needs).
 """
 
 from __future__ import annotations
@@ -17,34 +20,62 @@ import os
 import sys
 import time
 
+#: The groups of steps: (group, [step names]) in the order they run.
+GROUPS = {"rig": ("rigid model and instruments", "the composed rig's DDS batch writer", "rigid ensemble"),
+          "two-mass": ("two-mass model and instruments", "two-mass ensemble")}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """``rimd warmup`` takes no option."""
+    """``rimd warmup [--rig]``."""
+    parser.add_argument("--rig", action="store_true",
+                        help="only what a rig of the default configuration runs (the rigid model, its sensors, the "
+                             "composed rig's writer, the rigid maps), not the two-mass model")
 
 
-def main(args: argparse.Namespace) -> int:
-    """Compile (or load from the cache) every compiled function of the simulator and the maps."""
+def _step(name: str) -> None:
     from rimd_sim.analysis.dynamics.peterka import peterka
     from rimd_sim.instruments.rig_simulator import RigSimulator
     from rimd_sim.ros.nodes.outbox import compile_batch_writer
     from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
-    rigid = SimConfig().with_parameters({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75})
-    two_mass = load_config(find_config_file("structural.yaml"))
-    steps = (
-        ("rigid model and instruments", lambda: RigSimulator(rigid, strobe=True).advance(0.2)),
-        ("two-mass model and instruments", lambda: RigSimulator(two_mass, strobe=True).advance(0.2)),
-        ("rigid ensemble", lambda: peterka(SimConfig(), [0.0], [3.75], transient_cycles=2, measure_cycles=6,
-                                           workers=1)),
-        ("two-mass ensemble", lambda: peterka(two_mass, [0.0], [3.75], transient_cycles=2, measure_cycles=6,
-                                              workers=1)),
-        ("the composed rig's DDS batch writer", compile_batch_writer),
-    )
+    if name.startswith("two-mass"):
+        config = load_config(find_config_file("structural.yaml"))
+    else:
+        config = SimConfig()
+    if name.endswith("model and instruments"):
+        running = config.with_parameters({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75})
+        RigSimulator(running, strobe=True).advance(0.2)
+    elif name.endswith("ensemble"):
+        peterka(config, [0.0], [3.75], transient_cycles=2, measure_cycles=6, workers=1)
+    else:
+        compile_batch_writer()
+
+
+def run_group(group: str) -> list[tuple[str, float]]:
+    """Run one group's steps in this process; each step's name and seconds."""
+    times = []
+    for name in GROUPS[group]:
+        start = time.perf_counter()
+        _step(name)
+        times.append((name, time.perf_counter() - start))
+    return times
+
+
+def main(args: argparse.Namespace) -> int:
+    """Compile (or load from the cache) every compiled function of the simulator and the maps."""
     where = os.environ.get("NUMBA_CACHE_DIR") or "__pycache__ beside the sources"
     total = time.perf_counter()
-    for name, step in steps:
-        start = time.perf_counter()
-        step()
-        print(f"rimd warmup: {name}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+    groups = ["rig"] if args.rig else list(GROUPS)
+    if len(groups) > 1 and (os.cpu_count() or 1) >= 2:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=len(groups), mp_context=multiprocessing.get_context("spawn")) as pool:
+            results = list(pool.map(run_group, groups))
+    else:
+        results = [run_group(g) for g in groups]
+    for group, times in zip(groups, results, strict=True):
+        for name, seconds in times:
+            print(f"rimd warmup: {name}: {seconds:.1f} s ({group})", file=sys.stderr, flush=True)
     print(f"rimd warmup: compiled code cached in {where} ({time.perf_counter() - total:.1f} s)")
     return 0
