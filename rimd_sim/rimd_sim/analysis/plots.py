@@ -11,6 +11,10 @@ from typing import TYPE_CHECKING, Any
 import matplotlib
 
 matplotlib.use("Agg")
+# Tick labels say their values whole up to 1e9 (a stiffness of 5.5e6 N/m reads 5500000), with no offset or
+# multiplier ("1e6") written at the axis' end, where it ran into a secondary axis' tick labels.
+matplotlib.rcParams["axes.formatter.useoffset"] = False
+matplotlib.rcParams["axes.formatter.limits"] = (-4, 9)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
