@@ -577,9 +577,9 @@ class _Continuer:
             if graze is not None:
                 end = "grazing: the orbit touches the stop (the corrector does not pass the non-smooth point)"
         if end.startswith("the corrector failed") and not end.startswith("grazing"):
-            last = nodes[-1].point
-            end += (f" after {self.parameter} {last.parameter:.6g}: the last orbit has {last.impacts_per_period} "
-                    f"impact(s) per period and a largest |multiplier| of {last.max_multiplier:.3g}; Newton's method "
+            tip = nodes[-1].point
+            end += (f" after {self.parameter} {tip.parameter:.6g}: the last orbit has {tip.impacts_per_period} "
+                    f"impact(s) per period and a largest |multiplier| of {tip.max_multiplier:.3g}; Newton's method "
                     "does not pass a non-smooth point of the branch there (a new contact grazing, a dwell on the "
                     "stop): continue from the other side, or look with rimd bifurcation")
         self.branches[index] = Branch(index, problem.period, tuple(n.point for n in nodes), parent, end)
