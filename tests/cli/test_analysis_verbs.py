@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from harness.outputs import read_json
-from harness.presets import FORMER_DEFAULT_ARGS
+from harness.presets import SINGLE_MASS_ARGS
 from rimd_sim import cli
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -74,13 +74,13 @@ def test_poincare_reproduces_fig10_period_half(tmp_path):
 
 
 def test_peterka_small_map_has_period_1_and_half_and_marks_coexistence(tmp_path):
-    """A 2 x 3 map of the former default (harness.presets): at gap 0 the 3.75 Hz cell is 1/1 (band A) and 6.75 Hz 1/2
+    """A 2 x 3 map of the single-mass set (harness.presets): at gap 0 the 3.75 Hz cell is 1/1 (band A) and 6.75 Hz 1/2
     (band B region); at gap 2.4 mm and 5.25 Hz rest reaches 1/2 while the upward continuation stays without impact
     (the coexisting attractors of the paper's Fig. 12), so that cell is marked."""
     out = tmp_path / "pk"
     assert cli.main(["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3.75",
                      "--f-max", "6.75", "--freqs", "3", "--transient-cycles", "60", "--measure-cycles", "24",
-                     "--workers", "1", "--out", str(out), *FORMER_DEFAULT_ARGS]) == 0
+                     "--workers", "1", "--out", str(out), *SINGLE_MASS_ARGS]) == 0
     summary = _files(out, "peterka.png", "peterka.csv", "summary.json")
     cells = {(float(r["gap_mm"]), float(r["frequency_hz"])): r for r in csv.DictReader(open(out / "peterka.csv"))}
     assert cells[(0.0, 3.75)]["class_rest"] == "1/1"
@@ -123,13 +123,13 @@ def test_basins_at_gap_2_4mm_hold_two_attractors(tmp_path):
 
 
 def test_basins_give_each_initial_condition_its_attractor(tmp_path, capsys):
-    """Gap 2.4 mm, 2.548 Hz (the former default, harness.presets): two attractors, the 1/1 impact motion and the
+    """Gap 2.4 mm, 2.548 Hz (the single-mass set, harness.presets): two attractors, the 1/1 impact motion and the
     motion without impact (33 of 576 initial conditions); each initial condition's attractor id in basins.csv, the
     attractors listed in summary.json with a stroboscopic point and the peak force, their points drawn on the
     plot."""
     out = tmp_path / "b"
     assert cli.main(["basins", "--frequency", "2.548", "--size", "24", "--workers", "1", "--out", str(out),
-                     *FORMER_DEFAULT_ARGS]) == 0
+                     *SINGLE_MASS_ARGS]) == 0
     summary = _files(out, "basins.png", "basins.csv", "summary.json")
     rows = list(csv.DictReader(open(out / "basins.csv")))
     attractors = {a["id"]: a for a in summary["attractors"]}

@@ -87,9 +87,9 @@ def public_hashes() -> dict[str, str]:
     from rimd_sim.settings.config import load_config
 
     paper = load_config(CONFIG / "paper_model.yaml")
-    from harness.presets import FORMER_DEFAULT
+    from harness.presets import SINGLE_MASS_SET
 
-    rimd = load_config(CONFIG / "rimd.yaml", FORMER_DEFAULT)   # the set the reference was taken on
+    rimd = load_config(CONFIG / "rimd.yaml", SINGLE_MASS_SET)   # the mechanics the reference hashes are of
     structural = load_config(CONFIG / "structural.yaml")
     const = {"motor.initial_frequency": 4.9, "motor.initial_setpoint": 4.9}
     out = {

@@ -20,7 +20,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq, fsolve, minimize_scalar
 
-from harness.presets import FORMER_DEFAULT
+from harness.presets import SINGLE_MASS_SET
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics.continuation import (
     SHOOTING_TOLERANCES,
@@ -141,7 +141,7 @@ def test_the_multipliers_agree_with_a_monodromy_matrix_built_from_rig_model_runs
 
 def test_in_free_flight_the_multipliers_obey_liouville_exactly():
     """No impact: ``det M = exp(-2 zeta omega_n T)`` (the trace of the pendulum's Jacobian is ``-2 zeta omega_n``)."""
-    config = _config("rimd.yaml", 2.4).with_parameters(FORMER_DEFAULT)   # no impact at 3 Hz
+    config = _config("rimd.yaml", 2.4).with_parameters(SINGLE_MASS_SET)   # no impact at 3 Hz
     f = 3.0
     x, mu = fixed_point(config, f, (0.0, 0.0))
     rig = config.rig

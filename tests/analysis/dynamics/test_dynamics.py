@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from harness.presets import SINGLE_MASS_SET
 from rimd_sim.analysis.dynamics.steady import CHAOTIC, NO_IMPACT, UNSETTLED, classify, steady_orbit
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.config import SimConfig, find_config_file, load_config
@@ -50,20 +51,19 @@ def test_a_slowly_decaying_alternation_is_unsettled_never_2_2():
     assert classify(growing, np.zeros(48), np.ones(48, int))[0] != "1/1"
 
 
-def test_the_former_defaults_4_95_hz_gap_0_orbit_is_1_1_or_unsettled():
-    """The set m 0.15 kg, zeta 0.08, A0 1 mm, f_n 1.82 Hz at gap 0, 4.95 Hz: its period-1 orbit is stable with a
-    multiplier of -0.998, and the up sweep came to it on a slowly dying alternation that read 2/2. From rest
-    after 100 or 1000 cycles, and on the up, down and from-rest sweeps of ``rimd bifurcation``'s grid, it is
-    1/1 or unsettled; after 5000 cycles, 1/1."""
+def test_the_single_mass_sets_4_95_hz_gap_0_orbit_is_1_1_or_unsettled():
+    """The single-mass set (m 0.15 kg, zeta 0.08, A0 1 mm, f_n 1.82 Hz) at gap 0, 4.95 Hz: its period-1 orbit is
+    stable with a multiplier of -0.998, and a sweep comes to it on a slowly dying alternation that repeats every two
+    cycles to the tolerance. From rest after 100 or 1000 cycles, and on the up, down and from-rest sweeps of
+    ``rimd bifurcation``'s grid, it is 1/1 or unsettled, never 2/2; after 5000 cycles, 1/1."""
     from rimd_sim.analysis.dynamics.bifurcation import bifurcation
 
-    former = SimConfig().with_parameters({"amplitude": 1e-3, "natural_frequency": 1.82, "damping_ratio": 0.08,
-                                          "gap": 0.0})
+    single_mass = SimConfig().with_parameters({**SINGLE_MASS_SET, "gap": 0.0})
     for transient in (100, 1000):
-        assert steady_orbit(former, 4.95, transient_cycles=transient).label in ("1/1", UNSETTLED)
-    assert steady_orbit(former, 4.95, transient_cycles=5000).label == "1/1"
+        assert steady_orbit(single_mass, 4.95, transient_cycles=transient).label in ("1/1", UNSETTLED)
+    assert steady_orbit(single_mass, 4.95, transient_cycles=5000).label == "1/1"
     freqs = [round(4.5 + 0.05 * i, 2) for i in range(13)]
-    branches, _, _ = bifurcation(former, freqs, "all", workers=1)
+    branches, _, _ = bifurcation(single_mass, freqs, "all", workers=1)
     for b in branches:
         (point,) = [p for p in b.points if p.frequency_hz == 4.95]
         assert point.label in ("1/1", UNSETTLED), (b.direction, point.label)

@@ -28,7 +28,7 @@ import pytest
 
 import rimd_sim
 from harness.outputs import read_json
-from harness.presets import FORMER_DEFAULT, FORMER_DEFAULT_ARGS
+from harness.presets import SINGLE_MASS_ARGS, SINGLE_MASS_SET
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics.steady import steady_orbit
 from rimd_sim.errors import ConfigError
@@ -369,7 +369,7 @@ def test_rest_cycles_classifies_each_cell_as_the_run_of_that_many_cycles_from_re
     are the default map's, class and cycles."""
     from rimd_sim.analysis.dynamics.peterka import peterka, rest_classes
 
-    config = load_config(None, FORMER_DEFAULT)
+    config = load_config(None, SINGLE_MASS_SET)
     gaps, freqs = [0.0, 0.7e-3, 1.3e-3, 2.3e-3], [4.25, 5.37, 7.23, 8.54, 9.1]
     default = peterka(config, gaps, freqs, starts=0, rest_cycles=192, workers=1)   # the common cap
     long = peterka(config, gaps, freqs, starts=0, rest_cycles=1920, workers=1)
@@ -397,7 +397,7 @@ def test_rimd_peterka_rest_cycles_writes_its_cap_and_how_many_ran_to_it(tmp_path
     whose start from rest ran to it; the default gives its cap, 640. Both say how many cells were classified at
     the cap without having settled, the default with the option that runs them on (ten times the common cap)."""
     grid = ["--gap-min-mm", "0", "--gap-max-mm", "0", "--gaps", "1", "--f-min", "5.37", "--f-max", "8.54",
-            "--freqs", "2", "--starts", "0", "--workers", "1", *FORMER_DEFAULT_ARGS]
+            "--freqs", "2", "--starts", "0", "--workers", "1", *SINGLE_MASS_ARGS]
     assert cli.main(["peterka", *grid, "--rest-cycles", "1920", "--out", str(tmp_path / "long")]) == 0
     out = capsys.readouterr().out
     assert "1 cell(s) (50.0 %) classified at the cap of 1920 cycles from rest without having settled" in out

@@ -9,7 +9,7 @@ import pytest
 
 from harness import reference
 from harness.outputs import read_json
-from harness.presets import FORMER_DEFAULT
+from harness.presets import SINGLE_MASS_SET
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics.sweep import sweep
 from rimd_sim.settings.config import SimConfig
@@ -72,7 +72,7 @@ def test_coexisting_attractors_at_gap_2_4mm():
 
 
 @pytest.mark.parametrize("name, gap, up, down", [
-    # config/rimd.yaml with the former default's values (harness.presets): a 1/1 point of the up sweep read 0.98 (its
+    # config/rimd.yaml with the single-mass set's values (harness.presets): a 1/1 point of the up sweep read 0.98 (its
     # time window cut the impact in progress at its end); 5/6 and 2/3 points read 0.84, 0.64 (50 cycles hold no
     # whole number of their periods).
     ("rimd.yaml", 0.0, *[{4.5: 1.0, 4.75: 1.0, 6.5: 0.5, 9.0: 5 / 6, 9.25: 2 / 3}] * 2),
@@ -88,7 +88,7 @@ def test_impacts_per_cycle_of_a_steady_motion_is_exactly_p_over_n(name, gap, up,
     p / n (the classification of its last measured whole cycles), not a count over a window of time."""
     from rimd_sim.settings.config import find_config_file, load_config
 
-    cfg = load_config(find_config_file(name), {"gap": gap, **(FORMER_DEFAULT if name == "rimd.yaml" else {})})
+    cfg = load_config(find_config_file(name), {"gap": gap, **(SINGLE_MASS_SET if name == "rimd.yaml" else {})})
     freqs = np.round(np.arange(2.0, 9.51, 0.25), 6)
     for direction, expected in (("up", up), ("down", down)):
         at = {p.frequency_hz: p.impacts_per_cycle for p in sweep(cfg, freqs, direction).points}

@@ -15,7 +15,7 @@ import math
 import pytest
 
 from harness.outputs import read_json
-from harness.presets import FORMER_DEFAULT, FORMER_DEFAULT_ARGS
+from harness.presets import SINGLE_MASS_ARGS, SINGLE_MASS_SET
 from rimd_sim import cli
 from rimd_sim.analysis.dynamics.bifurcation import bifurcation
 from rimd_sim.analysis.dynamics.sweep import sweep
@@ -219,12 +219,12 @@ def test_researchers_basins_are_marked_and_the_verb_exits_3(fn11, tmp_path, caps
 
 
 def test_paper_map_cells_are_valid_and_their_classes_unchanged(tmp_path, capsys):
-    """The former default rig's map at gap 0 and 2.4 mm: every cell valid, the verb exits 0 with no validity line,
+    """The single-mass set's map at gap 0 and 2.4 mm: every cell valid, the verb exits 0 with no validity line,
     and the classes and cycles are those of the map before the valid domain (pinned from the code before it, whose
     stop rule was the confirmation window)."""
     from rimd_sim.analysis.dynamics.peterka import peterka
 
-    result = peterka(SimConfig().with_parameters(FORMER_DEFAULT), [0.0, 2.4e-3], [3.0, 5.5, 8.0], transient_cycles=30,
+    result = peterka(SimConfig().with_parameters(SINGLE_MASS_SET), [0.0, 2.4e-3], [3.0, 5.5, 8.0], transient_cycles=30,
                      measure_cycles=24,
                      stop="window", rest_cycles=54, workers=1)   # the common cap from rest, as then
     assert result.labels.tolist() == [[["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
@@ -236,7 +236,7 @@ def test_paper_map_cells_are_valid_and_their_classes_unchanged(tmp_path, capsys)
     out = tmp_path / "pk"
     status = cli.main(["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3",
                        "--f-max", "8", "--freqs", "3", "--transient-cycles", "30", "--measure-cycles", "24",
-                       "--workers", "1", "--out", str(out), *FORMER_DEFAULT_ARGS])
+                       "--workers", "1", "--out", str(out), *SINGLE_MASS_ARGS])
     assert status == 0
     assert {r["valid"] for r in _rows(out / "peterka.csv")} == {"True"}
     assert "valid domain" not in capsys.readouterr().out

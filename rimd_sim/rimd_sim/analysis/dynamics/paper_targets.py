@@ -57,7 +57,7 @@ GAPS_MM = tuple(TABLE1_HZ)
 BANDS = {"A": "1/1", "B": "1/2"}
 #: Section 2.1: the gap-0 peak impact forces at the resonances (N).
 FORCES_GAP0_N = {"A": 82.4, "B": 120.0}
-#: Relative tolerance of a force (the issue of a twin within the measurement's scatter: 5 %).
+#: Relative tolerance of a gap-0 peak force against the paper's.
 FORCE_TOLERANCE = 0.05
 #: Fig. 4 and section 2.1: the gap-0 period doubling at the end of band A (Hz), and the tolerance (Hz).
 DOUBLING_HZ = 4.75
