@@ -20,7 +20,7 @@ from rimd_sim.analysis.dynamics.paper_targets import (
     TABLE1_HZ,
     Check,
 )
-from rimd_sim.analysis.plots import _class_image, _hz_axis, _save, plt
+from rimd_sim.analysis.plots import _OTHER_COLOUR, CLASS_COLOURS, _class_image, _hz_axis, _save, plt
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
@@ -36,10 +36,10 @@ __all__ = ["grouped_palette", "plot_paper_bifurcation", "plot_paper_forces", "pl
 W = PAPER_NATURAL_FREQUENCY_HZ
 #: The classes the paper's figures name, in its colours (Fig. 12: period 1 red, period 1/2 green); every other
 #: periodic impacting motion is one grey, so that a map's legend stays readable.
-GROUPS = {"1/1": "#d62728", "1/2": "#2ca02c", "2/2": "#ff7f0e", "no impact": "#ececec",
-          "chaotic/non-periodic": "#000000", "unsettled": "#9ecae1"}
+GROUPS = {c: "#ececec" if c == "no impact" else CLASS_COLOURS[c]
+          for c in ("1/1", "1/2", "2/2", "no impact", "chaotic/non-periodic", "unsettled")}
 OTHER = "other periodic impacting motion"
-OTHER_COLOUR = "#7570b3"
+OTHER_COLOUR = _OTHER_COLOUR
 
 
 def grouped(label: str) -> str:

@@ -26,7 +26,7 @@ from rimd_sim.cli.verbs._analysis_io import (
 )
 
 #: What the verb says of a fold found right at its branch's start.
-SUSPECT = (" (suspect: within 1 % of the range from the branch's first orbit, where the predictor may have turned "
+FOLD_NOTE = (" (suspect: within 1 % of the range from the branch's first orbit, where the predictor may have turned "
            "back on the branch rather than found a fold: check with a start on either side)")
 
 
@@ -176,7 +176,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"{bif.kind.replace('_', ' ')} at {args.parameter} {bif.parameter:.6g}"
               + (f" ({bif.frequency_hz / rig.natural_frequency:.5g} omega_n)" if freq else "")
               + f" on branch {bif.branch} (period {bif.period}){to}"
-              + (SUSPECT if suspect_fold(result, bif) else ""))
+              + (FOLD_NOTE if suspect_fold(result, bif) else ""))
     print(f"{result.evaluations} periods integrated in {wall:.1f} s; files in {args.out}")
     return validity_exit("continue", rules.sentence(verdicts, "orbits"), args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'branch.csv'}")
