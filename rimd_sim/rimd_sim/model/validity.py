@@ -32,6 +32,7 @@ The rules (:func:`domain` builds them for a configuration):
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass
 
 from rimd_sim.settings.config import SimConfig
@@ -159,10 +160,14 @@ class ValidityDomain:
         return Verdict(tuple(broken)) if broken else VALID
 
     def report(self, verdicts) -> dict:
-        """The ``validity`` entry of a summary file: counts per rule and the rules themselves."""
-        verdicts = list(verdicts)
-        by_rule = {r.name: sum(r.name in v.rules for v in verdicts) for r in self.rules}
-        return {"points": len(verdicts), "invalid": sum(not v.valid for v in verdicts),
+        """The ``validity`` entry of a summary file: counts per rule and the rules themselves.
+
+        One pass over ``verdicts`` (any iterable), counting each distinct set of broken rules; the counts per rule
+        come from those few sets.
+        """
+        counts = Counter(v.rules for v in verdicts)
+        by_rule = {r.name: sum(n for rules, n in counts.items() if r.name in rules) for r in self.rules}
+        return {"points": sum(counts.values()), "invalid": sum(n for rules, n in counts.items() if rules),
                 "by_rule": {name: n for name, n in by_rule.items() if n},
                 "rules": [r.as_dict() for r in self.rules]}
 

@@ -41,9 +41,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.analysis.dynamics.peterka import cycles_summary, stop_rule
+from rimd_sim.analysis.dynamics.peterka import class_codes, cycles_summary, stop_rule
 from rimd_sim.analysis.dynamics.steady import check_frequencies, check_frequency
 from rimd_sim.analysis.executor import run_tasks
+from rimd_sim.analysis.outputs import rows_of
 from rimd_sim.errors import ConfigError
 from rimd_sim.model.ensemble import run_cells
 from rimd_sim.model.rig_model import model_for
@@ -170,20 +171,31 @@ class ParameterMap:
         """Cells per class."""
         return dict(Counter(self.labels.ravel().tolist()).most_common())
 
+    def columns(self) -> dict[str, list]:
+        """The columns of ``map.csv``, one value per cell, row by row.
+
+        The two parameters (named as given), then the cell's figures. Whole-array operations: linear in the cells;
+        Python values (an int parameter's stay integers).
+        """
+        rows, cols = self.labels.shape
+
+        def flat(values: np.ndarray, dtype: type = float) -> list:
+            return np.asarray(values, dtype=dtype).ravel().tolist()
+
+        xs, ys = [_plain(v) for v in self.x_values], [_plain(v) for v in self.y_values]
+        out: dict[str, list] = {self.x: xs * rows}
+        out[self.y] = [v for v in ys for _ in range(cols)]
+        out.update({"frequency_hz": flat(self.frequency_hz), "frequency_ratio": flat(self.frequency_ratio),
+                    "class": self.labels.ravel().tolist(), "peak_force_n": flat(self.peak_force),
+                    "force_ratio": flat(self.force_ratio), "impact_velocity_m_s": flat(self.impact_velocity),
+                    "impacts_per_cycle": flat(self.impacts_per_cycle), "cycles": flat(self.cycles, np.int64),
+                    "max_abs_theta_rad": flat(self.max_abs_theta), "max_force_n": flat(self.max_force),
+                    "valid": self.valid.ravel().tolist(), "invalid_rule": self.invalid_rule.ravel().tolist()})
+        return out
+
     def table(self) -> list[dict]:
-        """CSV rows, one per cell, row by row: the two parameters (named as given), then the cell's figures."""
-        rows = []
-        for i, yv in enumerate(self.y_values):
-            for j, xv in enumerate(self.x_values):
-                rows.append({
-                    self.x: _plain(xv), self.y: _plain(yv), "frequency_hz": float(self.frequency_hz[i, j]),
-                    "frequency_ratio": float(self.frequency_ratio[i, j]), "class": self.labels[i, j],
-                    "peak_force_n": float(self.peak_force[i, j]), "force_ratio": float(self.force_ratio[i, j]),
-                    "impact_velocity_m_s": float(self.impact_velocity[i, j]),
-                    "impacts_per_cycle": float(self.impacts_per_cycle[i, j]), "cycles": int(self.cycles[i, j]),
-                    "max_abs_theta_rad": float(self.max_abs_theta[i, j]), "max_force_n": float(self.max_force[i, j]),
-                    "valid": bool(self.valid[i, j]), "invalid_rule": self.invalid_rule[i, j]})
-        return rows
+        """CSV rows, one per cell: :meth:`columns` as one dict per row."""
+        return rows_of(self.columns())
 
     def summary(self) -> dict:
         """The ``summary.json`` content of ``rimd map`` (docs/analyses.md)."""
@@ -316,9 +328,7 @@ def save_map_npz(result: ParameterMap, path) -> None:
     them), ``frequency_hz``, ``peak_force_n``, ``force_ratio``, ``impact_velocity_m_s``, ``impacts_per_cycle``,
     ``cycles``, ``valid`` and ``invalid_rule``.
     """
-    names = sorted(set(result.labels.ravel().tolist()))
-    index = {c: i for i, c in enumerate(names)}
-    codes = np.vectorize(index.__getitem__, otypes=[np.int16])(result.labels)
+    names, codes = class_codes(result.labels)
     np.savez_compressed(path, x_name=np.array(result.x), y_name=np.array(result.y), x_values=result.x_values,
                         y_values=result.y_values, classes=np.array(names), codes=codes,
                         frequency_hz=result.frequency_hz, peak_force_n=result.peak_force,

@@ -89,6 +89,7 @@ from rimd_sim.analysis.dynamics.steady import (
     steady_orbit,
 )
 from rimd_sim.analysis.executor import run_tasks
+from rimd_sim.analysis.outputs import rows_of
 from rimd_sim.errors import ConfigError, IntegrationError
 from rimd_sim.model import validity
 from rimd_sim.model.ensemble import StopRule, run_cells
@@ -102,7 +103,7 @@ from rimd_sim.model.validity import (
 from rimd_sim.settings.config import SimConfig
 
 __all__ = ["BasinsResult", "DEFAULT_EXTRA_STARTS", "DEFAULT_STOP", "PeterkaResult", "START_NAMES", "basins",
-           "extra_starts", "peterka", "rest_classes"]
+           "basins_columns", "class_codes", "extra_starts", "peterka", "peterka_columns", "rest_classes"]
 
 START_NAMES = ("rest", "kick", "continued")
 #: How a Peterka map's trajectories are judged settled by default (module docstring; ``window``: the former rule).
@@ -195,10 +196,7 @@ class PeterkaResult:
         if self.invalid_rules is None:
             return np.full(self.primary.shape, "", dtype=object)
         rules = self._all(self.invalid_rules, self.extra_invalid_rules)
-        out = np.full(self.primary.shape, "", dtype=object)
-        for i, j in np.ndindex(*out.shape):
-            out[i, j] = _union(rules[:, i, j])
-        return out
+        return _rule_fields(np.bitwise_or.reduce(_rule_masks(rules), axis=0))
 
     @property
     def valid(self) -> np.ndarray:
@@ -219,20 +217,61 @@ class PeterkaResult:
     @property
     def classes_found(self) -> np.ndarray:
         """Per cell, the classes its starts ended on, sorted, ``;``-joined."""
-        labels = self.all_labels
-        out = np.full(self.primary.shape, "", dtype=object)
-        for i, j in np.ndindex(*out.shape):
-            out[i, j] = ";".join(sorted(set(labels[:, i, j].tolist())))
-        return out
+        return _class_sets(*class_codes(self.all_labels))
 
     def class_counts(self) -> dict[str, int]:
         """Cells per class (from rest)."""
         return dict(Counter(self.primary.ravel().tolist()).most_common())
 
 
-def _union(rules) -> str:
-    """The union of ``invalid_rule`` fields, in the domain's order."""
-    return validity.joined(name for r in rules for name in r.split(";") if name)
+def class_codes(labels: np.ndarray) -> tuple[list[str], np.ndarray]:
+    """The classes of ``labels`` (sorted) and each element's index into them (int16, the shape of ``labels``).
+
+    One dictionary look-up per element, no sort of the elements: linear in their number.
+    """
+    flat = labels.ravel().tolist()
+    names = sorted(set(flat))
+    index = {c: i for i, c in enumerate(names)}
+    codes = np.fromiter(map(index.__getitem__, flat), dtype=np.int16, count=len(flat))
+    return names, codes.reshape(labels.shape)
+
+
+def _class_sets(names: list[str], codes: np.ndarray) -> np.ndarray:
+    """Per element of ``codes[0]``, the classes ``codes`` hold along the first axis: names sorted, ``;``-joined.
+
+    ``names`` sorted (:func:`class_codes`), so that increasing codes are sorted names. The distinct sets are found
+    once (a map has few) and each element takes its own: no per-element join.
+    """
+    starts, cells = codes.shape[0], codes[0].size
+    present = np.zeros((len(names), cells), dtype=bool)
+    present[codes.reshape(starts, cells), np.arange(cells)] = True
+    packed = np.ascontiguousarray(np.packbits(present, axis=0).T)   # per element, one bit per class
+    keys = packed.view(np.dtype((np.void, packed.shape[1]))).ravel()
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    sets = np.array([";".join(names[c] for c in np.flatnonzero(present[:, k]).tolist()) for k in first.tolist()],
+                    dtype=object)
+    return sets[inverse.ravel()].reshape(codes.shape[1:])
+
+
+#: The ``invalid_rule`` field of each rule mask (:func:`_rule_masks`; bit k: ``RULE_NAMES[k]``), in the domain's order.
+_MASK_FIELDS = np.array([validity.joined(name for k, name in enumerate(validity.RULE_NAMES) if mask >> k & 1)
+                         for mask in range(1 << len(validity.RULE_NAMES))], dtype=object)
+
+
+def _rule_masks(fields: np.ndarray) -> np.ndarray:
+    """Each ``invalid_rule`` field as a mask of the rules it names (bit k: ``RULE_NAMES[k]``), the same shape.
+
+    A name outside the domain's counts for nothing, as in :func:`rimd_sim.model.validity.joined`; each distinct
+    field is read once.
+    """
+    flat = fields.ravel().tolist()
+    masks = {f: sum(1 << k for k, name in enumerate(validity.RULE_NAMES) if name in f.split(";")) for f in set(flat)}
+    return np.fromiter(map(masks.__getitem__, flat), dtype=np.uint8, count=len(flat)).reshape(fields.shape)
+
+
+def _rule_fields(masks: np.ndarray) -> np.ndarray:
+    """The ``invalid_rule`` field of each rule mask (``""``: none broken), an object array of the same shape."""
+    return _MASK_FIELDS[masks]
 
 
 def _measures(res) -> list[tuple[float, float, float, bool]]:
@@ -499,54 +538,57 @@ def _with_validity(result, dom: ValidityDomain):
     return replace(result, validity=dom.report(Verdict.of(r) for r in result.invalid_rule.ravel().tolist()))
 
 
-def peterka_table(result: PeterkaResult) -> list[dict]:
-    """CSV rows, one per cell; the valid domain's columns after the classes (max over the starts).
+def peterka_columns(result: PeterkaResult) -> dict[str, list]:
+    """The columns of ``peterka.csv``, one value per cell, row by row (gap, then frequency within a gap).
 
-    Then the ``rest`` start's steady peak force and impact velocity (its classified window): ``peak_force_n``,
-    ``impact_velocity_m_s``.
+    The gap and frequency and their ratios, the class from each named start, ``coexisting``, ``classes_found`` and
+    ``starts``; then the valid domain's columns (the largest |theta| and impact force over every start, ``valid``,
+    ``invalid_rule``: the union over the starts); then the ``rest`` start's steady peak force and impact velocity
+    (its classified window): ``peak_force_n``, ``impact_velocity_m_s``.
 
     ``coexisting`` and ``classes_found`` are over every start (``starts``: the three named ones and the extra
-    ones), a lower bound (module docstring).
+    ones), a lower bound (module docstring). Whole-array operations: linear in the cells. Python values, as
+    :func:`rimd_sim.analysis.outputs.write_columns` wants them.
     """
-    rows = []
-    cell_rules = result.invalid_rule
-    found = result.classes_found
-    # Each read once: these properties join every start's arrays (read per cell, the table is quadratic in cells).
-    every_start = _AllStarts(result)
-    coexisting = result.coexisting
-    for i, g in enumerate(result.gaps_mm):
-        for j, f in enumerate(result.frequencies_hz):
-            row = {"gap_mm": float(g), "gap_ratio": float(result.gap_ratio[i]), "frequency_hz": float(f),
-                   "frequency_ratio": float(result.frequency_ratio[j])}
-            row.update({f"class_{name}": result.labels[k, i, j] for k, name in enumerate(START_NAMES)})
-            row["coexisting"] = bool(coexisting[i, j])
-            row["classes_found"] = found[i, j]
-            row["starts"] = result.starts
-            row.update(_validity_columns(every_start, (slice(None), i, j), cell_rules[i, j]))
-            if result.peak_force is not None and result.impact_velocity is not None:
-                row["peak_force_n"] = float(result.peak_force[i, j])
-                row["impact_velocity_m_s"] = float(result.impact_velocity[i, j])
-            rows.append(row)
-    return rows
+    rows, cols = result.primary.shape
+    cells = rows * cols
+    out: dict[str, list] = {
+        "gap_mm": np.repeat(np.asarray(result.gaps_mm, dtype=float), cols).tolist(),
+        "gap_ratio": np.repeat(np.asarray(result.gap_ratio, dtype=float), cols).tolist(),
+        "frequency_hz": np.tile(np.asarray(result.frequencies_hz, dtype=float), rows).tolist(),
+        "frequency_ratio": np.tile(np.asarray(result.frequency_ratio, dtype=float), rows).tolist(),
+    }
+    out.update({f"class_{name}": result.labels[k].ravel().tolist() for k, name in enumerate(START_NAMES)})
+    out["coexisting"] = result.coexisting.ravel().tolist()
+    out["classes_found"] = result.classes_found.ravel().tolist()
+    out["starts"] = [result.starts] * cells
+    if result.max_abs_theta is not None:
+        out.update(_validity_arrays(result._all(result.max_abs_theta, result.extra_max_abs_theta),
+                                    result._all(result.max_force, result.extra_max_force), result.invalid_rule))
+    if result.peak_force is not None and result.impact_velocity is not None:
+        out["peak_force_n"] = np.asarray(result.peak_force, dtype=float).ravel().tolist()
+        out["impact_velocity_m_s"] = np.asarray(result.impact_velocity, dtype=float).ravel().tolist()
+    return out
 
 
-class _AllStarts:
-    """The largest angle and force of a map's every start (named and extra), as :func:`_validity_columns` reads."""
-
-    def __init__(self, result: PeterkaResult) -> None:
-        self.max_abs_theta = result._all(result.max_abs_theta, result.extra_max_abs_theta)
-        self.max_force = result._all(result.max_force, result.extra_max_force)
+def peterka_table(result: PeterkaResult) -> list[dict]:
+    """CSV rows, one per cell: :func:`peterka_columns` as one dict per row."""
+    return rows_of(peterka_columns(result))
 
 
-def _validity_columns(result, index, invalid_rule: str) -> dict:
-    """The valid domain's columns of a CSV row: the largest |theta| and impact force, ``valid``, ``invalid_rule``."""
-    if result.max_abs_theta is None:
-        return {}
-    th = result.max_abs_theta[index]
-    f = result.max_force[index]
-    return {"max_abs_theta_rad": float(np.nanmax(th)) if np.isfinite(th).any() else math.nan,
-            "max_force_n": float(np.nanmax(f)) if np.isfinite(f).any() else math.nan,
-            "valid": not invalid_rule, "invalid_rule": invalid_rule}
+def _validity_arrays(max_abs_theta: np.ndarray, max_force: np.ndarray, invalid_rule: np.ndarray) -> dict[str, list]:
+    """The valid domain's columns of a table, one value per element of ``invalid_rule`` (row by row).
+
+    ``max_abs_theta`` and ``max_force`` have one more axis in front (the starts, or one): the largest |theta| and
+    impact force over it, NaN where none is finite; then ``valid`` and ``invalid_rule``.
+    """
+    def largest(values: np.ndarray) -> list[float]:
+        values = np.asarray(values, dtype=float)
+        top = np.fmax.reduce(values, axis=0)   # NaN ignored, as np.nanmax
+        return np.where(np.isfinite(values).any(axis=0), top, math.nan).ravel().tolist()
+
+    return {"max_abs_theta_rad": largest(max_abs_theta), "max_force_n": largest(max_force),
+            "valid": (invalid_rule == "").ravel().tolist(), "invalid_rule": invalid_rule.ravel().tolist()}
 
 
 def compare_maps(early: PeterkaResult, fixed: PeterkaResult, config: SimConfig, measure_cycles: int, *,
@@ -642,10 +684,7 @@ def save_peterka_npz(result: PeterkaResult, path) -> None:
     model's valid domain over every start), ``peak_force_n`` and ``impact_velocity_m_s`` (per cell, the classified
     window of the ``rest`` start).
     """
-    labels = result.all_labels
-    names = sorted(set(labels.ravel().tolist()))
-    index = {c: i for i, c in enumerate(names)}
-    codes = np.vectorize(index.__getitem__, otypes=[np.int16])(labels)
+    names, codes = class_codes(result.all_labels)
     extra = result.starts - len(START_NAMES)
     start_names = [*START_NAMES, *(["free"] if extra else []), *(f"halton{s}" for s in range(1, extra))]
     rules = result.invalid_rule
@@ -844,6 +883,7 @@ def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], point
     orbits = [None if label is None or not done else orbit_points(pts[:, 0], pts[:, 1], label, tolerance)
               for label, pts, done in zip(keep, points, settled, strict=True)]
     ids, reps = cluster_orbits(keep, orbits, tolerance)
+    cells = np.bincount(ids[ids >= 0], minlength=len(reps))   # initial conditions per attractor
     omega = 2.0 * math.pi * frequency_hz
     out = []
     for a, r in enumerate(reps):
@@ -856,27 +896,33 @@ def _attractors(config: SimConfig, frequency_hz: float, labels: list[str], point
                     "period": 0 if orbits[r] is None else len(orbit),
                     "u": u.tolist(), "v": v.tolist(), "theta_rad": theta.tolist(),
                     "theta_dot_rad_s": theta_dot.tolist(),
-                    "peak_force_n": float(peaks[r]), "cells": int((ids == a).sum())})
+                    "peak_force_n": float(peaks[r]), "cells": int(cells[a])})
     return ids, out
 
 
-def basins_table(result: BasinsResult) -> list[dict]:
-    """CSV rows, one per initial condition; the attractor id after the class, then the valid domain's columns.
+def basins_columns(result: BasinsResult) -> dict[str, list]:
+    """The columns of ``basins.csv``, one value per initial condition, row by row (rate, then angle within a rate).
 
-    Then the peak force and impact velocity of its classified window (``peak_force_n``, ``impact_velocity_m_s``;
-    NaN where not run).
+    The initial angle and rate, the class, the attractor id, then the valid domain's columns, then the peak force
+    and impact velocity of its classified window (``peak_force_n``, ``impact_velocity_m_s``; NaN where not run).
+    Whole-array operations: linear in the initial conditions.
     """
-    rules = result.invalid_rule
-    ids = result.attractor_id
-    force, velocity = result.peak_force, result.impact_velocity
+    rows, cols = result.labels.shape
+    out: dict[str, list] = {
+        "theta0_rad": np.tile(np.asarray(result.theta0, dtype=float), rows).tolist(),
+        "theta_dot0_rad_s": np.repeat(np.asarray(result.theta_dot0, dtype=float), cols).tolist(),
+        "class": result.labels.ravel().tolist(),
+    }
+    if result.attractor_id is not None:
+        out["attractor_id"] = np.asarray(result.attractor_id, dtype=np.int64).ravel().tolist()
+    if result.invalid_rule is not None and result.max_abs_theta is not None and result.max_force is not None:
+        out.update(_validity_arrays(result.max_abs_theta[None], result.max_force[None], result.invalid_rule))
+    if result.peak_force is not None and result.impact_velocity is not None:
+        out["peak_force_n"] = np.asarray(result.peak_force, dtype=float).ravel().tolist()
+        out["impact_velocity_m_s"] = np.asarray(result.impact_velocity, dtype=float).ravel().tolist()
+    return out
 
-    def window(i: int, j: int) -> dict:
-        if force is None or velocity is None:
-            return {}
-        return {"peak_force_n": float(force[i, j]), "impact_velocity_m_s": float(velocity[i, j])}
 
-    return [{"theta0_rad": float(th), "theta_dot0_rad_s": float(r), "class": result.labels[i, j],
-             **({} if ids is None else {"attractor_id": int(ids[i, j])}),
-             **({} if rules is None else _validity_columns(result, (i, j), rules[i, j])),
-             **window(i, j)}
-            for i, r in enumerate(result.theta_dot0) for j, th in enumerate(result.theta0)]
+def basins_table(result: BasinsResult) -> list[dict]:
+    """CSV rows, one per initial condition: :func:`basins_columns` as one dict per row."""
+    return rows_of(basins_columns(result))

@@ -1,4 +1,4 @@
-"""Shared plumbing of the analysis verbs: argument checks and progress on stderr.
+"""Shared plumbing of the analysis verbs: argument checks, progress on stderr and the times of their last line.
 
 The files they write (CSV, strict JSON, parameter files) come from the library, :mod:`rimd_sim.analysis.outputs`;
 its writers are re-exported here for the verbs.
@@ -13,7 +13,13 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from rimd_sim.analysis.outputs import jsonable, write_csv, write_json, write_summary  # noqa: F401 - re-exported
+from rimd_sim.analysis.outputs import (  # noqa: F401 - re-exported
+    jsonable,
+    write_columns,
+    write_csv,
+    write_json,
+    write_summary,
+)
 from rimd_sim.cli import CommandError
 
 #: ``gap`` of :func:`add_model_arguments`: the gap is the configuration's unless ``--gap-mm`` is given.
@@ -203,8 +209,9 @@ class Progress:
     On a terminal: a tqdm bar rewritten in place (count, rate, time left), left on screen when the work is
     done. When stderr is not a terminal: no bar and no carriage returns, but whole lines in tqdm's format,
     one every :data:`LOG_INTERVAL` seconds while the work runs and one at the end, for example
-    ``rimd peterka: 31/31 gap rows in 19.8 s (1.57 gap rows/s)``. Time counts from the creation of the
-    object (create it when the work starts); the bar appears at the first call (only then is the total
+    ``rimd peterka: 31/31 gap rows in 19.8 s (1.57 gap rows/s)``: the time of the units counted, from the creation
+    of the object (create it when the work starts) to the last unit done; the verb's files come after (its last
+    line times them: :class:`VerbClock`). The bar appears at the first call (only then is the total
     known) and ends when ``done`` reaches ``total`` or at :meth:`close`, whichever comes first. Nothing is
     printed if the work never reported progress (a refusal before it started stays one line).
     """
@@ -285,6 +292,43 @@ def _is_terminal(file: TextIO) -> bool:
         return file.isatty() and size.columns > 0 and size.lines > 0
     except (AttributeError, OSError, ValueError):
         return False
+
+
+class VerbClock:
+    """The wall times an analysis verb's last line gives: what it computed, its files, and the whole verb.
+
+    Make it first thing in the verb's ``main`` (the verb's start); call :meth:`writing` when the computation is
+    over and the verb starts writing its files; after the last file (its figure included) is written,
+    :meth:`times` gives the clause, for example ``map computed in 56.1 s on 2 process(es), files written in
+    0.8 s, 57.9 s in all``:
+
+    * the computation's clause, the verb's words (``map computed in 56.1 s on 2 process(es)``): the analysis' own
+      wall time, which ``summary.json`` holds as ``wall_seconds``;
+    * ``files written in``: from :meth:`writing` to the files written (tables, arrays, summary, figure);
+    * ``in all``: from the verb's start to the files written: the imports its ``main`` makes (numba, matplotlib),
+      reading the configuration, the computation and the files. Not counted: the interpreter's start and the
+      imports before the verb's ``main`` runs, nor the exit (a benchmark times the process, benchmarks/bench_wall.py).
+
+    Each time is rounded to 0.1 s, so the parts may not add up to the whole to the last digit.
+    """
+
+    def __init__(self) -> None:
+        """Start the clock: the verb's start."""
+        self._start = time.perf_counter()
+        self._writing: float | None = None
+
+    def writing(self) -> None:
+        """Mark the end of the computation: the verb starts writing its files."""
+        self._writing = time.perf_counter()
+
+    def times(self, computed: str) -> str:
+        """``COMPUTED, files written in B s, C s in all`` (the class docstring), timed now.
+
+        Before :meth:`writing` was called, the files count as written in no time.
+        """
+        now = time.perf_counter()
+        files = 0.0 if self._writing is None else now - self._writing
+        return f"{computed}, files written in {files:.1f} s, {now - self._start:.1f} s in all"
 
 
 def progress_printer(verb: str, what: str) -> Progress:

@@ -10,13 +10,14 @@ import argparse
 
 from rimd_sim.cli import count, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
+    VerbClock,
     add_accept_invalid_argument,
     add_map_arguments,
     add_model_arguments,
     load_model_config,
     progress_printer,
     validity_exit,
-    write_csv,
+    write_columns,
     write_summary,
 )
 
@@ -37,8 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Compute the basins and write their files."""
+    clock = VerbClock()
     from rimd_sim.analysis.captions import describe
-    from rimd_sim.analysis.dynamics.peterka import basins, basins_table, default_basin_ranges
+    from rimd_sim.analysis.dynamics.peterka import basins, basins_columns, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
     from rimd_sim.model.validity import Verdict, domain
 
@@ -52,8 +54,9 @@ def main(args: argparse.Namespace) -> int:
                     transient_cycles=args.transient_cycles, measure_cycles=args.measure_cycles,
                     early_stop=not args.fixed_length, workers=args.workers, scheduler=args.scheduler,
                     progress=progress_printer("basins", "rows"))
+    clock.writing()
     args.out.mkdir(parents=True, exist_ok=True)
-    write_csv(args.out / "basins.csv", basins_table(result))
+    write_columns(args.out / "basins.csv", basins_columns(result))
     rig = config.rig
     summary = {
         "gap_mm": args.gap_mm, "gap_ratio": rig.gap / rig.amplitude, "frequency_hz": args.frequency,
@@ -73,8 +76,9 @@ def main(args: argparse.Namespace) -> int:
                 f"(Omega/omega_n = {args.frequency / rig.natural_frequency:.3g}): basins of attraction",
                 caption=describe(config))
     classes = ", ".join(f"{k}: {v}" for k, v in result.class_counts().items())
-    print(f"{classes}; {len(result.attractors or [])} attractor(s); "
-          f"{result.wall_seconds:.1f} s on {result.workers} process(es); files in {args.out}")
+    on = "process(es)" if result.where == "local" else f"Dask worker thread(s) of {result.where}"
+    times = clock.times(f"basins computed in {result.wall_seconds:.1f} s on {result.workers} {on}")
+    print(f"{classes}; {len(result.attractors or [])} attractor(s): {times}; files in {args.out}")
     run = (result.labels != "inside the stop").ravel().tolist()
     rules = [] if result.invalid_rule is None else result.invalid_rule.ravel().tolist()
     sentence = domain(config).sentence((Verdict.of(r) for r, ran in zip(rules, run, strict=False) if ran),

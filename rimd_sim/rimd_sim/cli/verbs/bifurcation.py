@@ -12,6 +12,7 @@ import sys
 from rimd_sim.cli import CommandError, count, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
     CONFIG_GAP,
+    VerbClock,
     add_accept_invalid_argument,
     add_model_arguments,
     add_scheduler_argument,
@@ -42,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweeps and write their files."""
+    clock = VerbClock()
     import numpy as np
 
     from rimd_sim.analysis.captions import describe
@@ -58,6 +60,7 @@ def main(args: argparse.Namespace) -> int:
     branches, wall, workers = bifurcation(config, freqs, args.direction, transient_cycles=args.transient_cycles,
                                           sample_cycles=args.sample_cycles, ramp_rate=args.ramp_rate,
                                           scheduler=args.scheduler)
+    clock.writing()
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "bifurcation.csv", branch_table(branches))
     summary = {
@@ -78,8 +81,8 @@ def main(args: argparse.Namespace) -> int:
         note = ("2/2 (period doubling) at " + ", ".join(f"{r['f_from_hz']:g}-{r['f_to_hz']:g} Hz" for r in doubled)
                 if doubled else "no 2/2 motion")
         print(f"sweep {b.direction}: {note}")
-    print(f"{summary['simulated_seconds']:.0f} s simulated in {wall:.1f} s on {workers} process(es); "
-          f"files in {args.out}")
+    print(clock.times(f"{summary['simulated_seconds']:.0f} s simulated in {wall:.1f} s on {workers} process(es)")
+          + f"; files in {args.out}")
     sentence = domain(config).sentence(v for b in branches for v in b.verdicts)
     return validity_exit("bifurcation", sentence, args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'bifurcation.csv'}")

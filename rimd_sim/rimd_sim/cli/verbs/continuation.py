@@ -17,6 +17,7 @@ import time
 from rimd_sim.cli import CommandError, count, number, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
     CONFIG_GAP,
+    VerbClock,
     add_accept_invalid_argument,
     add_model_arguments,
     load_model_config,
@@ -74,6 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Follow the branches and write the files."""
+    clock = VerbClock()
     import numpy as np
 
     from rimd_sim.analysis.captions import describe
@@ -107,6 +109,16 @@ def main(args: argparse.Namespace) -> int:
     except StartOutsideDomain as error:
         return _outside(args, config, error)
     wall = time.perf_counter() - t0
+    # The brute-force diagram is computed before any file is written, so that the files' time is theirs alone.
+    diagram, diagram_wall = None, 0.0
+    if freq and args.diagram_points:
+        from rimd_sim.analysis.dynamics.bifurcation import bifurcation
+
+        lo, hi = sorted((start, end))
+        diagram_freqs = np.round(np.linspace(lo, hi, args.diagram_points), 6)
+        print(f"rimd continue: brute-force diagram, {len(diagram_freqs)} frequencies...", file=sys.stderr, flush=True)
+        diagram, diagram_wall, _ = bifurcation(config, diagram_freqs, "both")
+    clock.writing()
     args.out.mkdir(parents=True, exist_ok=True)
     rig = config.rig
     rows = []
@@ -152,15 +164,8 @@ def main(args: argparse.Namespace) -> int:
         "periods_integrated": result.evaluations, "wall_seconds": wall,
         "validity": rules.report(verdicts),
     }
-    diagram = None
-    if freq and args.diagram_points:
-        from rimd_sim.analysis.dynamics.bifurcation import bifurcation
-
-        lo, hi = sorted((start, end))
-        freqs = np.round(np.linspace(lo, hi, args.diagram_points), 6)
-        print(f"rimd continue: brute-force diagram, {len(freqs)} frequencies...", file=sys.stderr, flush=True)
-        diagram, _, _ = bifurcation(config, freqs, "both")
-        summary["diagram_frequencies"] = len(freqs)
+    if diagram is not None:
+        summary["diagram_frequencies"] = len(diagram_freqs)
     write_summary(args.out, summary)
     title = (f"RIMD model, gap {args.gap_mm:g} mm: periodic orbits by continuation" if freq else
              f"RIMD model: periodic orbits by continuation in {args.parameter} at {f_fixed:g} Hz"
@@ -177,7 +182,9 @@ def main(args: argparse.Namespace) -> int:
               + (f" ({bif.frequency_hz / rig.natural_frequency:.5g} omega_n)" if freq else "")
               + f" on branch {bif.branch} (period {bif.period}){to}"
               + (FOLD_NOTE if suspect_fold(result, bif) else ""))
-    print(f"{result.evaluations} periods integrated in {wall:.1f} s; files in {args.out}")
+    computed = f"{result.evaluations} periods integrated in {wall:.1f} s" + (
+        f", the brute-force diagram in {diagram_wall:.1f} s" if diagram is not None else "")
+    print(clock.times(computed) + f"; files in {args.out}")
     return validity_exit("continue", rules.sentence(verdicts, "orbits"), args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'branch.csv'}")
 

@@ -38,9 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Parse, identify, write the files, print the estimates, the verdict and the validation."""
+    from rimd_sim.cli.verbs._analysis_io import VerbClock, check_positive
+
+    clock = VerbClock()
     from rimd_sim.analysis.identification.identify import identify
     from rimd_sim.analysis.identification.report import format_identification, parse_fix, write_outputs
-    from rimd_sim.cli.verbs._analysis_io import check_positive
     from rimd_sim.settings.config import find_config_file, load_config
 
     check_positive("--threshold", args.threshold)
@@ -51,8 +53,10 @@ def main(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     result = identify(args.recording, base, fixed, threshold=args.threshold, settle=args.settle,
                       log=lambda text: print(f"rimd identify: {text}", file=sys.stderr, flush=True))
-    write_outputs(result, base_path, args.out, args.recording, time.perf_counter() - start)
+    identified = time.perf_counter() - start
+    clock.writing()
+    write_outputs(result, base_path, args.out, args.recording, identified)
     for line in format_identification(result, base):
         print(line)
-    print(f"results in {args.out} ({time.perf_counter() - start:.1f} s)")
+    print(clock.times(f"identified in {identified:.1f} s") + f"; results in {args.out}")
     return 0

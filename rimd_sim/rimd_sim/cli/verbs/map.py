@@ -15,13 +15,14 @@ import sys
 from rimd_sim.cli import CommandError, count, positive_float
 from rimd_sim.cli.verbs._analysis_io import (
     CONFIG_GAP,
+    VerbClock,
     add_accept_invalid_argument,
     add_map_arguments,
     add_model_arguments,
     load_model_config,
     progress_printer,
     validity_exit,
-    write_csv,
+    write_columns,
     write_summary,
 )
 
@@ -86,6 +87,7 @@ def _axis(args: argparse.Namespace, axis: str) -> list[float]:
 
 def main(args: argparse.Namespace) -> int:
     """Compute the map and write its files."""
+    clock = VerbClock()
     from rimd_sim.analysis.captions import describe
     from rimd_sim.analysis.dynamics.maps import parameter_map, save_map_npz
     from rimd_sim.analysis.plots import plot_map
@@ -97,8 +99,9 @@ def main(args: argparse.Namespace) -> int:
                            transient_cycles=args.transient_cycles, measure_cycles=args.measure_cycles,
                            early_stop=not args.fixed_length, workers=args.workers, scheduler=args.scheduler,
                            progress=progress_printer("map", "rows"))
+    clock.writing()
     args.out.mkdir(parents=True, exist_ok=True)
-    write_csv(args.out / "map.csv", result.table())
+    write_columns(args.out / "map.csv", result.columns())
     save_map_npz(result, args.out / "map.npz")
     write_summary(args.out, result.summary())
     at = "" if args.frequency is None else f" at {args.frequency:g} Hz"
@@ -106,7 +109,7 @@ def main(args: argparse.Namespace) -> int:
              caption=describe(config, omit=(args.x, args.y)))
     classes = ", ".join(f"{k}: {v}" for k, v in result.class_counts().items())
     on = "process(es)" if result.where == "local" else f"Dask worker thread(s) of {result.where}"
-    print(f"{result.labels.size} cells ({classes}) in {result.wall_seconds:.1f} s on {result.workers} {on}; "
-          f"files in {args.out}", file=sys.stdout)
+    times = clock.times(f"map computed in {result.wall_seconds:.1f} s on {result.workers} {on}")
+    print(f"{result.labels.size} cells ({classes}): {times}; files in {args.out}", file=sys.stdout)
     sentence = domain(config).sentence((Verdict.of(r) for r in result.invalid_rule.ravel().tolist()), "cells")
     return validity_exit("map", sentence, args.accept_invalid, f"the invalid_rule column of {args.out / 'map.csv'}")

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from rimd_sim.cli import CommandError, count, gap_mm
 from rimd_sim.cli.verbs._analysis_io import (
+    VerbClock,
     add_accept_invalid_argument,
     add_map_arguments,
     add_model_arguments,
@@ -22,7 +24,7 @@ from rimd_sim.cli.verbs._analysis_io import (
     progress_printer,
     read_config,
     validity_exit,
-    write_csv,
+    write_columns,
     write_summary,
 )
 
@@ -68,6 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Compute the map and write its files."""
+    clock = VerbClock()
     import numpy as np
 
     from rimd_sim.analysis.captions import describe
@@ -76,7 +79,7 @@ def main(args: argparse.Namespace) -> int:
         compare_maps,
         cycles_summary,
         peterka,
-        peterka_table,
+        peterka_columns,
         save_peterka_npz,
     )
     from rimd_sim.analysis.plots import plot_peterka
@@ -95,15 +98,18 @@ def main(args: argparse.Namespace) -> int:
                      measure_cycles=args.measure_cycles, early_stop=not args.fixed_length, starts=args.starts,
                      stop=args.stop, rest_cycles=args.rest_cycles, workers=args.workers,
                      scheduler=args.scheduler, progress=progress_printer("peterka", "gap rows"))
-    comparison = None
+    comparison, compared = None, 0.0
     if args.compare_fixed and not args.fixed_length:
+        started = time.perf_counter()
         fixed = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
                         measure_cycles=args.measure_cycles, early_stop=False, starts=args.starts,
                         rest_cycles=result.rest_cap, workers=args.workers, scheduler=args.scheduler,
                         progress=progress_printer("peterka (fixed length)", "gap rows"))
         comparison = compare_maps(result, fixed, config, args.measure_cycles)
+        compared = time.perf_counter() - started
+    clock.writing()
     args.out.mkdir(parents=True, exist_ok=True)
-    write_csv(args.out / "peterka.csv", peterka_table(result))
+    write_columns(args.out / "peterka.csv", peterka_columns(result))
     save_peterka_npz(result, args.out / "peterka.npz")
     summary = {
         "gaps_mm": [args.gap_min_mm, args.gap_max_mm, args.gaps],
@@ -129,13 +135,15 @@ def main(args: argparse.Namespace) -> int:
                  caption=describe(config, omit=("gap",)))
     if comparison is not None:
         differ = [c for c in comparison["differing_cells"] if c["start"] == "rest"]
-        print(f"early stop vs fixed length ({comparison['fixed_cycles']} cycles): "
+        print(f"early stop vs fixed length ({comparison['fixed_cycles']} cycles; the fixed-length map and the "
+              f"long runs computed in {compared:.1f} s): "
               f"{100 * comparison['agreement_from_rest']:.2f} % of the cells agree (class from rest); differing: "
               + (", ".join(f"{c['gap_mm']:g} mm {c['frequency_hz']:.3f} Hz {c['early_stop']} vs {c['fixed_length']} "
                            f"(long run: {c['long_run']})" for c in differ) or "none"))
     on = "process(es)" if result.where == "local" else f"Dask worker thread(s) of {result.where}"
-    print(f"{result.primary.size} cells, {summary['coexisting_cells']} with coexisting attractors, in "
-          f"{result.wall_seconds:.1f} s on {result.workers} {on}; files in {args.out}", file=sys.stdout)
+    times = clock.times(f"map computed in {result.wall_seconds:.1f} s on {result.workers} {on}")
+    print(f"{result.primary.size} cells, {summary['coexisting_cells']} with coexisting attractors: {times}; "
+          f"files in {args.out}", file=sys.stdout)
     unsettled = int((result.cycles[0] > result.rest_cap).sum()) if result.early_stop else 0
     if unsettled:
         longer = (f"; --rest-cycles {10 * cap} runs their start from rest on" if result.rest_cap < 10 * cap else "")

@@ -14,6 +14,7 @@ import numpy as np
 from rimd_sim.cli import CommandError, count
 from rimd_sim.cli.verbs._analysis_io import (
     CONFIG_GAP,
+    VerbClock,
     add_accept_invalid_argument,
     add_model_arguments,
     add_scheduler_argument,
@@ -45,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its files."""
+    clock = VerbClock()
     from rimd_sim.analysis.executor import local_workers, scheduler_address
     from rimd_sim.analysis.figures import Figures
 
@@ -65,6 +67,7 @@ def main(args: argparse.Namespace) -> int:
         with progress_printer("sweep", "frequencies") as progress:
             result = sweep(config, freqs, args.direction, cycles=args.cycles, measure_cycles=args.measure_cycles,
                            workers=args.workers, scheduler=args.scheduler, progress=progress)
+        clock.writing()
         args.out.mkdir(parents=True, exist_ok=True)
         rows = points_table(result)
         with open(args.out / "sweep.csv", "w", newline="") as fh:
@@ -83,7 +86,7 @@ def main(args: argparse.Namespace) -> int:
         return "none" if p is None else f"{p.frequency_hz:g} Hz {p.peak_force_n:.1f} N"
 
     print(f"gap {args.gap_mm:g} mm, {args.direction}: band A {band(result.band_a)}, band B {band(result.band_b)}; "
-          f"{result.simulated_seconds:.0f} s simulated in {result.wall_seconds:.1f} s on {result.workers} "
-          f"process(es); files in {args.out}")
+          + clock.times(f"{result.simulated_seconds:.0f} s simulated in {result.wall_seconds:.1f} s on "
+                        f"{result.workers} process(es)") + f"; files in {args.out}")
     sentence = domain(config).sentence(Verdict.of(p.invalid_rule) for p in result.points)
     return validity_exit("sweep", sentence, args.accept_invalid, f"the invalid_rule column of {args.out / 'sweep.csv'}")
