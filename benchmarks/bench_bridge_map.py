@@ -11,12 +11,16 @@ at real time, and the parts: reading the bytes, the channels, the truth (phase p
 It is the bridge's share of ``bench_rig.py``'s composed rig without the rig's wake-ups and the other threads'
 interference (the live share is larger: a thread woken every few ms runs its work from cold caches).
 
+``--display-interval S`` maps the channels as the live bridge's display stream (each channel's min and max sample
+per S seconds: ``display_interval``, docs/rerun.md; the bridge's default is 0.005); the default 0 maps every sample,
+as ``rimd rig --rerun-full-rate`` and ``rimd rerun`` do (and as checkouts without the display stream did).
+
 With ``--compare DIR`` (another checkout), the same measurement runs from this tree and from DIR's package
 alternately (fresh processes, ``--rounds`` each), and the median ratio DIR / this is printed (> 1: this tree is
 cheaper): a before/after of one run on a shared machine.
 
 Run (after ``source env.sh``):
-    python benchmarks/bench_bridge_map.py [--seconds 30] [--compare DIR [--rounds 5]]
+    python benchmarks/bench_bridge_map.py [--seconds 30] [--display-interval 0.005] [--compare DIR [--rounds 5]]
 """
 
 from __future__ import annotations
@@ -66,8 +70,12 @@ def rig_messages(seconds: float) -> list[tuple[str, bytes]]:
     return out
 
 
-def measure(seconds: float) -> dict:
-    """The bridge's path on ``seconds`` of messages: CPU s in all and per part (one untimed second first)."""
+def measure(seconds: float, display_interval: float = 0.0) -> dict:
+    """The bridge's path on ``seconds`` of messages: CPU s in all and per part (one untimed second first).
+
+    ``display_interval`` > 0: the channels as the display stream (given to the mapper only then, so that a checkout
+    without it measures at full rate as before).
+    """
     import rerun as rr
     from rclpy.serialization import deserialize_message
 
@@ -80,7 +88,8 @@ def measure(seconds: float) -> dict:
     with tempfile.TemporaryDirectory(prefix="bench_bridge_map_") as tmp:
         rec = rr.RecordingStream("bench_bridge_map")
         rec.save(str(Path(tmp) / "map.rrd"))
-        mapper = RigMapper(rec, batch=10, min_interval=0.0)
+        display = {"display_interval": display_interval} if display_interval > 0 else {}
+        mapper = RigMapper(rec, batch=10, min_interval=0.0, **display)
         mapper.log_static()
         clock = time.thread_time
         # the first second of messages untimed (up to a block's end): the caches and the SDK warm up
@@ -106,18 +115,19 @@ def measure(seconds: float) -> dict:
             rec.flush()
             total = time.process_time() - start
         rec.disconnect()
-    return {"seconds": seconds, "cpu_s": total} | parts
+    return {"seconds": seconds, "cpu_s": total, "display_interval": display_interval} | parts
 
 
 def percent(result: dict, key: str = "cpu_s") -> float:
     return 100.0 * result[key] / result["seconds"]
 
 
-def run_tree(tree: Path, seconds: float) -> dict:
+def run_tree(tree: Path, seconds: float, display_interval: float = 0.0) -> dict:
     """:func:`measure` in a fresh process importing ``tree``'s package."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree / "rimd_sim"), env.get("PYTHONPATH")]))
-    out = subprocess.run([sys.executable, __file__, "--seconds", str(seconds), "--json-line"], env=env,
+    out = subprocess.run([sys.executable, __file__, "--seconds", str(seconds), "--display-interval",
+                          str(display_interval), "--json-line"], env=env,
                          capture_output=True, text=True, check=True, timeout=900).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -133,19 +143,26 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0, help="seconds of rig data mapped (default 30)")
     parser.add_argument("--compare", type=Path, default=None, metavar="DIR", help="another checkout, alternately")
     parser.add_argument("--rounds", type=int, default=5, help="with --compare: runs of each tree (default 5)")
+    parser.add_argument("--display-interval", type=float, default=0.0, metavar="S",
+                        help="map the channels as the display stream, min and max per S s (default 0: every sample)")
     parser.add_argument("--json-line", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.display_interval < 0:
+        parser.error("--display-interval must be >= 0")
     if args.json_line:
-        print(json.dumps(measure(args.seconds)))
+        print(json.dumps(measure(args.seconds, args.display_interval)))
         return
-    print(f"bench_bridge_map: {args.seconds:g} s of the default rig's messages, load {os.getloadavg()[0]:.2f}")
+    stream = (f"display stream, min and max per {args.display_interval:g} s" if args.display_interval > 0
+              else "every sample")
+    print(f"bench_bridge_map: {args.seconds:g} s of the default rig's messages ({stream}), "
+          f"load {os.getloadavg()[0]:.2f}")
     if args.compare is None:
-        show("this", run_tree(ROOT, args.seconds))
+        show("this", run_tree(ROOT, args.seconds, args.display_interval))
         return
     results: dict[str, list[dict]] = {"this": [], "compare": []}
     for _ in range(args.rounds):
         for label, tree in (("this", ROOT), ("compare", args.compare.resolve())):
-            results[label].append(run_tree(tree, args.seconds))
+            results[label].append(run_tree(tree, args.seconds, args.display_interval))
             show(label, results[label][-1])
     for label, runs in results.items():
         print(f"  {label:8s} median {statistics.median(percent(r) for r in runs):.2f} %")

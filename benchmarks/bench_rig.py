@@ -27,6 +27,11 @@ Printed for each layout (and written as JSON with --json):
     light-rig changes (docs/benchmarks.md: simulator <= 5 %, recorder <= 10 %, Rerun bridge <= 10 %, the whole
     rig <= 25 %), each with "met" or "NOT met"; and the composed rig's CPU against the separate rig's.
 
+With ``--rerun both``, each layout runs twice, its Rerun bridge sending the display stream (the default, as ``make
+run``: each channel's min and max sample per 5 ms, docs/rerun.md) and then every sample (``rimd rig
+--rerun-full-rate``), and the whole rig's CPU of the two is printed side by side; ``--rerun full`` measures full
+rate only.
+
 With ``--compare DIR`` (another checkout, set up: a worktree of an older commit), the rig of --only's layout
 (default composed) of this tree and of DIR's package run alternately (ABBA...), --rounds times each, in one run, and the
 whole rig's CPU is printed per run, as medians and as the median ratio DIR / this: on a shared machine whose speed
@@ -34,7 +39,7 @@ drifts within hours, a before/after figure that means something.
 
 Run (after ``source env.sh``, from the repository root; the machine otherwise idle):
     python benchmarks/bench_rig.py [--seconds 120] [--json rig.json] [--keep] [--only composed|separate]
-                                   [--compare DIR [--rounds 3]]
+                                   [--rerun display|full|both] [--compare DIR [--rounds 3]]
 The exit status is 0 whenever the rigs ran and were measured, whatever the verdicts.
 """
 
@@ -58,6 +63,8 @@ GOAL_RIG_PERCENT = 25.0
 GOAL_COMPOSED_PERCENT = 12.0
 EXTERNAL = "external subscriber"
 LAYOUTS = {"composed": (), "separate": ("--separate",)}
+#: The Rerun bridge's stream: the display stream (the default of ``rimd rig``) or every sample.
+STREAMS = {"display": (), "full": ("--rerun-full-rate",)}
 
 
 def traffic(path: Path, seconds_of_data: float) -> dict:
@@ -151,7 +158,9 @@ def stop_external(proc: subprocess.Popen, tmp: Path) -> dict:
 
 def report(result: dict) -> None:
     run, procs, flow = result["run"], result["processes"], result["traffic"]
-    print(f"\n{run['layout']}: the default rig (`rimd rig{' --separate' if run['layout'] == 'separate' else ''}`, "
+    options = " ".join((*LAYOUTS[run['layout']], *STREAMS[run.get('rerun_stream', 'display')]))
+    print(f"\n{run['layout']}, Rerun {run.get('rerun_stream', 'display')}: the default rig (`rimd rig"
+          f"{' ' + options if options else ''}`, "
           f"config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
           f"{run['warmup']:g} s of warm-up, from sample 0 "
           f"({'every consumer connected first' if run['from_sample_0'] else 'resumed WITHOUT all consumers'}); "
@@ -183,21 +192,24 @@ def report(result: dict) -> None:
         print(f"  {goal['goal']}: {soak._verdict(goal['met'])} ({goal['detail']})")
 
 
-def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path | None = None) -> dict:
+def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path | None = None,
+            stream: str = "display") -> dict:
     """One rig of ``layout`` (composed or separate) with the external subscriber, measured; its figures.
 
-    ``tree``: the checkout whose package runs (default this one; :func:`bench_soak.start_rig`).
+    ``tree``: the checkout whose package runs (default this one; :func:`bench_soak.start_rig`). ``stream``: the
+    Rerun bridge's (:data:`STREAMS`).
     """
+    options = (*LAYOUTS[layout], *STREAMS[stream])
     from rimd_sim.io.reader import RecordingError
 
     with soak.RigRun.open(f"bench_rig_{layout}_", args.keep) as run:
         tmp = run.tmp
-        print(f"bench_rig: `rimd rig {' '.join(LAYOUTS[layout])}` ({layout}{', ' + str(tree) if tree else ''}) "
+        print(f"bench_rig: `rimd rig {' '.join(options)}` ({layout}{', ' + str(tree) if tree else ''}) "
               f"in {tmp}, ROS_DOMAIN_ID "
               f"{run.domain_id}; {args.warmup:g} s warm-up, then {args.seconds:g} s measured", flush=True)
         external = start_external(tmp, run.domain_id)
         try:
-            from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout, LAYOUTS[layout], tree)
+            from_sample_0, procs = run.start(args.warmup + args.seconds, args.startup_timeout, options, tree)
             procs[EXTERNAL] = external.pid
             started = time.monotonic()
             expected = [soak.COMPOSED] if layout == "composed" else list(soak.NODES.values())
@@ -219,8 +231,8 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path
         finally:
             counts = stop_external(external, tmp)
         data_seconds = time.monotonic() - started   # about the simulated time recorded (real time)
-        result: dict = {"run": {"layout": layout, "seconds": wall, "warmup": args.warmup, "period": args.period,
-                                "domain_id": run.domain_id, "rig_exit_status": status,
+        result: dict = {"run": {"layout": layout, "rerun_stream": stream, "seconds": wall, "warmup": args.warmup,
+                                "period": args.period, "domain_id": run.domain_id, "rig_exit_status": status,
                                 "from_sample_0": from_sample_0, "tmp": str(tmp)}}
         result["processes"] = {name: soak.process_figures(s) for name, s in series.items()}
         result["threads"] = threads
@@ -250,7 +262,7 @@ def compare(args: argparse.Namespace, block_rate: float) -> dict:
         for name, tree in order:
             print(f"\nbench_rig: round {round_ + 1}/{args.rounds}, {name} ({tree or soak.REPO}), load "
                   f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
-            runs[name].append(measure(layout, args, block_rate, tree))
+            runs[name].append(measure(layout, args, block_rate, tree, args.rerun))
     totals = {name: [rig_total(r["processes"])[0] for r in results] for name, results in runs.items()}
     lost = {name: [not (r["goals"]["nothing_lost"]["met"] and r["goals"]["nothing_lost_external"]["met"])
                    for r in results] for name, results in runs.items()}
@@ -274,10 +286,15 @@ def main() -> None:
     parser.add_argument("--compare", type=Path, default=None, metavar="DIR",
                         help="alternate the rig of --only's layout (default composed) with DIR's (another checkout)")
     parser.add_argument("--rounds", type=int, default=3, help="with --compare: runs of each tree (default 3)")
+    parser.add_argument("--rerun", choices=(*STREAMS, "both"), default="display",
+                        help="the Rerun bridge's stream: display (default, as make run), full (every sample: "
+                             "rimd rig --rerun-full-rate), or both, one after the other, compared")
     soak.add_rig_arguments(parser)
     args = parser.parse_args()
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0 or args.rounds < 1:
         parser.error("--seconds, --period and --rounds must be positive, --warmup not negative")
+    if args.compare is not None and args.rerun == "both":
+        parser.error("--compare measures one stream: --rerun display or full")
     if args.compare is not None:
         from bench_latency import check_tree
 
@@ -289,7 +306,17 @@ def main() -> None:
     if args.compare is not None:
         soak.write_json(compare(args, block_rate), args.json)
         return
-    results = {layout: measure(layout, args, block_rate) for layout in LAYOUTS if args.only in (None, layout)}
+    layouts = [layout for layout in LAYOUTS if args.only in (None, layout)]
+    if args.rerun == "both":
+        streams = {layout: {stream: measure(layout, args, block_rate, stream=stream) for stream in STREAMS}
+                   for layout in layouts}
+        print("\nthe whole rig, the Rerun bridge sending the display stream against every sample, in this run:")
+        for layout, by_stream in streams.items():
+            display, full = (rig_total(by_stream[s]["processes"])[0] for s in ("display", "full"))
+            print(f"  {layout:<9} {display:.1f} % against {full:.1f} % of one core ({display - full:+.1f} points)")
+        soak.write_json(streams, args.json)
+        return
+    results = {layout: measure(layout, args, block_rate, stream=args.rerun) for layout in layouts}
     if len(results) == 2:
         composed, separate = (rig_total(results[n]["processes"])[0] for n in ("composed", "separate"))
         print(f"\nthe whole rig, composed against separate processes, in this run: {composed:.1f} % against "

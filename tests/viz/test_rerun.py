@@ -1,10 +1,13 @@
 """The Rerun bridge: live (simulator node + ``rimd_rerun`` over DDS) and offline (``rimd rerun REC.mcap``).
 
 Hypotheses:
-* every sample a channel published while the bridge listened is in the ``.rrd`` exactly once, at its exact
-  sample time ``first_index / rate`` on ``sim_time``, with the published value (bit for bit); impacts are
-  there as markers, log lines and table rows at their contact-start stamps; the file passes
-  ``rerun rrd verify`` after a SIGTERM;
+* live at full rate (``display_interval`` 0): every sample a channel published while the bridge listened is in
+  the ``.rrd`` exactly once, at its exact sample time ``first_index / rate`` on ``sim_time``, with the published
+  value (bit for bit); impacts are there as markers, log lines and table rows at their contact-start stamps;
+  the file passes ``rerun rrd verify`` after a SIGTERM;
+* live by default (the display stream): each channel holds, per 5 ms, the smallest and the largest of the
+  samples published in it, at their own times and values (at most two points per interval, whatever the
+  rate), so every impact's peak force sample is there exactly; the impacts as at full rate;
 * a recording converted offline gives the same entities, with counts equal to what the recording holds;
 * bad input (missing or garbage MCAP, unwritable --save, unknown sink) is one clear line and exit 1;
 * the web sink listens on loopback only, and Rerun's usage reporting is off unless asked for.
@@ -65,9 +68,22 @@ def check_channels(data, counts: dict[str, int] | None = None) -> dict[str, tupl
     return runs
 
 
-@pytest.mark.ros
-@pytest.mark.timeout(90)
-def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_executor, tmp_path):
+def envelope(times: np.ndarray, values: np.ndarray, interval_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """The display stream by a plain scan, interval by interval: the first min and first max sample, time order."""
+    ids = times // interval_ns
+    index: list[int] = []
+    for k in np.unique(ids):
+        where = np.flatnonzero(ids == k)
+        index += sorted({int(where[np.argmin(values[where])]), int(where[np.argmax(values[where])])})
+    return times[index], values[index]
+
+
+def run_live_bridge(ros_processes, ros_executor, tmp_path, runs_of, *bridge_args: str):
+    """The simulator (motor at 3.75 Hz, gap 0), a probe that hears every channel and the impacts, and the bridge
+    saving an .rrd (``bridge_args`` more) until it has logged a few impacts; SIGTERM. ``runs_of(data, closed)``
+    gives each channel's (first index, count) the bridge logged; the probe then takes every block and impact up
+    to the bridge's last, and the rig stops. Returns (data, heard blocks, events, closing line, origin ns, runs).
+    """
     import rclpy
 
     rig = ros_processes.start_node("rimd_simulator", "--ros-args", "-p", "motor.initial_frequency:=3.75")
@@ -89,7 +105,7 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
 
     out = tmp_path / "live.rrd"
     bridge = ros_processes.start_node("rimd_rerun", "--ros-args", "-p", "sink:=save", "-p", f"save_path:={out}",
-                                      "-p", "status_period:=1.0")
+                                      "-p", "status_period:=1.0", *bridge_args)
     bridge.wait_for_output(r"rerun bridge ready: sink save", timeout=30)
     # Run until the bridge has logged a few impacts (the motor runs at 3.75 Hz from the start, gap 0).
     assert spin_until(ros_executor, lambda: re.search(r"status: .*, [3-9]\d* impacts|status: .*, \d{2,} impacts",
@@ -98,11 +114,12 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
     assert bridge.wait(20) == 0, bridge.tail()
     closed = re.search(r"rimd_rerun: closed .*", bridge.output())
     assert closed, bridge.tail()
+    assert closed.group(0).endswith(", 0 gaps"), closed.group(0)
 
     verify_rrd(out)
     data = load_rrd(out)
     assert ENTITIES <= set(data), sorted(ENTITIES - set(data))
-    runs = check_channels(data)
+    runs = runs_of(data, closed.group(0))
     origin = stamp_ns(heard["impact_force"][0].header.stamp) - int(
         sample_times_ns(heard["impact_force"][0].first_index, 1, 20000.0)[0])
     markers = data["channels/impact_force/impacts"]
@@ -114,19 +131,21 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
         stamp_ns(e.header.stamp) - origin >= last_impact for e in events), timeout=20), \
         {n: (heard_to[n](), sum(runs[n])) for n in runs}
     assert rig.stop() == 0, rig.tail()
-    for ch in CHANNELS:
-        first, count = runs[ch.name]
-        assert f"{ch.name} {count} samples" in closed.group(0)  # what the bridge counted is what is in the file
-        # What was published in that index range, as heard by the probe: same samples, same values.
-        blocks = [b for b in heard[ch.name] if first <= b.first_index < first + count]
-        assert blocks and blocks[0].first_index == first, ch.name
-        published = np.concatenate([np.asarray(b.samples) for b in blocks])
-        assert published.size == count, (ch.name, published.size, count)
-        assert np.array_equal(data[ch.entity].scalars(), published), ch.name
-        assert stamp_ns(blocks[0].header.stamp) - data[ch.entity].times[0] == \
-            stamp_ns(heard["impact_force"][0].header.stamp) - int(sample_times_ns(
-                heard["impact_force"][0].first_index, 1, 20000.0)[0]), "one origin for all channels"
+    return data, heard, events, closed.group(0), origin, runs
 
+
+def published(heard: dict, name: str, first: int, count: int) -> np.ndarray:
+    """The samples the probe heard on channel ``name`` with indices ``first .. first + count - 1``, in order."""
+    blocks = [b for b in heard[name] if first <= b.first_index < first + count]
+    assert blocks and blocks[0].first_index == first, name
+    samples = np.concatenate([np.asarray(b.samples) for b in blocks])
+    assert samples.size == count, (name, samples.size, count)
+    return samples
+
+
+def check_impacts(data, events, origin: int) -> None:
+    """Markers, table and log of the impacts are the events the probe heard, at their contact-start stamps."""
+    markers = data["channels/impact_force/impacts"]
     assert markers.times.size >= 3
     by_time = {stamp_ns(e.header.stamp) - origin: e for e in events}
     for t, peak in zip(markers.times, markers.scalars(), strict=True):
@@ -138,6 +157,64 @@ def test_live_bridge_logs_every_published_sample_at_its_time(ros_processes, ros_
     # One Poincare point per completed motor cycle at 3.75 Hz while the bridge listened (within one).
     span = (data["phase_plane/trajectory"].times[-1] - data["phase_plane/trajectory"].times[0]) / 1e9
     assert abs(data["poincare/points"].times.size - 3.75 * span) <= 1.5
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(90)
+def test_live_bridge_at_full_rate_logs_every_published_sample_at_its_time(ros_processes, ros_executor, tmp_path):
+    """``display_interval`` 0 (``rimd rig --rerun-full-rate``): every sample, bit for bit, at its time."""
+    data, heard, events, closed, origin, runs = run_live_bridge(
+        ros_processes, ros_executor, tmp_path, lambda data, closed: check_channels(data), "-p", "display_interval:=0.0")
+    assert "display points" not in closed
+    for ch in CHANNELS:
+        first, count = runs[ch.name]
+        assert f"{ch.name} {count} samples," in closed  # what the bridge counted is what is in the file
+        # What was published in that index range, as heard by the probe: same samples, same values.
+        assert np.array_equal(data[ch.entity].scalars(), published(heard, ch.name, first, count)), ch.name
+        first_block = next(b for b in heard[ch.name] if b.first_index == first)
+        assert stamp_ns(first_block.header.stamp) - data[ch.entity].times[0] == origin, "one origin for all channels"
+    check_impacts(data, events, origin)
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(90)
+def test_live_bridge_logs_the_display_stream_by_default(ros_processes, ros_executor, tmp_path):
+    """The default: each channel's min and max sample per 5 ms of what was published, each at its own time (at most
+    two points per interval whatever the rate); every impact's peak force sample among them, value and time."""
+    interval = 5_000_000
+
+    def runs_of(data, closed: str) -> dict[str, tuple[int, int]]:
+        # The bridge's first block starts an interval (10 ms blocks): its first index from its first point's
+        # interval; its sample count from its closing line.
+        runs = {}
+        for ch in CHANNELS:
+            count = re.search(rf"{ch.name} (\d+) samples \((\d+) display points\)", closed)
+            assert count, closed
+            first = int(data[ch.entity].times[0]) // interval * interval * int(RATES[ch.name]) // 1_000_000_000
+            runs[ch.name] = (first, int(count.group(1)))
+        return runs
+
+    data, heard, events, closed, origin, runs = run_live_bridge(ros_processes, ros_executor, tmp_path, runs_of)
+    for ch in CHANNELS:
+        first, count = runs[ch.name]
+        times = sample_times_ns(first, count, RATES[ch.name])
+        samples = published(heard, ch.name, first, count)
+        want_t, want_v = envelope(times, samples, interval)
+        assert np.array_equal(data[ch.entity].times, want_t), ch.name
+        assert np.array_equal(data[ch.entity].scalars(), want_v), ch.name
+        assert f"{ch.name} {count} samples ({want_t.size} display points)" in closed
+        assert want_t.size <= 2 * np.unique(times // interval).size, ch.name   # 400 points/s, at 2 or 20 kHz
+        if ch.name == "impact_force":
+            shown = dict(zip(want_t.tolist(), want_v.tolist(), strict=True))
+            impacts = [e for e in events if times[0] <= stamp_ns(e.header.stamp) - origin
+                       and stamp_ns(e.header.stamp) - origin + e.duration * 1e9 <= times[-1]]
+            assert len(impacts) >= 3
+            for e in impacts:
+                start = stamp_ns(e.header.stamp) - origin
+                inside = np.flatnonzero((times >= start) & (times <= start + e.duration * 1e9))
+                top = inside[np.argmax(samples[inside])]
+                assert shown.get(int(times[top])) == samples[top], e.index   # the peak sample, time and value
+    check_impacts(data, events, origin)
 
 
 @pytest.mark.process

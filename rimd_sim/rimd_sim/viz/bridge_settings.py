@@ -48,6 +48,12 @@ class BridgeSettings:
                           read_only=True)
     trail: float = param(1.0, "phase-plane trajectory shown (trailing line)", unit="s", ge=0.01, le=3600,
                          read_only=True)
+    display_interval: float = param(0.005, "the channels' display stream: per interval of this length, its "
+                                           "smallest and largest sample at their own times (peaks exact, at most 2 "
+                                           "points per interval and channel whatever the sample rate); 0 = full "
+                                           "rate, every sample (rimd rig --rerun-full-rate). The recording keeps "
+                                           "every sample either way", unit="s", ge=0.0001, le=10,
+                                    zero="full rate: every sample", read_only=True)
     batch_blocks: int = param(10, "blocks of a channel sent per send_columns call (1 = one call per block; more = "
                                   "less CPU, up to that many block periods of latency)", ge=1, le=1000,
                               read_only=True)

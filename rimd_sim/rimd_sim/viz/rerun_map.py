@@ -12,7 +12,9 @@ start at real time) is learnt from the blocks; impact events are placed at ``sta
 
 Entities:
 
-* ``channels/<name>``: the four instrument channels (Scalars, SI units, one ``send_columns`` per block);
+* ``channels/<name>``: the four instrument channels (Scalars, SI units, sent as columns): every sample, or with
+  ``display_interval`` (the live bridge's default) the display stream, each interval's min and max sample
+  (:mod:`rimd_sim.viz.display`);
 * ``channels/impact_force/impacts``: one marker per impact at its contact start, at the peak force;
 * ``impacts/log`` (TextLog) and ``impacts/table`` (AnyValues: peak, impulse, velocity, ...): one row per impact;
 * ``phase_plane/trajectory``: relative displacement of the RIMD (``x - x_c``, mm) versus its relative
@@ -32,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from rimd_sim.viz.display import EnvelopeDecimator
 from rimd_sim.viz.sinks import require_rerun
 
 __all__ = [
@@ -196,9 +199,14 @@ class _PhaseState:
 
 @dataclass
 class MapperStats:
-    """What a :class:`RigMapper` has logged, per entity: samples, blocks, gaps (dropped blocks)."""
+    """What a :class:`RigMapper` has logged, per entity: samples, blocks, gaps (dropped blocks).
+
+    ``samples`` counts the samples received per channel, ``points`` those sent to Rerun (the same at full rate;
+    the envelope's points with a display interval).
+    """
 
     samples: dict[str, int] = field(default_factory=dict)
+    points: dict[str, int] = field(default_factory=dict)
     blocks: dict[str, int] = field(default_factory=dict)
     gaps: dict[str, int] = field(default_factory=dict)
     impacts: int = 0
@@ -224,6 +232,12 @@ class RigMapper:
     send of a channel and go with it (:meth:`log_impact`). :meth:`flush` sends a partial batch and the impacts
     waiting; call it before closing the stream.
 
+    With ``display_interval`` > 0 (s) the channels are sent as their display stream: per channel and per
+    interval of that length, its smallest and its largest sample, each at its own time
+    (:class:`rimd_sim.viz.display.EnvelopeDecimator`: at most 2 points per interval, every impact's peak sample
+    exact); 0 (the default, the offline conversion's) sends every sample. The truth's views and the impacts are
+    the same either way.
+
     Args:
         recording: A ``rerun.RecordingStream``.
         natural_frequency: Hz; the phase plane's velocity axis is ``v_rel / (2 pi natural_frequency)`` so
@@ -231,7 +245,7 @@ class RigMapper:
     """
 
     def __init__(self, recording: Any, *, natural_frequency: float = 1.82, batch: int = 1,
-                 min_interval: float = 0.0) -> None:
+                 min_interval: float = 0.0, display_interval: float = 0.0) -> None:
         """Bind to ``recording``; nothing is logged until :meth:`log_static` or a message.
 
         A channel's pending blocks are sent once there are ``batch`` of them and ``min_interval`` s of wall time
@@ -243,6 +257,8 @@ class RigMapper:
 
         if batch < 1:
             raise ValueError(f"batch {batch} must be >= 1")
+        if not display_interval >= 0:
+            raise ValueError(f"display_interval {display_interval} must be >= 0")
         self._rr = rr
         self.rec = recording
         self.batch = batch
@@ -258,6 +274,10 @@ class RigMapper:
         self._pending: list[tuple[str, Any]] = []
         self._impacts: list[tuple] = []   # impacts waiting for the next send: time, text, the table's columns
         self.stats = MapperStats()
+        #: The display interval in ns (0: every sample) and each channel's decimator.
+        self.display_interval_ns = round(display_interval * NS_PER_S)
+        self._display = ({ch.name: EnvelopeDecimator(self.display_interval_ns) for ch in CHANNELS}
+                         if self.display_interval_ns > 0 else {})
 
     # ---- static ------------------------------------------------------------------------------------
 
@@ -342,17 +362,30 @@ class RigMapper:
         pending = self._blocks.pop(channel.name, None)
         if not pending:
             return
-        rr = self._rr
         times = _block_times([(first, rate, values.size) for first, rate, values in pending])
         values = pending[0][2] if len(pending) == 1 else np.concatenate([v for _, _, v in pending])
-        rr.send_columns(channel.entity, indexes=[rr.TimeColumn(TIMELINE, duration=times.view("timedelta64[ns]"))],
-                        columns=rr.Scalars.columns(scalars=values), recording=self.rec)
+        display = self._display.get(channel.name)
+        if display is not None:   # the envelope; the next sample's time says whether the last interval is whole
+            first, rate, last = pending[-1]
+            times, values = display.feed(times, values, end_ns=int(sample_times_ns(first + last.size, 1, rate)[0]))
+        self._send_scalars(channel, times, values)
         self._send_impacts()   # the impacts waiting go with the blocks
 
+    def _send_scalars(self, channel: Channel, times: np.ndarray, values: np.ndarray) -> None:
+        if times.size == 0:
+            return
+        rr = self._rr
+        rr.send_columns(channel.entity, indexes=[rr.TimeColumn(TIMELINE, duration=times.view("timedelta64[ns]"))],
+                        columns=rr.Scalars.columns(scalars=values), recording=self.rec)
+        self.stats.points[channel.name] = self.stats.points.get(channel.name, 0) + int(times.size)
+
     def flush(self) -> None:
-        """Send everything pending (blocks, truth and impacts of an unfinished batch)."""
+        """Send everything pending (blocks, truth and impacts of an unfinished batch, a display interval carried)."""
         for channel in CHANNELS:
             self._send_channel(channel)
+            display = self._display.get(channel.name)
+            if display is not None and display.carrying:
+                self._send_scalars(channel, *display.flush())
         self._send_truth()
         self._send_impacts()
 

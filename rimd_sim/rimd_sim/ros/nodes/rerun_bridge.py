@@ -3,6 +3,9 @@
 A thin adapter: subscriptions to the rig topics (relative names, namespace ``/rig`` by default) hand each
 message to :class:`rimd_sim.viz.rerun_map.RigMapper`, which logs it to a :class:`rimd_sim.viz.sinks.RerunStream`
 (``sink``: ``save`` an ``.rrd``, ``spawn`` a viewer, ``connect`` to a URL, ``serve_web`` on loopback).
+The channels go as their display stream by default: per ``display_interval`` (5 ms) each channel's smallest and
+largest sample at their own times (:mod:`rimd_sim.viz.display`; every peak exact, a bounded rate a browser keeps
+up with); ``display_interval`` 0 sends every sample (full rate).
 With ``foxglove.enabled`` the same raw messages also go, bytes unchanged, to a Foxglove WebSocket server
 (:class:`rimd_sim.ros.nodes._foxglove.FoxgloveRelay`, which also subscribes to the other rig topics, forwards the
 rig's services and the simulator's parameters); ``rerun: false`` leaves Rerun out (Foxglove only).
@@ -94,7 +97,8 @@ class RerunBridgeNode(PollingNode):
                     self.foxglove.close()
                 raise
             self.mapper = RigMapper(self.stream.rec, natural_frequency=float(p["natural_frequency"]),
-                                    batch=int(p["batch_blocks"]), min_interval=float(p["batch_interval"]))
+                                    batch=int(p["batch_blocks"]), min_interval=float(p["batch_interval"]),
+                                    display_interval=float(p["display_interval"]))
             self.mapper.log_static()
         self._lags: deque[float] = deque(maxlen=10_000)
         self._received = 0
@@ -136,9 +140,11 @@ class RerunBridgeNode(PollingNode):
         if p["status_period"] > 0:
             self.create_timer(float(p["status_period"]), self._report)
         if self.stream is not None:
+            assert self.mapper is not None   # made with the stream
             self.get_logger().info(
                 f"rerun bridge ready: sink {spec.kind} -> {self.stream.viewer_url}; topics under "
-                f"{self.get_namespace()}; analytics {'per user config' if spec.analytics else 'off'}")
+                f"{self.get_namespace()}; channels {self._channels_shown()}; "
+                f"analytics {'per user config' if spec.analytics else 'off'}")
         if self.foxglove is not None:
             replay = p["foxglove.playback_node"]
             self.get_logger().info(
@@ -147,6 +153,14 @@ class RerunBridgeNode(PollingNode):
                 + (f"the timeline drives the replay {replay} (playback control once it answers)" if replay else
                    f"services and parameters under {self.get_namespace()}"))
 
+
+    def _channels_shown(self) -> str:
+        """How the channels are sent: the display stream's interval, or full rate."""
+        assert self.mapper is not None
+        interval = self.mapper.display_interval_ns / 1e9
+        if interval:
+            return f"as a display stream (min and max per {interval * 1e3:g} ms; display_interval 0 = full rate)"
+        return "at full rate (every sample)"
 
     def _raw_handler(self, topic: str, type_name: str):
         on_message = self._handler(topic)
@@ -227,9 +241,10 @@ class RerunBridgeNode(PollingNode):
                else "lag n/a")
         lag += f", slowest message {self._slowest * 1e3:.1f} ms"
         self._slowest = 0.0
+        shown = f"; {sum(s.points.values())} display points" if self.mapper.display_interval_ns else ""
         self.get_logger().info(
             f"status: {self._received} messages, {sum(s.samples.values())} samples, {s.impacts} impacts, "
-            f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}")
+            f"{s.poincare_points} Poincare points, {sum(s.gaps.values())} gaps; {lag}{shown}")
 
     def finish(self) -> int:
         """At the stop: close (:meth:`close`) and say what was delivered; 1 when the last data was not."""
@@ -243,8 +258,10 @@ class RerunBridgeNode(PollingNode):
                   "forwarded", flush=True)
         if self.mapper is not None and self.stream is not None:
             s = self.mapper.stats
+            shown = " ({} display points)" if self.mapper.display_interval_ns else ""
             print(f"rimd_rerun: closed {self.stream.viewer_url}: "
-                  + ", ".join(f"{k} {v} samples" for k, v in sorted(s.samples.items()))
+                  + ", ".join(f"{k} {v} samples" + shown.format(s.points.get(k, 0))
+                              for k, v in sorted(s.samples.items()))
                   + f", {s.impacts} impacts, {sum(s.gaps.values())} gaps", flush=True)
         return status
 
