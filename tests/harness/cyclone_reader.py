@@ -104,6 +104,8 @@ class ConsumerProgress(IdlStruct, typename="rimd_msgs::msg::dds_::ConsumerProgre
     instance: str
     leaving: bool
     node: str
+    controls: bool
+    commands: uint32
 
 
 def ns(t: Time) -> int:
@@ -156,7 +158,8 @@ def main() -> int:
         names = sorted(done)
         progress.write(ConsumerProgress(
             consumer=args.lockstep, done_through=to_time(min(done.values()) if done else 0), topics=names,
-            topics_done_through=[to_time(done[n]) for n in names], instance=instance, leaving=leaving, node=""))
+            topics_done_through=[to_time(done[n]) for n in names], instance=instance, leaving=leaving, node="",
+            controls=False, commands=0))
 
     def finished() -> bool:
         if not sessions:   # the run's identity (transient local): its start_stamp is the time grid's origin

@@ -183,8 +183,10 @@ def test_the_encoder_writes_each_byte_order_as_rosbags_does(frame, samples, firs
 
 @SETTINGS
 @given(consumer=TEXT, instance=TEXT, done=st.integers(0, 2**31 * 10**9 - 1), leaving=st.booleans(),
-       topics=st.dictionaries(TEXT, st.integers(0, 2**31 * 10**9 - 1), max_size=6), node=TEXT)
-def test_progress_reports_encode_as_rclpy_serializes_them(consumer, instance, done, leaving, topics, node):
+       topics=st.dictionaries(TEXT, st.integers(0, 2**31 * 10**9 - 1), max_size=6), node=TEXT,
+       controls=st.booleans(), commands=st.integers(0, 2**32 - 1))
+def test_progress_reports_encode_as_rclpy_serializes_them(consumer, instance, done, leaving, topics, node, controls,
+                                                          commands):
     """The lockstep reporter publishes its ConsumerProgress as bytes it encodes itself: what rclpy reads back as
     the message, in rclpy's layout."""
     from builtin_interfaces.msg import Time
@@ -194,11 +196,12 @@ def test_progress_reports_encode_as_rclpy_serializes_them(consumer, instance, do
 
     names = sorted(topics)
     reference = ConsumerProgress(consumer=consumer, instance=instance, leaving=leaving, topics=names, node=node,
+                                 controls=controls, commands=commands,
                                  topics_done_through=[Time(sec=topics[t] // 10**9, nanosec=topics[t] % 10**9)
                                                       for t in names])
     overall = min(topics.values()) if topics else done
     reference.done_through = Time(sec=overall // 10**9, nanosec=overall % 10**9)
-    ours = encode_progress(consumer, done, instance, topics, leaving, node)
+    ours = encode_progress(consumer, done, instance, topics, leaving, node, controls, commands)
     # rclpy leaves its alignment padding uninitialised (stray bytes there), so compare what the bytes mean, and
     # the length: the same layout.
     assert deserialize_message(ours, ConsumerProgress) == reference

@@ -7,8 +7,9 @@ Hypotheses:
   ``rimd_sim``, ``rimd_sim.ros``, ``rimd_sim.ros.clients``, ``rimd_sim.runtime`` (package modules that import
   nothing), its books ``rimd_sim.runtime.progress`` (the standard library's) and itself: no numba, numpy, scipy,
   mcap, or the twin's core (docs/daq-client.md);
-- its reports are the bytes the package's CDR writer (rimd_sim.io.cdr) gave for them before, so what goes on the
-  wire is unchanged (tests/io/test_cdr_blocks.py checks them against rclpy's own serialization).
+- its reports are the bytes the package's CDR writer (rimd_sim.io.cdr) gives for them, so what goes on the wire
+  is the message's layout (tests/io/test_cdr_blocks.py checks them against rclpy's own serialization), a
+  controller's two fields (``controls``, ``commands``) included.
 """
 
 from __future__ import annotations
@@ -51,12 +52,12 @@ def test_the_reports_are_the_bytes_they_were():
     from rimd_sim.io.cdr import CdrWriter
     from rimd_sim.ros.clients.progress import encode_progress
 
-    def before(consumer, done_ns, instance, topics, leaving, node):   # the writer the reporter used to take
+    def before(consumer, done_ns, instance, topics, leaving, node, controls, commands):   # the package's writer
         names = sorted(topics) if topics else []
         stamps = [divmod(topics[t], 1_000_000_000) for t in names] if topics else []
         done = divmod(min(topics.values()) if topics else done_ns, 1_000_000_000)
         w = CdrWriter().string(consumer).time(*done).strings(names).times(stamps).string(instance)
-        return w.boolean(leaving).string(node).message()
+        return w.boolean(leaving).string(node).boolean(controls).u32(commands).message()
 
     rng = random.Random(7)
 
@@ -66,7 +67,8 @@ def test_the_reports_are_the_bytes_they_were():
     for _ in range(3000):
         topics = {text(): rng.randrange(0, 2**31 * 10**9) for _ in range(rng.randrange(0, 5))} \
             if rng.random() < 0.8 else None
-        args = (text(), rng.randrange(0, 2**31 * 10**9), text(), topics, rng.random() < 0.5, text())
+        args = (text(), rng.randrange(0, 2**31 * 10**9), text(), topics, rng.random() < 0.5, text(),
+                rng.random() < 0.5, rng.randrange(0, 2**32))
         assert encode_progress(*args) == before(*args), args
     with pytest.raises(ValueError, match="NUL"):
         encode_progress("a\0b", 0, "i")

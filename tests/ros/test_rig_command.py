@@ -40,7 +40,21 @@ def test_rig_brings_up_the_simulator_and_stops_cleanly(ros_processes, ros_execut
     assert "LOSS" not in rig.output()
     # The Rerun bridge ran with the default sink (a web viewer on loopback) and was closed with the rig.
     assert "rerun bridge ready: sink serve_web -> http://127.0.0.1:" in rig.output()
-    assert "rimd_rerun: closed" in rig.output()
+    assert "channels as a display stream (min and max per 5 ms" in rig.output()   # the default live view
+    assert "rimd_rerun: closed" in rig.output() and "display points)" in rig.output()
+
+
+def test_rig_with_rerun_full_rate_sends_every_sample_to_rerun(ros_processes, tmp_path):
+    rig = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--duration", "3", "--rerun-full-rate",
+                                     "--output-dir", str(tmp_path / "rec"), name="rimd_rig_full_rate")
+    assert rig.wait(60) == 0, rig.tail()
+    assert "channels at full rate (every sample)" in rig.output()
+    assert "rimd_rerun: closed" in rig.output() and "display points" not in rig.output()
+    assert not list((tmp_path / "rec").glob(".rimd_rig_overrides_*")), "the override file is removed at the end"
+    refused = ros_processes.start_python("-m", "rimd_sim.cli", "rig", "--no-rerun", "--rerun-full-rate",
+                                         name="rimd_rig_full_rate_no_rerun")
+    assert refused.wait(30) == 1
+    assert "--rerun-full-rate is for the Rerun view: not with --no-rerun" in refused.output()
 
 
 def test_rig_without_recorder(ros_processes, tmp_path):

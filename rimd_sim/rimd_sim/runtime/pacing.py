@@ -32,6 +32,12 @@ Consumer protocol (``rimd_msgs/msg/ConsumerProgress`` on ``/rig/progress``; :met
   When the run has been held by a consumer that had joined for ``timeout`` seconds without progress from it,
   ``on_timeout`` applies: ``wait`` keeps holding (the debugger case; it is reported as timed out), ``drop``
   stops waiting for it until it reports again.
+* A consumer that commands the publisher (``controls``: a controller on ``/rig/motor/command``, docs/control.md)
+  is held tight: its lead is one block instead of the window, so the publisher stops after each block that
+  brought it a message on a topic its report names, until it has finished with it. Its reports count the
+  commands it has sent (``commands``); a report that counts more commands than the publisher has received
+  (:meth:`Lockstep.command`) waits until they are there, since DDS orders no two topics. A command it decided
+  on the data it had then applies where the publisher is held: the same run, whatever the load.
 
 Every time here is an integer number of nanoseconds on the data's axis, except wall times (float seconds of
 the injected monotonic clock).
@@ -161,6 +167,8 @@ class ConsumerStatus:
         held_since: Wall time since which it holds the run (None: it does not).
         joins: How many times it joined (a restart joins again).
         joined_at: Data time the run had reached when it last joined (where its slow start counts from).
+        controls: It commands the publisher: its lead is one block (see the module docstring).
+        awaiting: A report of it waits for commands: (commands it counts, commands received), else None.
     """
 
     name: str
@@ -173,6 +181,8 @@ class ConsumerStatus:
     held_since: float | None = None
     joins: int = 0
     joined_at: int = 0
+    controls: bool = False
+    awaiting: tuple[int, int] | None = None
 
     @property
     def joined(self) -> bool:
@@ -200,7 +210,7 @@ class ProgressVerdict:
         accepted: Whether it counted.
         log: A line to log when there is something to say ('' otherwise).
         reason: Why it was ignored: ``unknown`` consumer, ``topics`` not published here, from the ``future``,
-            going ``back``; '' when accepted.
+            going ``back``; ``pending``: kept until the commands it counts are received; '' when accepted.
         joined: The consumer (re)joined with this report (a first report, a restart, a return after a drop).
     """
 
@@ -239,6 +249,9 @@ class Lockstep:
         self._origin = 0
         self._step = 1   # how far the next candidate ends beyond the front: the least lead (one block)
         self._events: list[tuple[str, str]] = []
+        #: Commands received per (consumer, instance), and the report of a consumer that waits for its commands.
+        self._received: dict[tuple[str, str], int] = {}
+        self._pending: dict[str, tuple[int, str, dict[str, int] | None, bool, bool, int]] = {}
 
     def published(self, data_ns: int, topic: str = ALL_TOPICS) -> None:
         """The publisher publishes (before the publish call) a message stamped ``data_ns`` on ``topic``."""
@@ -252,8 +265,27 @@ class Lockstep:
     def _published(self, topic: str) -> int:
         return self.published_ns if topic == ALL_TOPICS else self.published_on.get(topic, 0)
 
+    def command(self, consumer: str, instance: str) -> ProgressVerdict | None:
+        """The publisher has received (and scheduled) one command of ``consumer``'s ``instance``.
+
+        Returns the verdict of the report that waited for it, when it is now taken, else None.
+        """
+        key = (consumer, instance)
+        received = self._received[key] = self._received.get(key, 0) + 1
+        pending = self._pending.get(consumer)
+        c = self.consumers.get(consumer)
+        if pending is None or c is None or pending[1] != instance:
+            return None
+        done_ns, _, topics, leaving, controls, commands = pending
+        if commands > received:
+            c.awaiting = (commands, received)
+            return None
+        del self._pending[consumer]
+        return self.progress(consumer, done_ns, instance, topics, leaving, controls=controls, commands=commands)
+
     def progress(self, consumer: str, done_ns: int, instance: str = "",
-                 topics: dict[str, int] | None = None, leaving: bool = False) -> ProgressVerdict:
+                 topics: dict[str, int] | None = None, leaving: bool = False, *, controls: bool = False,
+                 commands: int = 0) -> ProgressVerdict:
         """Take one progress report; the verdict says whether it counted and what to log.
 
         Args:
@@ -262,11 +294,20 @@ class Lockstep:
             instance: Identifies the consumer's process: a new value is a restart.
             topics: Per topic, the data time it has finished with there (replaces ``done_ns``).
             leaving: Its last report: it stops cleanly (see the module docstring).
+            controls: It commands the publisher: held with a lead of one block (see the module docstring).
+            commands: How many commands this instance has sent: the report waits until they are received.
         """
         c = self.consumers.get(consumer)
         if c is None:
             return ProgressVerdict(False, f"progress from '{consumer}' ignored: not a registered consumer "
                                           f"(lockstep.consumers: {', '.join(self.settings.consumers)})", "unknown")
+        self._pending.pop(consumer, None)   # a report is the consumer's whole state: it replaces one that waited
+        c.awaiting = None
+        received = self._received.get((consumer, instance), 0)
+        if commands > received:
+            self._pending[consumer] = (int(done_ns), instance, topics, leaving, controls, int(commands))
+            c.awaiting = (int(commands), received)
+            return ProgressVerdict(False, "", "pending")
         if leaving:
             if c.joins and instance != c.instance:
                 return ProgressVerdict(False, f"leave of '{consumer}' ignored: from an earlier instance (the "
@@ -307,6 +348,7 @@ class Lockstep:
             c.done = {t: max(v, self._published(t)) for t, v in report.items()}
             c.joined_at = min(c.done.values())
             c.instance, c.last_heard, c.dropped, c.left, c.timed_out = instance, now, False, False, False
+            c.controls = controls
             c.joins += 1
             return ProgressVerdict(True, f"consumer '{consumer}' {was} at {c.done_s:.9f} s"
                                    + (f"; {note}" if note else ""), joined=True)
@@ -317,6 +359,7 @@ class Lockstep:
                                           "new instance)", "back")
         advanced = any(v > c.done.get(t, -1) for t, v in report.items())
         c.done = dict(report)   # a report is the consumer's whole state: a topic it no longer names does not hold
+        c.controls = controls
         returned = c.timed_out and advanced
         if advanced:   # a report that repeats itself (a heartbeat) is no progress: the timeout runs on
             c.last_heard, c.timed_out = now, False
@@ -345,10 +388,15 @@ class Lockstep:
         if not c.joined:
             return -math.inf
         at = self._at(c)
-        # Slow start: the lead grows with what the consumer has confirmed since it joined (the next block, then
-        # two, four...) up to the window, so that its readers get the first blocks one by one instead of a window's
-        # burst at once (docs/rig.md, "Pacing: lockstep").
-        lead = min(self.settings.window_ns, max(self._step, min(at.values(), default=self._front) - c.joined_at))
+        if c.controls:
+            # A controller: the next block only once it has finished with every message so far (one where it is
+            # caught up is at the front), so that its command lands where the run is held (module docstring).
+            lead = self._step
+        else:
+            # Slow start: the lead grows with what the consumer has confirmed since it joined (the next block, then
+            # two, four...) up to the window, so that its readers get the first blocks one by one instead of a
+            # window's burst at once (docs/rig.md, "Pacing: lockstep").
+            lead = min(self.settings.window_ns, max(self._step, min(at.values(), default=self._front) - c.joined_at))
         return min((v + lead for v in at.values()), default=math.inf)
 
     def allowed(self, ends: Sequence[int]) -> tuple[int, tuple[str, ...]]:

@@ -51,6 +51,10 @@ class ProgressLedger:
         self.left = False
         self.last_sent = 0.0
         self.reports = 0
+        #: Commands the consumer has sent (a controller's, counted by :meth:`command_sent`), and their number as
+        #: the last report took it (what that report says: ``ConsumerProgress.commands``).
+        self.commands = 0
+        self.reported_commands = 0
 
     def done(self, ns: int, topic: str | None) -> bool:
         """The consumer finished a message stamped ``ns`` of ``topic`` (None: of everything it takes).
@@ -64,6 +68,11 @@ class ProgressLedger:
                 self.done_ns[topic] = ns
             self.dirty = True
             return self.joined and time.monotonic() - self.last_sent >= self.min_interval
+
+    def command_sent(self) -> None:
+        """The consumer has published one more command (call it after the publish, before :meth:`done`)."""
+        with self.lock:
+            self.commands += 1
 
     def join(self) -> bool:
         """Join from scratch (nothing finished yet); False once it has left."""
@@ -87,6 +96,7 @@ class ProgressLedger:
             if not self.joined:
                 return None
             done = dict.fromkeys(topics, 0) if topics is not None else dict(self.done_ns)
+            self.reported_commands = self.commands
             self.dirty = False
             self.last_sent = time.monotonic()
             self.reports += 1

@@ -6,6 +6,8 @@ the process, DDS carries them only to the other processes (docs/rig.md, "The com
 starts each node in a process of its own. Open loop (default), the simulator starts paused and is resumed
 once every consumer subscribes; with ``--lockstep`` it waits for its consumers by itself and never runs ahead
 of the slowest. Ctrl-C (or ``--duration``) stops the nodes in reverse order (simulator first, recorder last).
+``--set NAME=VALUE`` (or ROS's ``-p NAME:=VALUE``) sets a simulator parameter over the file's, checked before
+anything starts.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from rimd_sim.cli import nonnegative_float, real_time_factor
 from rimd_sim.settings import paths
@@ -30,6 +33,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="record into this directory (default: the recorder's output_dir in the config)")
     parser.add_argument("--no-record", action="store_true", help="do not start the recorder")
     parser.add_argument("--no-rerun", action="store_true", help="do not start the Rerun bridge")
+    parser.add_argument("--rerun-full-rate", action="store_true",
+                        help="send every sample of every channel to Rerun (the bridge's display_interval 0); by "
+                             "default the live view gets each channel's min and max sample per 5 ms, which keeps "
+                             "every peak exact at a rate a browser keeps up with. The recording keeps every sample "
+                             "either way")
     parser.add_argument("--foxglove", action="store_true",
                         help="serve the rig to Foxglove (ws://127.0.0.1:8765 by default; the bridge's foxglove.* "
                              "parameters); with --no-rerun the bridge serves Foxglove only")
@@ -44,6 +52,79 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "simulator's process, fed without DDS)")
     parser.add_argument("--real-time-factor", type=real_time_factor, default=None, metavar="F",
                         help="the simulator's real_time_factor (0 = as fast as possible; in lockstep: a speed cap)")
+    parser.add_argument("--set", dest="settings", action="append", type=_setting, default=[], metavar="NAME=VALUE",
+                        help="a simulator parameter over the config file's, named as in the file with dots "
+                             "(motor.initial_setpoint=3.0, gap=1e-3); repeatable; checked as the file is, before "
+                             "anything starts")
+    parser.add_argument("-p", dest="settings", action="append", type=_ros_setting, metavar="NAME:=VALUE",
+                        help="the same, in ROS's --ros-args form (-p gap:=0.001)")
+
+
+def _setting(text: str) -> tuple[str, Any, str]:
+    """``--set NAME=VALUE``: the name, the value typed (as the analysis verbs' ``--set``) and the option as typed."""
+    from rimd_sim.cli.verbs._analysis_io import parameter_setting
+
+    name, value = parameter_setting(text)
+    return name, value, f"--set {text}"
+
+
+def _ros_setting(text: str) -> tuple[str, Any, str]:
+    """``-p NAME:=VALUE`` (ROS's parameter form): as ``--set``."""
+    from rimd_sim.cli.verbs._analysis_io import parameter_setting
+
+    name, sep, value = text.partition(":=")
+    if not sep or not name.strip() or not value.strip():
+        raise argparse.ArgumentTypeError(f"-p {text!r} refused: must be NAME:=VALUE, for example gap:=0.001")
+    name, typed = parameter_setting(f"{name}={value}")
+    return name, typed, f"-p {text}"
+
+
+def simulator_settings(settings: list[tuple[str, Any, str]], config: Path | None) -> dict[str, Any]:
+    """The ``--set``/``-p`` values by name (the last given wins), checked as the config file's values are.
+
+    Each name and value on its own, then with the file's other values (``motor.initial_setpoint <=
+    motor.max_frequency``); a refusal of the file's own values is left to the plan, which names the file.
+
+    Raises:
+        CommandError: An unknown name (with the closest ones) or a refused value, naming the option as typed.
+    """
+    from rimd_sim.cli import CommandError
+    from rimd_sim.errors import ConfigError
+    from rimd_sim.settings.config import (
+        NODE_PARAMETERS,
+        PARAMETERS,
+        check_simulator_section,
+        find_config_file,
+        read_ros_parameters,
+    )
+    from rimd_sim.settings.params import unknown_name
+    from rimd_sim.settings.yaml_file import resolve_config
+
+    known = {**PARAMETERS, **NODE_PARAMETERS}
+    out: dict[str, Any] = {}
+    typed: dict[str, str] = {}
+    for name, value, given in settings:
+        declared = known.get(name)
+        if declared is None:
+            raise CommandError(f"{given} refused: {unknown_name(name, known)}")
+        try:
+            declared.validate(value)
+        except ConfigError as exc:
+            raise CommandError(f"{given} refused: {exc.rule}") from None
+        out[name], typed[name] = value, given
+    if not out:
+        return out
+    try:
+        path = resolve_config(config) if config is not None else find_config_file("rimd.yaml")
+        section = read_ros_parameters(path, node="rimd_simulator")
+    except ConfigError:
+        return out   # the file itself is refused: the plan says why, naming it
+    try:
+        check_simulator_section({**section, **out})
+    except ConfigError as exc:
+        if exc.key in typed:
+            raise CommandError(f"{typed[exc.key]} refused: {exc.rule} (with {path}'s other values)") from None
+    return out
 
 
 def main(args: argparse.Namespace) -> int:
@@ -53,13 +134,18 @@ def main(args: argparse.Namespace) -> int:
 
     if args.consumer and not args.lockstep:
         raise CommandError("--consumer is for --lockstep (the names the lockstep rig waits for)")
+    if args.rerun_full_rate and args.no_rerun:
+        raise CommandError("--rerun-full-rate is for the Rerun view: not with --no-rerun")
     if args.foxglove:   # the extra foxglove (Rerun's, rerun-sdk, is refused by the plan when the bridge streams)
         from rimd_sim.viz.foxglove_sink import require_sdk
 
         require_sdk("or run without --foxglove")
+    parameters: dict[str, dict[str, Any]] = {"rimd_simulator": simulator_settings(args.settings, args.config)}
+    if args.rerun_full_rate:
+        parameters["rimd_rerun"] = {"display_interval": 0.0}
     plan = plan_rig(args.config, output_dir=args.output_dir, record=not args.no_record, rerun=not args.no_rerun,
                     foxglove=args.foxglove, lockstep=args.lockstep, consumers=args.consumer,
-                    real_time_factor=args.real_time_factor, separate=args.separate)
+                    real_time_factor=args.real_time_factor, separate=args.separate, parameters=parameters)
     rig = Rig(plan)
     config = plan.config
     assert config is not None   # plan_rig reads one (only a replay's plan has none)

@@ -29,7 +29,11 @@ What :class:`ProgressReporter` does for you:
 * it publishes on a reliable, transient local writer with a history of one (:data:`PROGRESS_QOS`): a report
   written before a lockstep publisher matched the writer, the join above all, reaches it at the match;
 * it joins again when a new run starts (``/rig/session``: the rig restarted, or a replay started a pass), with
-  a new ``instance`` for each process, so a restarted consumer resumes where the run stands.
+  a new ``instance`` for each process, so a restarted consumer resumes where the run stands;
+* for a controller (:class:`rimd_sim.ros.clients.motor.MotorCommander` given this reporter: docs/control.md) its
+  reports say that it commands the rig and count the commands it has sent, and it reports at once after each
+  ``done``: the rig then waits for its decision on each message before it simulates further, and applies a
+  command where it waits. Call ``done`` after publishing the commands a message led to.
 
 Clients in other languages publish the message themselves: it is documented field by field in
 ``rimd_msgs/msg/ConsumerProgress.msg``, and the protocol (QoS, join, reports, leave) in docs/rig.md, "Pacing:
@@ -120,7 +124,7 @@ class _Cdr:
 
 
 def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str, int] | None = None,
-                    leaving: bool = False, node: str = "") -> bytes:
+                    leaving: bool = False, node: str = "", controls: bool = False, commands: int = 0) -> bytes:
     """A serialized ``rimd_msgs/msg/ConsumerProgress`` (what ``serialize_message`` gives, tested), for a raw publish.
 
     A consumer reports up to a few hundred times a second; rclpy's conversion of the message object (its arrays
@@ -140,6 +144,8 @@ def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str
     w.string(instance)
     w.boolean(leaving)
     w.string(node)
+    w.boolean(controls)
+    w.u32(commands)
     return w.message()
 
 
@@ -203,9 +209,45 @@ class ProgressReporter(LedgerState):
         self._unmatched_warning = unmatched_warning
         self._unmatched_since: float | None = None
         self._warned = False
+        self._controls = False   # a controller's reporter (take_control)
         self._pub = node.create_publisher(ConsumerProgress, topic, PROGRESS_QOS)
         node.create_subscription(RigSession, SESSION_TOPIC, self._on_session, SESSION_QOS)
         self._timer = node.create_timer(0.02, self._tick)
+
+    @property
+    def controls(self) -> bool:
+        """Whether this consumer commands the rig (:meth:`take_control`)."""
+        return self._controls
+
+    @property
+    def commands(self) -> int:
+        """The commands counted so far in this instance (:meth:`command_sent`)."""
+        return self._ledger.commands
+
+    def take_control(self, ready: Callable[[], bool] | None = None) -> None:
+        """Make this consumer a controller: its reports say so and count its commands, and go out at each ``done``.
+
+        :class:`rimd_sim.ros.clients.motor.MotorCommander` calls it; call it before the node spins (the join report
+        must say it: a rig that took it for a plain consumer could run a window ahead of its first decision).
+
+        Args:
+            ready: A further condition to join: the command writer has matched the rig's command reader (a command
+                published before that would be lost, and the rig would wait for it).
+        """
+        with self._ledger.lock:
+            self._controls = True
+            self._ledger.min_interval = 0.0
+            if ready is not None:
+                before = self._ready
+
+                def both() -> bool:
+                    return (before is None or bool(before())) and ready()
+
+                self._ready = both
+
+    def command_sent(self) -> None:
+        """One more command published (:class:`~rimd_sim.ros.clients.motor.MotorCommander` calls it after each)."""
+        self._ledger.command_sent()
 
     def add_subscription(self, subscription: Any) -> None:
         """Take one more subscription into account (before the join: it must match a publisher first)."""
@@ -235,7 +277,8 @@ class ProgressReporter(LedgerState):
             return
         overall, done = report
         self._pub.publish(encode_progress(self.name, overall, self.instance, done,
-                                          node=self._node.get_fully_qualified_name()))
+                                          node=self._node.get_fully_qualified_name(), controls=self._controls,
+                                          commands=self._ledger.reported_commands))
 
     def leave(self, timeout: float = 1.0) -> bool:
         """Say that the consumer stops cleanly: its progress so far, then its last report, ``leaving``.
@@ -248,7 +291,8 @@ class ProgressReporter(LedgerState):
             return True   # nobody waits for it
         self.flush()
         self._ledger.leave()   # no report after the leave (it would join again)
-        self._pub.publish(encode_progress(self.name, 0, self.instance, leaving=True))
+        self._pub.publish(encode_progress(self.name, 0, self.instance, leaving=True, controls=self._controls,
+                                          commands=self._ledger.commands))
         try:
             return bool(self._pub.wait_for_all_acked(Duration(nanoseconds=round(timeout * 1e9))))
         except Exception:  # the context is going down: best effort
@@ -309,4 +353,5 @@ class ProgressReporter(LedgerState):
             return   # a reset goes on with the same stamps: the progress stands
         with self._ledger.lock:
             self._ledger.joined = False
+            self._ledger.commands = 0   # counted per instance
             self.instance = uuid.uuid4().hex

@@ -7,8 +7,8 @@ commands, the run's identity, diagnostics) and serializes every message; this no
   :class:`~rimd_sim.settings.config.SimulatorNodeSettings`, one declaration each) and builds the runtime;
 * creates one publisher per :func:`rimd_sim.runtime.simulator.outputs` entry and publishes the runtime's bytes
   on it, from a pacing thread that runs :meth:`SimulatorRuntime.step` and waits as long as it says;
-* maps the services, parameter changes and ``/rig/progress`` reports onto the runtime, and its answers onto the
-  responses and ``/diagnostics``;
+* maps the services, parameter changes, ``/rig/progress`` reports and ``/rig/motor/command`` commands onto the
+  runtime, and its answers onto the responses and ``/diagnostics``;
 * waits, bounded, for DDS to match the readers the ROS graph shows before the first block and when a lockstep
   consumer joins (the one decision that needs the graph).
 """
@@ -32,9 +32,10 @@ from rclpy.executors import Executor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
-from rimd_msgs.msg import ConsumerProgress
+from rimd_msgs.msg import ConsumerProgress, MotorCommand
 from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.errors import ConfigError
+from rimd_sim.ros.clients.motor import COMMAND_QOS
 from rimd_sim.ros.clients.progress import listen_for_progress
 from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
@@ -120,11 +121,13 @@ class SimulatorNode(RimdNode):
         self._rt = SimulatorRuntime(
             config, settings, send=send,
             topics={key: pub.topic_name for key, pub in self._pubs.items()}, node=self.get_fully_qualified_name(),
-            log=self.log, alive=self.context.ok, match=self._wait_for_matches)
+            log=self._log_line, alive=self.context.ok, match=self._wait_for_matches)
         if feed is not None:
             feed.bind(self._rt.progress)
         if settings.lockstep.enabled:   # a transient local writer's join reaches it at the match, too
             listen_for_progress(self, self._on_progress, "progress")
+        # Commands at any rate (docs/control.md); reliable, volatile, as the controllers' writer (COMMAND_QOS).
+        self.create_subscription(MotorCommand, "motor/command", self._on_motor_command, COMMAND_QOS)
         self.create_service(SetMotorFrequency, "set_motor_frequency", self._on_set_motor_frequency)
         self.create_service(Perturb, "perturb", self._on_perturb)
         for name, call in (("reset", self._rt.reset), ("pause", self._rt.pause), ("resume", self._rt.resume),
@@ -290,10 +293,21 @@ class SimulatorNode(RimdNode):
         except Exception:  # noqa: BLE001 - rclpy's NodeNameNonExistentError (not exported), or a name it refuses
             return None
 
+    def _log_line(self, level: str, line: str) -> None:
+        """The runtime's log: ``debug`` (each motor command from the topic) on its own call site, the rest as usual."""
+        if level == "debug":
+            self.get_logger().debug(line)
+        else:
+            self.log(level, line)
+
     def _on_progress(self, msg: ConsumerProgress) -> None:
         self._rt.progress(msg.consumer, from_time(msg.done_through), instance=msg.instance, topics=list(msg.topics),
                           topics_done_ns=[from_time(d) for d in msg.topics_done_through], leaving=msg.leaving,
-                          node=msg.node)
+                          node=msg.node, controls=msg.controls, commands=msg.commands)
+
+    def _on_motor_command(self, msg: MotorCommand) -> None:
+        self._rt.motor_command(msg.frequency_hz, msg.ramp_rate, (msg.header.stamp.sec, msg.header.stamp.nanosec),
+                               consumer=msg.consumer, instance=msg.instance, sequence=msg.sequence)
 
     def _on_diagnostics_matched(self, status: Any) -> None:
         """A reader of /diagnostics matched (or left): a new one hears the status now.
