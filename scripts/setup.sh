@@ -254,7 +254,7 @@ step_warmup() {
         return 0
     fi
     echo "set-up: compiling the physics into numba's cache (rimd warmup; the first time takes a minute or so)" >&2
-    env -u PYTHONPATH PYTHONPATH="$ROOT/rimd_sim" "$VENV/bin/python" -m rimd_sim.cli warmup >&2 \
+    env -u PYTHONPATH PYTHONPATH="$ROOT/rimd_sim" "$VENV/bin/python" -m rimd_sim.cli warmup --all >&2 \
         || fail "rimd warmup exited with an error (see above)"
     echo "$digest" > "$stamp"
     WARMUP_STATUS="compiled"

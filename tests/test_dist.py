@@ -208,7 +208,7 @@ def test_the_workflow_is_valid_and_runs_the_scripts_commands():
     assert commands == [
         "python -m venv .venv-rimd",
         f'.venv-rimd/bin/python -m pip install --find-links wheels "rimd_sim[testing]=={rimd_sim.__version__}"',
-        ".venv-rimd/bin/rimd info", ".venv-rimd/bin/rimd warmup --rig", ".venv-rimd/bin/python -m pytest tests"]
+        ".venv-rimd/bin/rimd info", ".venv-rimd/bin/rimd warmup", ".venv-rimd/bin/python -m pytest tests"]
     assert [line for line in run if line in commands] == commands
     assert any(f"gh release download v{rimd_sim.__version__} " in line for line in run)
 

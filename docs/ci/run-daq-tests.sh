@@ -17,7 +17,7 @@ PYTHON="${PYTHON:-python3}"
 # rimd_sim and the rimd_msgs wheel of this Python from RIMD_WHEELS, everything else from the package registry.
 "$RIMD_VENV/bin/python" -m pip install --find-links "$RIMD_WHEELS" "rimd_sim[testing]==$RIMD_VERSION"
 "$RIMD_VENV/bin/rimd" info
-# Compile what the rig runs once into numba's cache, not in the first test's rig (--rig: not the two-mass model).
-"$RIMD_VENV/bin/rimd" warmup --rig
+# Compile what the rig runs (its model and sensors) into numba's cache once, not in the first test's rig.
+"$RIMD_VENV/bin/rimd" warmup
 if [ $# -eq 0 ]; then set -- tests; fi
 "$RIMD_VENV/bin/python" -m pytest "$@"

@@ -1,10 +1,10 @@
 """``rimd warmup`` fills numba's on-disk cache, so that later processes load the physics instead of compiling it.
 
-Hypothesis: after ``rimd warmup`` (in the cache the set-up filled, ``__pycache__`` beside the sources), a new
+Hypothesis: after ``rimd warmup --all`` (in the cache the set-up filled, ``__pycache__`` beside the sources), a new
 process that runs both models through the simulator and one cell of a map for each loads everything it needs
 from that cache: it adds and rewrites no cache file. Were warmup to leave a compiled function out, that process
-would compile it and write it, and the test would name the file. (A cold ``rimd warmup``, about 40 s, runs in
-the set-up of every fresh clone: ``scripts/setup.sh``, step ``warmup``.)
+would compile it and write it, and the test would name the file. (``rimd warmup --all`` runs in the set-up of every
+fresh clone: ``scripts/setup.sh``, step ``warmup``.)
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ def _cache_files() -> dict[Path, int]:
 @pytest.mark.process
 def test_after_warmup_a_new_process_compiles_nothing():
     env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
-    run = subprocess.run([sys.executable, "-m", "rimd_sim.cli", "warmup"], capture_output=True, text=True, env=env,
-                         timeout=600)
+    run = subprocess.run([sys.executable, "-m", "rimd_sim.cli", "warmup", "--all"], capture_output=True, text=True,
+                         env=env, timeout=600)
     assert run.returncode == 0, run.stderr
     for step in ("rigid model and instruments", "two-mass model and instruments", "rigid ensemble",
                  "two-mass ensemble"):
@@ -58,11 +58,11 @@ def test_after_warmup_a_new_process_compiles_nothing():
 
 
 @pytest.mark.process
-def test_warmup_rig_compiles_what_the_rig_runs_and_not_the_two_mass_model():
+def test_warmup_compiles_what_the_rig_runs_and_not_the_maps_nor_the_two_mass_model():
     env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
-    run = subprocess.run([sys.executable, "-m", "rimd_sim.cli", "warmup", "--rig"], capture_output=True, text=True,
+    run = subprocess.run([sys.executable, "-m", "rimd_sim.cli", "warmup"], capture_output=True, text=True,
                          env=env, timeout=600)
     assert run.returncode == 0, run.stderr
     assert "rimd warmup: rigid model and instruments: " in run.stderr
     assert "rimd warmup: the composed rig's DDS batch writer: " in run.stderr
-    assert "two-mass" not in run.stderr
+    assert "two-mass" not in run.stderr and "ensemble" not in run.stderr

@@ -142,6 +142,24 @@ def test_reset_puts_the_hammer_back_at_rest():
     assert [c.kind for c in out.commands] == ["reset"]
 
 
+def test_a_resting_contact_is_not_reported_as_an_impact_and_the_impacts_count_from_zero():
+    """At gap 0 with the motor at speed from t = 0, the hammer starts on the stop: the model's first contact, at
+    t = 0 with no closing velocity, is the cart pressing it away, no collision. The rig leaves it out (after a reset
+    too) and numbers the impacts it reports from 0; the model itself keeps it."""
+    cfg = SimConfig().with_parameters({"gap": 0.0, "motor.initial_frequency": 7.25, "motor.initial_setpoint": 7.25})
+    model = RigModel(cfg, channels=False)
+    model_impacts = model.advance(2.0)
+    assert model_impacts.impacts[0].t_start < 1e-9 and model_impacts.impacts[0].impact_velocity < 1e-9
+    sim = RigSimulator(cfg)
+    impacts = run_blocks(sim, Fraction(2), Fraction(1, 100))[2]
+    assert [i.t_start for i in impacts] == [i.t_start for i in model_impacts.impacts[1:]]
+    assert [i.index for i in impacts] == list(range(len(impacts))) and impacts[0].impact_velocity > 0.01
+    sim.reset(at=Fraction(2))
+    after = run_blocks(sim, Fraction(4), Fraction(1, 100))[2]
+    assert all(i.impact_velocity > 1e-6 for i in after)
+    assert [i.index for i in after] == list(range(len(impacts), len(impacts) + len(after)))
+
+
 @pytest.mark.parametrize(
     ("freq", "rate", "message"),
     [(float("nan"), 0.0, "finite"), (float("inf"), 0.0, "finite"), (-1.0, 0.0, ">= 0"), (13.0, 0.0, "max_frequency"),
@@ -193,7 +211,8 @@ def test_impacts_are_not_lost_across_blocks():
     _, _, impacts, _ = run_blocks(RigSimulator(cfg), Fraction(10), Fraction(1, 100))
     assert [i.index for i in impacts] == list(range(len(impacts)))
     one = RigModel(cfg, channels=False, truth=False).advance(10).impacts
-    assert impacts == one
+    assert one[0].t_start < 1e-9 and one[0].impact_velocity < 1e-9   # the resting contact at gap 0, left out
+    assert impacts == [i._replace(index=i.index - 1) for i in one[1:]]
 
 
 def _run_python(code: str, **env) -> subprocess.CompletedProcess:

@@ -188,7 +188,7 @@ def assert_same(mine, theirs, specs: dict[str, tuple[Field, ...]], type_name: st
 # ---- every type against rclpy ------------------------------------------------------------------------------------
 
 def test_the_types_cover_every_rig_message_and_service():
-    assert len(RIMD_MESSAGES) == 8 and len(RIMD_SERVICES) == 20
+    assert len(RIMD_MESSAGES) == 9 and len(RIMD_SERVICES) == 20
     assert {"rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState", "rimd_msgs/srv/GetRate_Request"} <= set(TYPES)
 
 
@@ -434,7 +434,7 @@ def test_a_recording_decodes_from_its_own_definitions_as_rosbags_decodes_it(tmp_
     assert seen == set(RECORDED_TOPICS.values())
 
     # The physics core's file (mcap_ros2's writer, its own copy of the definitions).
-    core = write_rig_mcap(tmp_path / "core.mcap", seconds=0.3).path
+    core = write_rig_mcap(tmp_path / "core.mcap", seconds=0.5).path   # its first impact at 0.40 s
     recording = open_recording(core)
     decoders = {}
     n = 0

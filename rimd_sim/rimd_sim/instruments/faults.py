@@ -148,7 +148,8 @@ def validate_fault(channel: Any, kind: Any, start: Any, duration: Any, magnitude
         CommandError: Naming the field and the rule it broke.
     """
     if not isinstance(kind, str) or kind not in FAULT_KINDS:
-        raise CommandError(f"kind = {kind!r} refused: must be one of {', '.join(FAULT_KINDS)}")
+        raise CommandError(f"kind = {kind!r} refused: must be one of {', '.join(FAULT_KINDS)}"
+                           + _closest(kind, list(FAULT_KINDS)))
     rule = FAULT_KINDS[kind]
     names = list(channels)
     if rule.stage == "motor":
@@ -156,7 +157,7 @@ def validate_fault(channel: Any, kind: Any, start: Any, duration: Any, magnitude
             raise CommandError(f"channel = {channel!r} refused: kind '{kind}' acts on the channel 'motor'")
     elif not isinstance(channel, str) or channel not in channels:
         allowed = ", ".join(names)
-        raise CommandError(f"channel = {channel!r} refused: must be one of {allowed}"
+        raise CommandError(f"channel = {channel!r} refused: must be one of {allowed}" + _closest(channel, names)
                            + (f" (kind '{kind}' is a sensor fault; 'motor' takes motor_slip)" if channel == MOTOR
                               else ""))
     start_s = _number("start", start)
@@ -191,6 +192,35 @@ MAX_AHEAD_S = 86_400
 
 #: The fields of a fault entry: ``start`` (simulation time) or ``after`` (relative to when it is injected).
 ENTRY_FIELDS = ("channel", "kind", "start", "after", "duration", "magnitude")
+
+
+def _closest(name: Any, known: Sequence[str]) -> str:
+    """``; did you mean X?`` for the known names closest to ``name`` (difflib's ratio >= 0.6), else ''."""
+    import difflib
+
+    close = difflib.get_close_matches(name, list(known), n=2, cutoff=0.6) if isinstance(name, str) else []
+    return f"; did you mean {' or '.join(close)}?" if close else ""
+
+
+def check_scenario(entries: Sequence[Any], channels: Mapping[str, ChannelConfig]) -> None:
+    """Check a fault scenario before anything runs.
+
+    Each entry is read as :func:`parse_fault_entry` and :func:`validate_fault` read it at the start of a run
+    (simulation time 0).
+
+    Raises:
+        CommandError: Naming the entry (``faults[2]``), the field and its rule (with the closest names).
+    """
+    for i, entry in enumerate(entries):
+        if isinstance(entry, str) and not entry.strip():
+            continue
+        where = f"faults[{i}]"
+        fields = parse_fault_entry(entry, where)
+        try:
+            validate_fault(fields["channel"], fields["kind"], fields["start"], fields["duration"], fields["magnitude"],
+                           now=Fraction(0), channels=channels, after=fields["after"])
+        except CommandError as exc:
+            raise CommandError(f"{where}: {exc}") from None
 
 
 def parse_fault_entry(entry: Any, where: str) -> dict[str, Any]:

@@ -36,7 +36,13 @@ from rimd_sim.model.rig_model import (
 from rimd_sim.settings.capture import ACC_CHANNEL, FORCE_CHANNEL, CaptureConfig
 from rimd_sim.settings.config import CHANNEL_NAMES, SimConfig
 
-__all__ = ["AppliedCommand", "ChannelBlock", "RigSimulator", "SimBlock"]
+__all__ = ["RESTING_VELOCITY", "AppliedCommand", "ChannelBlock", "RigSimulator", "SimBlock"]
+
+#: A contact that starts with the hammer placed at rest (the run's start, a reset) and closes at less than this
+#: relative velocity (m/s) is a resting contact, not an impact: at gap 0 the hammer starts on the stop, and the cart
+#: pressing it away is no collision. The model's impact list keeps it; the rig does not report it, and numbers the
+#: impacts after it from 0 on, so that ``index`` counts the impacts a DAQ sees.
+RESTING_VELOCITY = 1e-6
 
 #: Parameters that only concern the node's pacing: accepted at run time, ignored by the core.
 NODE_ONLY_PARAMETERS = {"real_time_factor", "block_rate"}
@@ -119,6 +125,9 @@ class RigSimulator:
         self._queue: list[tuple[Fraction, int, str, Any]] = []
         self._counter = itertools.count()
         self._faults = FaultLayer(config.channels, config.seed)
+        #: When the hammer was placed at rest (the start, each reset): a contact starting there may be resting.
+        self._placed: list[float] = [float(self._model.time)]
+        self._resting = 0   # resting contacts left out so far (the impacts after them are numbered on)
 
     @property
     def config(self) -> SimConfig:
@@ -148,8 +157,11 @@ class RigSimulator:
         return at
 
     def set_motor_frequency(self, frequency_hz: float, ramp_rate: float = 0.0, *,
-                            at: float | Fraction | None = None) -> Fraction:
+                            at: float | Fraction | None = None, kind: str = "set_motor_frequency") -> Fraction:
         """Schedule a motor setpoint (see :meth:`RigModel.set_motor_frequency` for the rules).
+
+        ``kind`` names it in the applied commands' log: ``set_motor_frequency`` (the service) or ``motor_command``
+        (the command topic, whose applications the node counts rather than logs one by one).
 
         Returns:
             The simulation time at which it takes effect.
@@ -160,7 +172,9 @@ class RigSimulator:
         when = self._at(at)
         max_f = self._config.motor.max_frequency
         _check_frequency(frequency_hz, ramp_rate, max_f)
-        return self._push(when, "set_motor_frequency", (float(frequency_hz), float(ramp_rate)))
+        if kind not in ("set_motor_frequency", "motor_command"):
+            raise ValueError(f"kind = {kind!r}: must be set_motor_frequency or motor_command")
+        return self._push(when, kind, (float(frequency_hz), float(ramp_rate)))
 
     def perturb(self, velocity: float, *, at: float | Fraction | None = None) -> Fraction:
         """Schedule a velocity kick of the hammer (m/s)."""
@@ -239,7 +253,7 @@ class RigSimulator:
 
     def _apply(self, kind: str, arg: Any) -> tuple[list[Impact], str]:
         model = self._model
-        if kind == "set_motor_frequency":
+        if kind in ("set_motor_frequency", "motor_command"):
             f, rate = arg
             done = model.set_motor_frequency(f, rate)
             return done, f"setpoint {f:g} Hz, ramp {rate or self._config.motor.ramp_rate:g} Hz/s"
@@ -248,6 +262,7 @@ class RigSimulator:
         if kind == "motor_slip":
             return model.set_motor_slip(arg), f"motor slip {arg:g} of the frequency per impact"
         if kind == "reset":
+            self._placed.append(float(model.time))
             return model.reset_hammer(), "hammer reset to its initial state"
         config = self._config.with_parameters(arg)
         done = model.reconfigure(config)
@@ -356,7 +371,7 @@ class RigSimulator:
             truth_all = (parts[0].truth[0], np.concatenate([_truth(p)[1] for p in parts], axis=1))
             truth_cuts = _split_index(truth_all[0], truth_all[1].shape[1],
                                       _cuts(ratios, truth_rate))
-        impacts = sorted([i for p in parts for i in p.impacts] + extra, key=lambda i: i.index)
+        impacts = self._reported(sorted([i for p in parts for i in p.impacts] + extra, key=lambda i: i.index))
         strobe = [s for p in parts for s in p.strobe]
         blocks = []
         prev = t_start
@@ -386,6 +401,18 @@ class RigSimulator:
             ))
             prev = b
         return blocks
+
+
+    def _reported(self, impacts: list[Impact]) -> list[Impact]:
+        """The impacts the rig reports: resting contacts (:data:`RESTING_VELOCITY`) left out, the rest renumbered."""
+        out = []
+        for imp in impacts:
+            if abs(imp.impact_velocity) < RESTING_VELOCITY and any(abs(imp.t_start - t) < 1e-9 for t in self._placed):
+                self._resting += 1
+                continue
+            out.append(imp._replace(index=imp.index - self._resting) if self._resting else imp)
+        del self._placed[:-1]   # only the last placement can still start a contact
+        return out
 
 
 def _truth(part: ModelOutput) -> tuple[int, np.ndarray]:

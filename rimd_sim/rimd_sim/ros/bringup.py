@@ -33,7 +33,7 @@ from typing import Any, TextIO
 
 import yaml
 
-from rimd_sim.errors import ConfigError, InputError
+from rimd_sim.errors import CommandError, ConfigError, InputError
 from rimd_sim.ros.nodes.registry import by_name, rig_nodes
 from rimd_sim.settings.config import (
     SimConfig,
@@ -231,6 +231,12 @@ def plan_rig(config: str | Path | None = None, *, output_dir: str | Path | None 
         sim.update({"lockstep.enabled": True, "lockstep.consumers": list(lockstep_consumers)})
     sim_config, sim_settings = _checked(config_path, "rimd_simulator", check_simulator_section,
                                         {**(sections["rimd_simulator"] or {}), **sim})
+    from rimd_sim.instruments.faults import check_scenario
+
+    try:
+        check_scenario(sim_settings.faults, {c.name: c for c in sim_config.channels})
+    except CommandError as exc:
+        raise InputError(f"{config_path}, section rimd_simulator: {exc}") from None
     overrides_path = None
     if any(extra.values()):
         directory = Path(run_dir) if run_dir is not None else (recording_dir or Path.cwd())

@@ -43,6 +43,7 @@ import math
 import os
 import re
 import signal
+import subprocess
 import sys
 import tempfile
 import time
@@ -78,12 +79,18 @@ READY_REPORT_S = 5.0
 SERVICE_TIMEOUT_S = 30.0
 #: Lines of a node's log that an error message shows.
 LOG_TAIL_LINES = 20
+#: Default wall time (s) :meth:`RigHandle.run` gives the program.
+RUN_TIMEOUT_S = 180.0
+#: Default wall time (s) the ground truth waits for the recording to hold the window asked for.
+TRUTH_TIMEOUT_S = 60.0
 #: The simulator's services the helpers call (in the rig's namespace): served means the rig takes commands.
 RIG_SERVICES = ("set_motor_frequency", "perturb", "inject_fault", "pause", "resume", "reset", "clear_faults")
 #: The simulator's diagnostic status that names its lockstep consumers (runtime/simulator.py, ``diagnostics``).
 PACING_STATUS = "rimd_simulator: pacing"
 LOCK_DIR = Path(tempfile.gettempdir()) / "rimd-ros-domain-locks"
 _lease_counter = itertools.count()
+_client_counter = itertools.count()
+_run_counter = itertools.count()
 
 
 # ---- configuration: the domain range and the ready timeout ---------------------------------------------------------
@@ -269,6 +276,19 @@ def _say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
+def _read(f: Any) -> str:
+    f.flush()
+    f.seek(0)
+    return f.read().decode(errors="replace")
+
+
+def _tail(f: Any, lines: int = LOG_TAIL_LINES) -> str:
+    """The last lines a program wrote on stderr, for an error message ('' when none)."""
+    text = _read(f).rstrip().splitlines()[-lines:]
+    return ("\n--- the program's last " f"{len(text)} lines on stderr:\n" + "\n".join(f"    {t}" for t in text)
+            if text else "")
+
+
 def _how(status: int) -> str:
     """An exit status in words (a negative one: killed by that signal)."""
     if status < 0:
@@ -297,6 +317,10 @@ class RigHandle:
     _stopped: bool = False
     #: Where the rig's processes write their ready files (``RIMD_READY_DIR``); None: not waited for.
     _ready_dir: Path | None = None
+    #: The simulation time at which the rig holds (``until``; None: no end).
+    until: float | None = None
+    _truth: Any = None   # the recording's ground truth, read once the rig is stopped
+    _status: int = 0     # the rig's exit status, once stopped
 
     @property
     def config(self) -> Any:
@@ -358,7 +382,8 @@ class RigHandle:
 
             from rimd_sim.ros.clients.rig import RigClient
 
-            self._client = RigClient(domain_id=self.domain_id, timeout=SERVICE_TIMEOUT_S, name="rimd_test_rig",
+            self._client = RigClient(domain_id=self.domain_id, timeout=SERVICE_TIMEOUT_S,
+                                     name=f"rimd_test_rig_{self.domain_id}_{next(_client_counter)}",
                                      check=self.check_alive,
                                      discovery_range=self.env.get("ROS_AUTOMATIC_DISCOVERY_RANGE"))
 
@@ -525,21 +550,144 @@ class RigHandle:
                 it waits for (its log's last lockstep line).
             UnavailableError: A node of the rig exited meanwhile (at once).
         """
+        if self.until is not None and seconds > self.until:
+            raise InputError(f"wait_until_simulated({seconds:g}) refused: the rig holds at until = {self.until:g} s")
         target = round(seconds * 1e9)
         if not self._spin_until(lambda: self._clock_ns >= target, timeout):
-            waiting = [line for line in self.log().splitlines() if "lockstep: holding" in line]
-            # Its last report (repeated every 10 s): the time it states is the hold's length then, not now.
-            said = f"; the rig's last lockstep report: {waiting[-1]}" if waiting else ""
-            if "not joined" in said:
-                said += (" (a consumer joins once every subscription it gave its ProgressReporter has matched a "
-                         "publisher: one on a misspelt topic never does, and its node warns after 5 s)")
-            raise AssertionError(f"the rig is at {self._clock_ns / 1e9:.3f} s, not {seconds:g} s, after {timeout:g} s"
-                                 + said)
+            raise AssertionError(f"the rig did not reach {seconds:g} s within {timeout:g} s: {self.where()}")
+
+    def where(self) -> str:
+        """Where the rig stands, in words: its simulation time and what it waits for (its last lockstep report)."""
+        self.client().executor.spin_once(timeout_sec=0.0)
+        at = ("the rig has not simulated anything yet (no /clock)" if self._clock_ns < 0
+              else f"the rig is at {self._clock_ns / 1e9:.3f} s")
+        waiting = [line for line in self.log().splitlines() if "lockstep: holding" in line]
+        # Its last report (repeated every 10 s): the time it states is the hold's length then, not now.
+        said = f"; its last lockstep report: {waiting[-1].strip()}" if waiting else ""
+        if "not joined" in said:
+            said += (" (a consumer joins once every subscription it gave its ProgressReporter has matched a "
+                     "publisher: one on a misspelt topic never does, and its node warns after 5 s)")
+        return at + said
+
+    # -- your program, run against the rig ---------------------------------------------------------------------
+    def run(self, args: Sequence[str], *, timeout: float = RUN_TIMEOUT_S, check: bool = True,
+            cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+        """Run a program in the rig's domain (``env``) until it exits, watching the rig meanwhile.
+
+        Its output is captured (``stdout``, ``stderr`` of the result, as text).
+
+        Args:
+            args: The command line.
+            timeout: Seconds of wall time the program may take.
+            check: Raise when it exits with a status other than 0.
+            cwd: Its working directory.
+
+        Raises:
+            UnavailableError: A node of the rig exited meanwhile (at once; the program is stopped).
+            AssertionError: The program did not exit within ``timeout`` (it is stopped; the message says where the
+                rig stands and what it waits for), or, with ``check``, exited with another status than 0 (its
+                last output lines).
+        """
+        out_path = self.run_dir / f"program{next(_run_counter)}.out"
+        with open(out_path, "w+b") as out, open(out_path.with_suffix(".err"), "w+b") as err:
+            proc = subprocess.Popen(list(args), env=self.env, stdout=out, stderr=err, cwd=cwd)
+            try:
+                deadline = time.monotonic() + timeout
+                while proc.poll() is None:
+                    self.check_alive("while the program ran")
+                    if time.monotonic() >= deadline:
+                        raise AssertionError(f"{' '.join(map(str, args))} did not exit within {timeout:g} s; "
+                                             f"{self.where()}{_tail(err)}")
+                    self.client().executor.spin_once(timeout_sec=0.05)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+            result = subprocess.CompletedProcess(list(args), proc.returncode, _read(out), _read(err))
+            if check and proc.returncode != 0:
+                raise AssertionError(f"{' '.join(map(str, args))} {_how(proc.returncode)}; {self.where()}{_tail(err)}")
+        return result
+
+    # -- the ground truth of the run -----------------------------------------------------------------------------
+    def events(self, start: float = 0.0, end: float | None = None, *, timeout: float = TRUTH_TIMEOUT_S) -> Any:
+        """The rig's impact events whose contact starts in ``[start, end)`` s of simulation time.
+
+        A :class:`rimd_sim.analysis.recordings.truth.Table`: ``time`` (contact start), ``peak_force`` (N, the
+        model's true peak), ``impact_velocity`` (m/s), ``duration``, ``impulse``, ``index``... (docs/testing.md).
+        Read from the recording; while the rig runs, this waits (up to ``timeout`` s) until the recording holds
+        ``end`` (``end`` None: what it holds now; after :meth:`stop`: everything).
+        """
+        return self._ground_truth(end, timeout).events(start, math.inf if end is None else end)
+
+    def faults(self, start: float = 0.0, end: float | None = None, *, timeout: float = TRUTH_TIMEOUT_S) -> Any:
+        """The faults acting in ``[start, end)``, one row each.
+
+        Columns ``id``, ``channel``, ``kind``, ``start``, ``end`` (``inf`` while it lasts), ``magnitude``,
+        ``detail``; ``.active(times, channel, kind)`` masks the times a fault acts at. Waits as :meth:`events` does.
+        """
+        return self._ground_truth(end, timeout).faults(start, math.inf if end is None else end)
+
+    def motor_states(self, start: float = 0.0, end: float | None = None, *,
+                     timeout: float = TRUTH_TIMEOUT_S) -> Any:
+        """The motor states stamped in ``[start, end)``.
+
+        Columns ``time``, ``frequency_setpoint``, ``frequency`` (Hz), ``phase`` (rad), ``cycle_index``. Waits as
+        :meth:`events` does.
+        """
+        return self._ground_truth(end, timeout).motor_states(start, math.inf if end is None else end)
+
+    def channel(self, name: str, start: float = 0.0, end: float | None = None, *,
+                timeout: float = TRUTH_TIMEOUT_S) -> Any:
+        """A channel's samples as recorded (``impact_force``, ...) in ``[start, end)``.
+
+        Columns ``time``, ``index``, ``value``. Waits as :meth:`events` does.
+
+        Raises:
+            InputError: An unknown channel (with the closest names).
+        """
+        return self._ground_truth(end, timeout).channel(name, start, math.inf if end is None else end)
+
+    def _ground_truth(self, end: float | None, timeout: float) -> Any:
+        """The recording read now; while the rig runs, once it holds every channel up to ``end``."""
+        from rimd_sim.analysis.recordings.truth import RunTruth
+        from rimd_sim.io.reader import RecordingError
+
+        if self.recording is None:
+            raise InputError("this rig keeps no recording (rimd_rig(record=False)): it has no ground truth to give")
+        if self._truth is not None:
+            return self._truth
+        if self.until is not None and end is not None:
+            end = min(end, self.until)
+        deadline = time.monotonic() + timeout
+        while True:
+            stopped = self._stopped
+            try:
+                truth = RunTruth(self.recording)
+            except RecordingError:
+                truth = None   # no file yet
+            if stopped:
+                if truth is None:
+                    raise InputError(f"the rig recorded nothing (no recording in {self.recording})")
+                self._truth = truth
+                return truth
+            if truth is not None and (end is None or truth.covered_until >= end - 1e-9):
+                return truth
+            self.check_alive("while the test waited for its recording")
+            if time.monotonic() >= deadline:
+                held = -math.inf if truth is None else truth.covered_until
+                raise AssertionError(f"the recording holds every channel up to {held:.3f} s, not {end:g} s, after "
+                                     f"{timeout:g} s; {self.where()}")
+            self.client().executor.spin_once(timeout_sec=0.2)
 
     def stop(self) -> int:
-        """Stop the rig (the recorder finishes its file) and give the domain back; the rig's exit status."""
+        """Stop the rig (the recorder finishes its file) and give the domain back; the rig's exit status.
+
+        The ground truth (:meth:`events`...) stays readable: from the finished recording.
+        """
+        if self._stopped:
+            return self._status
         self._stopped = True
-        status = self.rig.stop()
+        status = self._status = self.rig.stop()
         if self._client is not None:
             self._client.close()
             self._client = None
@@ -565,7 +713,8 @@ class RigFactory:
                  config: str | Path | None = None, record: bool = True, rerun: bool = False,
                  real_time_factor: float = 0.0, window: float | None = None, timeout: float | None = None,
                  on_timeout: str | None = None, env: Mapping[str, str] | None = None,
-                 ready_timeout: float | None = None, separate: bool = False) -> RigHandle:
+                 ready_timeout: float | None = None, separate: bool = False,
+                 until: float | None = None) -> RigHandle:
         """Bring up a rig in lockstep in a domain of its own; return it once it is ready.
 
         Args:
@@ -586,6 +735,9 @@ class RigFactory:
                 ``RigHandle.env``, the environment of your processes.
             ready_timeout: Seconds to wait for the rig to be ready (default: ``RIMD_READY_TIMEOUT``, the ini key
                 ``rimd_ready_timeout``, else :data:`DEFAULT_READY_TIMEOUT_S`).
+            until: Simulation time (s) at which the rig holds: it simulates up to the first block end at or after it
+                (10 ms blocks by default), its recording ends at ``until`` exactly, and it publishes nothing more
+                until it is stopped. None: it runs until stopped.
             separate: Each node in a process of its own (logs ``<node>.log``). By default the rig is composed:
                 the recorder and the bridge run in the simulator's process, fed without DDS (one log,
                 ``rimd_composed.log``; :meth:`RigHandle.log` finds a node's lines there), docs/rig.md.
@@ -611,11 +763,18 @@ class RigFactory:
             if value is not None:
                 sim[f"lockstep.{key}"] = value
         bridge = {"sink": "save", "save_path": str(run_dir / "rig.rrd")}
+        recorder = {}
+        if until is not None:
+            sim["until"] = until
+            if isinstance(until, (int, float)) and math.isfinite(until) and until > 0:
+                recorder["stop_at"] = round(until * 1e9)   # stamps are simulation time from 0 in lockstep
         rig = None
         try:
             plan = plan_rig(config, output_dir=run_dir / "recording" if record else None, record=record,
                             rerun=rerun, lockstep=True, consumers=consumers, real_time_factor=real_time_factor,
-                            parameters={"rimd_simulator": sim, "rimd_rerun": bridge}, run_dir=run_dir,
+                            parameters={"rimd_simulator": sim, "rimd_rerun": bridge,
+                                        **({"rimd_recorder": recorder} if record and recorder else {})},
+                            run_dir=run_dir,
                             separate=separate)
             handle_env = ros_environment(lease.domain_id, run_dir / "ros_log")
             ready_dir = run_dir / "ready"
@@ -629,7 +788,7 @@ class RigFactory:
             lease.release()
             raise
         handle = RigHandle(lease.domain_id, handle_env, run_dir, plan.recording_dir, plan.lockstep_consumers, rig,
-                           lease, _ready_dir=ready_dir)
+                           lease, _ready_dir=ready_dir, until=until)
         self._rigs.append(handle)
         try:
             handle.ready_after = handle.wait_ready(wait)

@@ -18,6 +18,11 @@ hands the runtime a ``send(key, data)`` that publishes the bytes, and maps its s
 * **Commands**, validated at once (a refusal answers ``success = false`` with the reason and changes nothing)
   and applied at the next block boundary in simulation time, or at the exact stamp the request names: motor
   setpoint, perturbation, fault injection and clearing, reset, pause and resume, parameter changes.
+* **Motor commands from the topic** (``/rig/motor/command``, :meth:`SimulatorRuntime.motor_command`): applied
+  at their stamp, or at the next block boundary for stamp zero and for a stamp already simulated (late: counted);
+  a refused one is counted and said once per sender. No log line per command (debug level only): a summary every
+  ``COMMAND_SUMMARY_S`` while they come, and counts in the diagnostics. In lockstep each command of a controller
+  is counted against its progress reports (:meth:`rimd_sim.runtime.pacing.Lockstep.command`, docs/control.md).
 * **The run's identity** (``/rig/session``): each start and each reset opens a run with a new ``run_id``, its
   reason, a sequence number, the stamp of its first sample, the seed, the configuration's hash and time base.
 * **Diagnostics** (``/diagnostics``, :meth:`SimulatorRuntime.diagnostics`): pacing state, lateness as a subscriber
@@ -52,7 +57,7 @@ from rimd_sim.errors import CommandError, ConfigError, IntegrationError
 from rimd_sim.instruments.faults import parse_fault_entry
 from rimd_sim.instruments.rig_simulator import NODE_ONLY_PARAMETERS, RigSimulator, SimBlock
 from rimd_sim.io.cdr import BLOCK_ARRAYS, ENCAPSULATION, CdrWriter, SampleBlockEncoder
-from rimd_sim.runtime.pacing import Go, Hold, Pacer, Wait
+from rimd_sim.runtime.pacing import Go, Hold, Pacer, ProgressVerdict, Wait
 from rimd_sim.runtime.progress import PACING_STATUS, PUBLISHED_KEY
 from rimd_sim.settings.config import (
     CHANNEL_NAMES,
@@ -85,6 +90,8 @@ IDLE_S = 0.1
 #: A lockstep hold is said in the log and in /diagnostics once it has lasted this long (s), then every REPEAT s.
 HOLD_REPORT_S = 0.5
 HOLD_REPEAT_S = 10.0
+#: Motor commands from the topic are summed up in one log line at most this often (s of wall time), while they come.
+COMMAND_SUMMARY_S = 10.0
 #: Stamp frame of the run's identity, and the hardware id of the diagnostics.
 SESSION_FRAME = "rimd_virtual_rig"
 #: Diagnostic levels (diagnostic_msgs/DiagnosticStatus).
@@ -370,6 +377,33 @@ def _no_log(level: str, line: str) -> None:
     del level, line
 
 
+@dataclass
+class CommandBook:
+    """The counts of the motor commands taken from the topic, for the diagnostics and the periodic summary.
+
+    Attributes:
+        received: Commands taken (valid or not).
+        applied: Commands the core applied (at their stamp, or at the next block boundary).
+        late: Commands whose stamp was already simulated when they came (applied at the next block boundary).
+        refused: Commands refused (a value out of its range, a stamp more than a day ahead).
+        worst_late_s: The largest lateness (s of simulation time from the stamp to where the rig stood).
+        last: The last applied command, in words.
+        last_refusal: Why the last refused one was refused.
+        since_summary: Commands applied since the last summary line.
+        summary_at: Monotonic time of the last summary line (0: none yet).
+    """
+
+    received: int = 0
+    applied: int = 0
+    late: int = 0
+    refused: int = 0
+    worst_late_s: float = 0.0
+    last: str = ""
+    last_refusal: str = ""
+    since_summary: int = 0
+    summary_at: float = 0.0
+
+
 # ---- the runtime ---------------------------------------------------------------------------------------------------
 
 class SimulatorRuntime:
@@ -382,7 +416,8 @@ class SimulatorRuntime:
         topics: Output key -> topic name as published (lockstep reports and diagnostics name them); default
             :func:`default_topics` in ``/rig``.
         node: The node's fully qualified name (the run's identity; the diagnostics use its last part).
-        log: ``log(level, line)`` with level ``info``, ``warning`` or ``error``.
+        log: ``log(level, line)`` with level ``debug`` (each motor command from the topic), ``info``, ``warning``
+            or ``error``.
         clock: Monotonic clock (s).
         wall_ns: Wall clock (ns since the epoch): the stamps' ``t0`` at real time.
         alive: False once the caller's publishers are gone (the loop then stops quietly).
@@ -445,6 +480,12 @@ class SimulatorRuntime:
         self._sent: dict[str, int] = {}   # messages published per topic since the start (diagnostics)
         self._pacer = Pacer(self._rtf, self._lockstep, topics=list(self._topics.values()), clock=clock)
         self._warned: set[tuple[str, str]] = set()
+        self._commands = CommandBook()   # motor commands from the topic
+        self._reporting: dict[str, tuple[str, tuple[str, ...]]] = {}   # consumer -> (node, topics) of its last report
+        #: The last block the run publishes (``until``: the first block end at or after it), None: no end.
+        self._last_block: int | None = (math.ceil(Fraction(repr(settings.until)) * self._block_rate)
+                                        if settings.until > 0 else None)
+        self._held_said = False
 
     # ---- state -------------------------------------------------------------------------------------------------
 
@@ -574,6 +615,11 @@ class SimulatorRuntime:
         if self._match_pending:
             self._wait_for_matches()
         count = 1 if self._wall_clock else decision.count
+        if self._last_block is not None:
+            count = min(count, self._last_block - self._block)
+            if count <= 0:
+                self._say_held()
+                return Step(IDLE_S)
         try:
             with self._lock:
                 if self._paused:   # paused while the caller waited for the lock: nothing more
@@ -590,6 +636,13 @@ class SimulatorRuntime:
                 return Step(stopped=True)
             self._publish(block)
         return Step()
+
+    def _say_held(self) -> None:
+        """Say once that the run reached ``until`` and holds there."""
+        if not self._held_said:
+            self._held_said = True
+            self._log("info", f"until: holding at simulation time {float(self._sim.time):.6f} s "
+                              f"(until {self._settings.until:g} s); nothing more is published")
 
     def _candidate_ends(self) -> list[int]:
         """The stamps (ns) at which the next MAX_BATCH blocks end, kept until a block goes (asked twice a block)."""
@@ -617,6 +670,8 @@ class SimulatorRuntime:
             for c in holders:
                 heard = "never heard" if c.last_heard is None else f"last heard {now - c.last_heard:.1f} s ago"
                 done = "not joined" if c.done_ns is None else f"done through {c.done_ns / 1e9:.6f} s"
+                if c.awaiting is not None:   # a controller's report counts commands that have not come
+                    done += f", its report counts {c.awaiting[0]} commands, {c.awaiting[1]} received"
                 parts.append(f"{c.name} ({done}, {heard}" + (", timed out" if c.timed_out else "") + ")")
         return ", ".join(parts) or "nobody"
 
@@ -638,8 +693,13 @@ class SimulatorRuntime:
             self._joining.pop(node, None)
 
     def progress(self, consumer: str, done_ns: int, *, instance: str = "", topics: Sequence[str] = (),
-                 topics_done_ns: Sequence[int] = (), leaving: bool = False, node: str = "") -> None:
-        """A lockstep consumer's progress report (``rimd_msgs/msg/ConsumerProgress``; see :mod:`.pacing`)."""
+                 topics_done_ns: Sequence[int] = (), leaving: bool = False, node: str = "", controls: bool = False,
+                 commands: int = 0) -> None:
+        """A lockstep consumer's progress report (``rimd_msgs/msg/ConsumerProgress``; see :mod:`.pacing`).
+
+        ``controls`` and ``commands``: a controller's (docs/control.md); a report that counts commands not received
+        yet is taken when the last of them comes (:meth:`motor_command`).
+        """
         if self._pacer.lockstep is None:
             return
         per_topic = None
@@ -649,8 +709,15 @@ class SimulatorRuntime:
                                                     f"topics but {len(topics_done_ns)} topics_done_through")
                 return
             per_topic = dict(zip(topics, topics_done_ns, strict=True))
+        self._reporting[consumer] = (node, tuple(topics))   # what a report taken later (commands pending) named
         with self._pace_lock:
-            verdict = self._pacer.lockstep.progress(consumer, done_ns, instance, per_topic, leaving=leaving)
+            verdict = self._pacer.lockstep.progress(consumer, done_ns, instance, per_topic, leaving=leaving,
+                                                    controls=controls, commands=commands)
+        self._take_verdict(consumer, verdict)
+
+    def _take_verdict(self, consumer: str, verdict: ProgressVerdict) -> None:
+        """Act on a progress report's verdict: the match wait of a join, the log line, the pacing thread woken."""
+        node, topics = self._reporting.get(consumer, ("", ()))
         if verdict.joined:   # its subscriptions may be newer than its report: let the transport match them first
             if node:   # the topics it names, or (None) those the graph shows it reading
                 published = set(self._topics.values())
@@ -727,8 +794,14 @@ class SimulatorRuntime:
         if not self._wall_clock:
             self._send("/clock", encode_clock(end), end)
         for cmd in block.commands:
+            if cmd.kind == "motor_command":   # the topic's: counted, summed up every COMMAND_SUMMARY_S
+                self._commands.applied += 1
+                self._commands.since_summary += 1
+                self._commands.last = f"{cmd.detail} at {self._when(cmd.time)}"
+                continue
             self._log("info", f"{cmd.kind} at simulation time {float(cmd.time):.6f} s "
                               f"(stamp {show_stamp(stamp_ns(t0, cmd.time))}): {cmd.detail}")
+        self._summarize_commands()
         self._published += 1
         if last_due is not None:
             self._measure_lateness(last_due)
@@ -799,6 +872,13 @@ class SimulatorRuntime:
             "overruns": str(self._overruns),
             "dropped_blocks": "0",
             "paused": str(self._paused).lower(),
+            "motor_commands_received": str(self._commands.received),
+            "motor_commands_applied": str(self._commands.applied),
+            "motor_commands_late": str(self._commands.late),
+            "motor_commands_worst_late_ms": f"{self._commands.worst_late_s * 1e3:.3f}",
+            "motor_commands_refused": str(self._commands.refused),
+            "motor_command_last": self._commands.last,
+            "motor_command_last_refusal": self._commands.last_refusal,
         }
         if self._wall_clock:
             values["stamps_behind_wall_clock_s"] = f"{self._paused_wall:.3f}"
@@ -884,6 +964,74 @@ class SimulatorRuntime:
                             self.stamp_of(when), float(frequency_hz))
         self.wake.set()
         return answer
+
+    def motor_command(self, frequency_hz: float, ramp_rate: float = 0.0, stamp: tuple[int, int] = (0, 0), *,
+                      consumer: str = "", instance: str = "", sequence: int = 0) -> None:
+        """A motor command from ``/rig/motor/command`` (``rimd_msgs/msg/MotorCommand``; docs/control.md).
+
+        Applied at ``stamp`` (``(sec, nanosec)`` in the rig's time base), or at the next block boundary when it is
+        zero or already simulated (late: counted, the worst lateness kept). A refused one (a value out of its range,
+        a stamp more than a day ahead) changes nothing; it is counted and said once per sender. Nothing is logged
+        per command but at debug level: :meth:`_summarize_commands` sums them up.
+
+        In lockstep a command of a registered consumer (``consumer``, ``instance``) is counted once scheduled: a
+        progress report of that consumer that counts it is taken only then (:meth:`.pacing.Lockstep.command`).
+        """
+        book = self._commands
+        sender = consumer or "an unnamed sender"
+        with self._lock:
+            book.received += 1
+            now = self._sim.time
+            sec, nanosec = stamp
+            ns = int(sec) * 1_000_000_000 + int(nanosec)
+            t = None if ns == 0 else Fraction(ns - self._t0_ns, 1_000_000_000)
+            late = t is not None and t < now
+            try:
+                if not 0 <= int(nanosec) < 1_000_000_000:
+                    raise CommandError(f"header.stamp.nanosec = {nanosec} refused: must be in [0, 1000000000)")
+                if t is not None and t - now > MAX_SCHEDULE_AHEAD_S:
+                    raise CommandError(f"stamp {show_stamp(ns)} refused: {float(t - now):.6g} s ahead of the rig "
+                                       "(at most one day)")
+                if not ramp_rate <= MAX_RAMP_RATE:
+                    raise CommandError(f"ramp_rate = {ramp_rate!r} refused: must be <= {MAX_RAMP_RATE:g} Hz/s "
+                                       "(0 = motor.ramp_rate)")
+                when = self._sim.set_motor_frequency(frequency_hz, ramp_rate, at=None if late else t,
+                                                     kind="motor_command")
+            except CommandError as exc:
+                book.refused += 1
+                book.last_refusal = f"from {sender}: {exc}"
+                self._warn_once(sender, "motor command refused", f"motor command {sequence} from {sender} refused: "
+                                                                 f"{exc}; the next refusals are counted in "
+                                                                 "/diagnostics and the summary")
+                when = None
+            if late and when is not None:
+                assert t is not None
+                book.late += 1
+                book.worst_late_s = max(book.worst_late_s, float(now - t))
+        if when is not None:
+            self._log("debug", f"motor command {sequence} from {sender}: setpoint {frequency_hz:g} Hz, ramp "
+                               f"{ramp_rate:g} Hz/s at {self._when(when)}" + (" (late)" if late else ""))
+        if consumer and self._pacer.lockstep is not None:
+            with self._pace_lock:
+                verdict = self._pacer.lockstep.command(consumer, instance)
+            if verdict is not None:
+                self._take_verdict(consumer, verdict)
+        self.wake.set()
+
+    def _summarize_commands(self) -> None:
+        """One log line for the motor commands applied since the last one, at most every COMMAND_SUMMARY_S."""
+        book = self._commands
+        if not book.since_summary:
+            return
+        now = self._clock()
+        if book.summary_at and now - book.summary_at < COMMAND_SUMMARY_S:
+            return
+        span = f"in the last {now - book.summary_at:.1f} s" if book.summary_at else "since the start"
+        book.summary_at = now
+        self._log("info", f"motor commands: {book.since_summary} applied {span} ({book.applied} in all; "
+                          f"{book.late} late, worst {book.worst_late_s * 1e3:.3f} ms; {book.refused} refused); "
+                          f"last: {book.last}")
+        book.since_summary = 0
 
     def perturb(self, velocity: float, start_stamp: tuple[int, int] = (0, 0)) -> Answer:
         """Add ``velocity`` (m/s) to the hammer at ``start_stamp`` (zero: the next block boundary)."""
@@ -1010,6 +1158,8 @@ class SimulatorRuntime:
         # Blocks continue from the current time: the block counter is re-based on the new rate.
         self._block_rate = Fraction(repr(config.block_rate))
         self._block = math.floor(t * self._block_rate)
+        if self._last_block is not None:
+            self._last_block = math.ceil(Fraction(repr(self._settings.until)) * self._block_rate)
         self._rtf = config.real_time_factor
         with self._pace_lock:
             self._pacer.schedule.set_factor(self._rtf, stamp_ns(self._t0_ns, t))

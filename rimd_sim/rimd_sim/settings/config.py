@@ -362,6 +362,9 @@ class SimulatorNodeSettings:
     faults: tuple[str, ...] = param((), "fault scenario loaded at start: one 'channel=NAME kind=KIND start=S "
                                         "duration=S magnitude=M' string per fault (\"\" entries are ignored); "
                                         "docs/faults.md", read_only=True)
+    until: float = param(0.0, "simulation time at which the rig holds: it simulates up to the first block end at or "
+                              "after it and then publishes nothing more", unit="s", gt=0.0,
+                         zero="no end", read_only=True)
     capture: CaptureConfig = group(CaptureConfig, "capture.")
     lockstep: LockstepSettings = group(LockstepSettings, "lockstep.")
 

@@ -4,13 +4,14 @@ numba compiles the integration driver of each model, the instruments' filters an
 their first call and keeps the machine code in its cache (``__pycache__`` beside the sources, or
 ``NUMBA_CACHE_DIR``). On a fresh install that first call takes tens of seconds, paid by whatever runs first: a
 rig's simulator before it says ``rig ready``, a test, a sweep. ``rimd warmup`` pays it at set-up time instead
-(``scripts/setup.sh`` runs it after the build); later processes load the compiled code in about a second.
+(``scripts/setup.sh`` runs ``rimd warmup --all`` after the build); later processes load the compiled code in about
+a second.
 
-Two groups of steps, each timed: what a rig of the default configuration runs (the rigid model through the
-simulator, its sensors, the composed rig's loop of DDS writes, and the rigid ensemble of the maps), and the
-two-mass model (``config/structural.yaml``: its simulator and its ensemble). With two cores or more the groups
-compile in two processes at once (numba writes each cache file whole, so two writers of one file do no harm);
-``--rig`` compiles the first group alone (what a DAQ test against the rig needs).
+By default it compiles what a rig of the default configuration runs: the rigid model through the simulator, its
+sensors and the composed rig's loop of DDS writes (what a DAQ test against the rig needs). ``--all`` adds the
+maps' ensembles and the two-mass model (``config/structural.yaml``: its simulator and its ensemble), in two
+processes at once with two cores or more (numba writes each cache file whole, so two writers of one file do no
+harm); without it they compile at their first use. Each step is timed.
 """
 
 from __future__ import annotations
@@ -20,16 +21,18 @@ import os
 import sys
 import time
 
-#: The groups of steps: (group, [step names]) in the order they run.
-GROUPS = {"rig": ("rigid model and instruments", "the composed rig's DDS batch writer", "rigid ensemble"),
-          "two-mass": ("two-mass model and instruments", "two-mass ensemble")}
+#: The groups of steps: (group, [step names]) in the order they start (``--all``: two at a time).
+GROUPS = {"rig": ("rigid model and instruments", "the composed rig's DDS batch writer"),
+          "two-mass": ("two-mass model and instruments", "two-mass ensemble"),
+          "maps": ("rigid ensemble",)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """``rimd warmup [--rig]``."""
-    parser.add_argument("--rig", action="store_true",
-                        help="only what a rig of the default configuration runs (the rigid model, its sensors, the "
-                             "composed rig's writer, the rigid maps), not the two-mass model")
+    """``rimd warmup [--all]``."""
+    parser.add_argument("--all", action="store_true",
+                        help="also the maps' ensembles and the two-mass model (default: only what a rig of the default "
+                             "configuration runs: the rigid model, its sensors, the composed rig's writer)")
+    parser.add_argument("--rig", action="store_true", help="what a rig runs (the default)")
 
 
 def _step(name: str) -> None:
@@ -65,12 +68,13 @@ def main(args: argparse.Namespace) -> int:
     """Compile (or load from the cache) every compiled function of the simulator and the maps."""
     where = os.environ.get("NUMBA_CACHE_DIR") or "__pycache__ beside the sources"
     total = time.perf_counter()
-    groups = ["rig"] if args.rig else list(GROUPS)
+    groups = list(GROUPS) if args.all else ["rig"]
     if len(groups) > 1 and (os.cpu_count() or 1) >= 2:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=len(groups), mp_context=multiprocessing.get_context("spawn")) as pool:
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=min(len(groups), 2), mp_context=context) as pool:
             results = list(pool.map(run_group, groups))
     else:
         results = [run_group(g) for g in groups]
