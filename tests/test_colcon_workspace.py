@@ -1,11 +1,12 @@
-"""A copy of the two packages builds in a fresh colcon workspace and installs what docs/ros-install.md promises.
+"""A copy of ``rimd_sim`` builds in a fresh colcon workspace and installs what docs/ros-install.md promises.
 
-Hypotheses: ``rimd_sim/`` and ``rimd_msgs/`` carry everything they need (no link out of them is followed: the
-copy keeps links as links); ``colcon build`` without ``--symlink-install`` (a plain install, as on a lab machine)
-against the project venv as the only underlay (the environment ``scripts/setup.sh``'s ``build_environment``
-makes) installs the configuration and the launch file in ``share/rimd_sim``, the node executables in
-``lib/rimd_sim``, and, once ``install/setup.sh`` is sourced, a ``rimd`` on PATH that runs from the workspace and
-names the workspace's ``share/rimd_sim/config``, not the repository's ``config/``.
+Hypotheses: ``rimd_sim/`` carries everything it needs (no link out of it is followed: the copy keeps links as
+links); ``colcon build`` without ``--symlink-install`` (a plain install, as on a lab machine) against the project
+venv and the set-up's ``rimd_msgs`` as underlays installs the configuration and the launch file in
+``share/rimd_sim``, the node executables in ``lib/rimd_sim``, and, once ``install/setup.sh`` is sourced, a ``rimd``
+on PATH that runs from the workspace and names the workspace's ``share/rimd_sim/config``, not the repository's
+``config/``. (``rimd_msgs`` is built from a clean tree by the set-up of every fresh clone, ``scripts/setup.sh``:
+the interfaces' generation is the build's long part, and repeating it here proved nothing more.)
 """
 
 from __future__ import annotations
@@ -36,16 +37,17 @@ def _build_environment(venv: Path, repo_root: Path) -> dict[str, str]:
 
 
 @pytest.mark.process
-@pytest.mark.slow
-@pytest.mark.timeout(900)
-def test_a_copy_of_the_packages_builds_and_runs_from_a_colcon_workspace(repo_root, tmp_path):
+@pytest.mark.timeout(600)
+def test_a_copy_of_rimd_sim_builds_and_runs_from_a_colcon_workspace(repo_root, tmp_path):
     venv = Path(sys.prefix)
     assert (venv / "bin" / "colcon").is_file(), "the project venv has colcon (requirements.txt)"
     workspace = tmp_path / "ws"
-    for package in ("rimd_msgs", "rimd_sim"):
-        shutil.copytree(repo_root / package, workspace / "src" / package, symlinks=True,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    shutil.copytree(repo_root / "rimd_sim", workspace / "src" / "rimd_sim", symlinks=True,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    msgs = repo_root / "ros_ws" / "install" / "rimd_msgs"
+    assert (msgs / "share" / "rimd_msgs" / "package.xml").is_file(), "the set-up built rimd_msgs (make setup)"
     env = _build_environment(venv, repo_root)
+    env.update(AMENT_PREFIX_PATH=f"{msgs}{os.pathsep}{venv}", CMAKE_PREFIX_PATH=f"{msgs}{os.pathsep}{venv}")
     build = subprocess.run(
         [str(venv / "bin" / "colcon"), "build", "--event-handlers", "console_direct+",
          "--cmake-args", f"-DCMAKE_PROJECT_INCLUDE={repo_root / 'cmake' / 'drop_missing_includes.cmake'}",

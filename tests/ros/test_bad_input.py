@@ -472,7 +472,8 @@ def test_simulator_refuses_bad_input_and_keeps_running(ros_processes, ros_execut
             return Time(sec=-1 - ns_back % 2**31, nanosec=0)
         if kind == "nanosec":
             return Time(sec=now // 10**9 + 1, nanosec=10**9 + ns_back % (2**32 - 10**9))
-        ns = now + 86_401 * 10**9 + ns_back
+        # Two days ahead of the last state received: beyond the one-day rule however far the rig has run since.
+        ns = now + 2 * 86_400 * 10**9 + ns_back
         return Time(sec=min(ns // 10**9, 2**31 - 1), nanosec=ns % 10**9)
 
     stamps = st.tuples(st.sampled_from(["passed", "negative", "nanosec", "ahead"]), st.integers(1, 10**12))

@@ -26,7 +26,7 @@ from rimd_sim.io.reader import open_recording
 
 pytestmark = pytest.mark.ros
 
-STOPS_PER_NODE = 6
+STOPS_PER_NODE = 4   # loading and running, each from the fixed seed and from the clock's
 #: The fixed seed of the first half of the stops; the second half's is drawn from the clock (or RIMD_STOP_SEED).
 FIXED_SEED = 20261124
 SEED = int(os.environ.get("RIMD_STOP_SEED", time.time_ns() % 1_000_000))
