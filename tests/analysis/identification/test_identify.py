@@ -215,9 +215,11 @@ def test_captures_pin_a_short_contact_within_half_a_percent(tmp_path):
     from rimd_sim.analysis.identification.identify import identify
 
     rig = SHORT_CONTACT
-    design = identification_steps(SimConfig().with_parameters(rig), steps=3, dwell=5.0, settle=2.0)
+    # Two steps of 4 s (the design's band A at that dwell): two impact velocities, some 45 captures. The captures'
+    # pulses are most of the fit's work; these pin k, c and the mass well within the 0.5 %.
+    design = identification_steps(SimConfig().with_parameters(rig), steps=2, dwell=4.0, settle=2.0)
     path = tmp_path / "captured.mcap"
-    written = write_core_recording(path, rig, Schedule(design.frequencies, dwell=5.0, capture=True, seed=4))
+    written = write_core_recording(path, rig, Schedule(design.frequencies, dwell=4.0, capture=True, seed=4))
     assert written.captures > 20
     result = identify(path, SimConfig(), {}, resamples=100)
     assert "captures" in result.data["pulse"]["source"]

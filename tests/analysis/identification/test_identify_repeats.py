@@ -10,6 +10,9 @@ iterations, never by a clock; no estimate is read from a set or a dict whose ord
 Hypotheses: the same recording identified twice in one process, the second time with one worker instead of
 several, gives equal estimates, standard errors (each kind), intervals, residuals, validation rows and verdict,
 compared as exact floats; and a second process gives the same printed numbers.
+
+The first identification (this process, several workers) is made once, by the module's ``first`` fixture: the
+second in this process and the one of the second process are each compared with it.
 """
 
 from __future__ import annotations
@@ -34,6 +37,12 @@ def recording(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.fixture(scope="module")
+def first(recording) -> str:
+    """The recording's first identification in this process, with the Jacobian's workers one per core."""
+    return _answer(recording)
+
+
 def _answer(path: Path) -> str:
     """Everything the identification reports, as exact text (``repr`` of every float)."""
     from rimd_sim.analysis.identification.identify import identify
@@ -53,10 +62,9 @@ def _answer(path: Path) -> str:
                              "kicks": ident.kicks, "initial": ident.initial}), sort_keys=True)
 
 
-def test_the_same_recording_identified_twice_gives_the_same_answer(recording, monkeypatch):
+def test_the_same_recording_identified_twice_gives_the_same_answer(recording, first, monkeypatch):
     from rimd_sim.analysis.identification import joint_fit
 
-    first = _answer(recording)
     monkeypatch.setattr(joint_fit.os, "cpu_count", lambda: 1)   # one worker for the Jacobian's forward runs
     second = _answer(recording)
     assert first == second
@@ -66,7 +74,7 @@ def test_the_same_recording_identified_twice_gives_the_same_answer(recording, mo
 
 
 @pytest.mark.process
-def test_another_process_gives_the_same_answer(recording):
+def test_another_process_gives_the_same_answer(recording, first):
     tests = Path(__file__).resolve().parents[2]
     code = ("import sys, importlib.util; from pathlib import Path; sys.path.insert(0, sys.argv[3]); "
             "spec = importlib.util.spec_from_file_location('repeats', sys.argv[2]); "
@@ -75,4 +83,4 @@ def test_another_process_gives_the_same_answer(recording):
     done = subprocess.run([sys.executable, "-c", code, str(recording), __file__, str(tests)], capture_output=True,
                           text=True, timeout=300, cwd=tests)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert done.stdout.strip().splitlines()[-1] == _answer(recording)
+    assert done.stdout.strip().splitlines()[-1] == first

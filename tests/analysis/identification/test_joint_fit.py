@@ -45,6 +45,12 @@ def prepared(tmp_path_factory):
     return local_stages(rec.load(path), SimConfig(), {})
 
 
+@pytest.fixture(scope="module")
+def truth_x(prepared) -> np.ndarray:
+    """The unknowns at the true parameters (:func:`_truth_x`), fitted once for the tests that start from them."""
+    return _truth_x(_fit(prepared), prepared)
+
+
 def _fit(prepared):
     from rimd_sim.analysis.identification.joint_fit import JointFit
 
@@ -79,9 +85,9 @@ def test_packing_round_trips(prepared):
                                                                             np.reshape(kicks, (-1, 2)), rtol=1e-12)
 
 
-def test_residuals_at_the_truth_are_the_data_noise(prepared):
+def test_residuals_at_the_truth_are_the_data_noise(prepared, truth_x):
     fit = _fit(prepared)
-    parts = fit.parts(_truth_x(fit, prepared))
+    parts = fit.parts(truth_x)
     for kind in ("displacement", "cart"):
         assert 0.6 < float(np.mean(parts[kind] ** 2)) < 1.4, (kind, float(np.mean(parts[kind] ** 2)))
     assert float(np.mean(parts["samples"] ** 2)) < 1.4
@@ -89,9 +95,9 @@ def test_residuals_at_the_truth_are_the_data_noise(prepared):
     assert float(np.mean(parts["onset"] ** 2)) < 2.0 and float(np.mean(parts["scale"] ** 2)) < 2.0
 
 
-def test_jacobian_equals_central_differences(prepared):
+def test_jacobian_equals_central_differences(prepared, truth_x):
     fit = _fit(prepared)
-    x = _truth_x(fit, prepared)
+    x = truth_x.copy()
     jac = fit.jacobian(x)
     for i in (fit.names.index("mass"), fit.names.index("contact.stiffness"), fit.n_par, fit.n_par + 3):
         h = 1e-5 * max(1.0, abs(x[i]))
@@ -122,9 +128,9 @@ def test_the_fit_converges_back_to_the_truth_from_5_percent_off(prepared):
         assert abs(err) <= 4 * se + (1e-9 if p == "gap" else 0.0), (p, err / (RIG[p] or 1.0), se)
 
 
-def test_cluster_bootstrap_agrees_with_the_jacobian_for_white_noise(prepared):
+def test_cluster_bootstrap_agrees_with_the_jacobian_for_white_noise(prepared, truth_x):
     fit = _fit(prepared)
-    x = _truth_x(fit, prepared)
+    x = truth_x.copy()
     runs = fit.run(x)
     r = fit.residuals(x, runs)
     jac = fit.jacobian(x, runs, r)
@@ -143,9 +149,9 @@ def _jacobian_se(fit, jac, r):
     return np.array([np.sqrt(cov[i, i]) * SCALES[p] for i, p in enumerate(fit.names)])
 
 
-def test_the_two_sided_jacobian_keeps_the_smooth_slope_across_a_jump(prepared):
+def test_the_two_sided_jacobian_keeps_the_smooth_slope_across_a_jump(prepared, truth_x):
     fit = _fit(prepared)
-    x = _truth_x(fit, prepared)
+    x = truth_x.copy()
     runs = fit.run(x)
     r = fit.residuals(x, runs)
     smooth = _jacobian_se(fit, fit.jacobian(x, runs, r), r)
