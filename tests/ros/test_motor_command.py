@@ -113,6 +113,7 @@ def test_in_lockstep_100_commands_a_second_apply_exactly_at_their_stamps(rimd_ri
 
     single, summaries = command_lines(log)
     assert single == [] and 1 <= len(summaries) < COUNT // 10, summaries
+    assert all("; 0 late," in line for line in summaries), summaries   # the rig waited for every command
 
 
 @pytest.mark.timeout(180)

@@ -105,9 +105,13 @@ class MotorCommander:
         self._flush()
 
     def ready(self) -> bool:
-        """Whether every command given so far is published (the reporter joins only then)."""
+        """Whether the writer has matched the rig's reader and every command given so far is published.
+
+        The reporter joins only then, so the graph is asked before the first command: a reader that appears later
+        (a recorder subscribing to every rig topic) cannot hold a command back, uncounted, while the run goes on.
+        """
         self._flush()
-        return not self._queue
+        return not self._queue and self._matched()
 
     def _matched(self) -> bool:
         """Whether the writer has matched the rig's reader: every reader the graph shows, the rig's among them.
