@@ -19,17 +19,18 @@ Hypotheses:
 from __future__ import annotations
 
 import random
-from dataclasses import dataclass, field
 from fractions import Fraction
 
 import pytest
 
 from harness.clock import FakeClock
+from harness.runtime_rig import Rig
+from harness.runtime_rig import make_rig as make_runtime_rig
 from rimd_sim.instruments.rig_simulator import RigSimulator
 from rimd_sim.io.cdr import CdrReader
 from rimd_sim.runtime.closed_loop import Command, run_closed_loop
 from rimd_sim.runtime.pacing import Go, Hold, Pacer
-from rimd_sim.runtime.simulator import SimulatorRuntime, encode_truth, load_settings, sample_stamp_ns
+from rimd_sim.runtime.simulator import encode_truth, sample_stamp_ns
 from rimd_sim.settings.lockstep import LockstepSettings
 
 MS = 1_000_000
@@ -95,32 +96,9 @@ def test_a_report_that_counts_commands_not_received_waits_for_them():
 
 # ---- the runtime -----------------------------------------------------------------------------------------------
 
-@dataclass
-class Rig:
-    """A runtime on a fake clock with what it sent and logged."""
-
-    rt: SimulatorRuntime
-    clock: FakeClock
-    sent: list[tuple[str, bytes]] = field(default_factory=list)
-    logs: list[tuple[str, str]] = field(default_factory=list)
-
-    def on(self, key: str) -> list[bytes]:
-        return [data for k, data in self.sent if k == key]
-
-    def run(self, passes: int) -> None:
-        for _ in range(passes):
-            assert not self.rt.step().stopped
-
-
 def make_rig(**values) -> Rig:
-    clock = FakeClock()
-    rig = Rig(None, clock)  # type: ignore[arg-type]
-    config, settings = load_settings({"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75, **values})
-    rig.rt = SimulatorRuntime(config, settings, send=lambda key, data: rig.sent.append((key, data)),
-                              log=lambda level, line: rig.logs.append((level, line)), clock=clock,
-                              wall_ns=lambda: 1_790_000_000 * S, match=lambda joining: None, warm_up=False)
-    rig.rt.start()
-    return rig
+    """A started runtime with the motor at 3.75 Hz from t = 0."""
+    return make_runtime_rig(**{"motor.initial_frequency": 3.75, "motor.initial_setpoint": 3.75, **values})
 
 
 def truth_bytes(config, commands: list[tuple[Fraction | None, float, float]], blocks: int) -> list[bytes]:

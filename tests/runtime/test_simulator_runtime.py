@@ -25,7 +25,6 @@ Hypotheses:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
@@ -33,7 +32,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from harness.clock import FakeClock
+from harness.runtime_rig import WALL0, make_rig
 from rimd_sim.errors import ConfigError
 from rimd_sim.io.cdr import CdrReader, block_span, header_stamp, read_block
 from rimd_sim.model.rig_model import RigModel
@@ -42,7 +41,6 @@ from rimd_sim.runtime.simulator import (
     ERROR,
     OK,
     WARN,
-    SimulatorRuntime,
     Step,
     load_settings,
 )
@@ -51,44 +49,8 @@ from rimd_sim.settings.config import SimConfig
 MS = 1_000_000
 S = 1_000_000_000
 #: The fake wall clock at the fake monotonic clock's start: not a whole millisecond, so that t0's rounding shows.
-WALL0 = 1_790_000_000 * S + 123_456_789
 RATES = {"cart/displacement": 2000, "rimd/displacement": 2000, "rimd/acceleration": 20000, "impact/force": 20000}
 CHANNELS = tuple(RATES)
-
-
-@dataclass
-class Rig:
-    """A runtime on a fake clock with what it sent, logged and asked to match."""
-
-    rt: SimulatorRuntime
-    clock: FakeClock
-    sent: list[tuple[str, bytes]] = field(default_factory=list)
-    logs: list[tuple[str, str]] = field(default_factory=list)
-    matches: list[dict] = field(default_factory=list)
-
-    def on(self, key: str) -> list[bytes]:
-        return [data for k, data in self.sent if k == key]
-
-    def said(self, text: str, level: str | None = None) -> bool:
-        return any(text in line and (level is None or lvl == level) for lvl, line in self.logs)
-
-    def run(self, passes: int) -> None:
-        """``passes`` passes of the pacing loop without waiting (as fast as possible)."""
-        for _ in range(passes):
-            assert not self.rt.step().stopped
-
-
-def make_rig(start: bool = True, **values) -> Rig:
-    clock = FakeClock()
-    rig = Rig(None, clock)  # type: ignore[arg-type]
-    config, settings = load_settings(values)
-    rig.rt = SimulatorRuntime(config, settings, send=lambda key, data: rig.sent.append((key, data)),
-                              log=lambda level, line: rig.logs.append((level, line)), clock=clock,
-                              wall_ns=lambda: WALL0 + round((clock.now - 100.0) * S), match=rig.matches.append,
-                              warm_up=False)
-    if start:
-        rig.rt.start()
-    return rig
 
 
 # ---- decoding, with rimd_sim.io.cdr ------------------------------------------------------------------------------
