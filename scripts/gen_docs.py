@@ -48,8 +48,8 @@ BEGIN = "<!-- BEGIN GENERATED: {name} -->"
 END = "<!-- END GENERATED: {name} -->"
 MARKER = re.compile(r"^<!-- (BEGIN|END) GENERATED: ([\w.-]+) -->[ \t]*$", re.MULTILINE)  # a marker is a line
 
-#: Page of each verb's options table.
-VERB_PAGES = {
+#: The guide that explains each verb (the CLI reference, docs/cli.md, links each verb's table to it).
+VERB_GUIDES = {
     "rig": "docs/recording.md",
     "node": "docs/rig.md",
     "rerun": "docs/rerun.md",
@@ -75,8 +75,10 @@ VERB_PAGES = {
     **{verb: "docs/rig.md" for verb in ("motor", "perturb", "inject", "pause", "resume", "reset", "clear-faults",
                                          "status")},
 }
-#: Where a verb that is not in VERB_PAGES yet gets its options table.
-DEFAULT_VERB_PAGE = "docs/analyses.md"
+#: The guide of a verb that is not in VERB_GUIDES.
+DEFAULT_VERB_GUIDE = "docs/analyses.md"
+#: The page that holds every verb's options table and the overview of the verbs.
+CLI_PAGE = "docs/cli.md"
 
 
 @dataclass(frozen=True)
@@ -269,9 +271,22 @@ def _option_default(action: argparse.Action) -> str:
     return _value(action.default)
 
 
+#: The end of a help text's first sentence: a period and a capital, not after "e.g." or "i.e.".
+SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)\.\s+(?=[A-Z`])")
+
+
+#: A help text's ", default X" or " (default X)", removed when X is the default column's value.
+DEFAULT_NOTE = re.compile(r" \(default:? ([^()\s]+)\)|, default ([^,;()\s]+)(?=[,;]|$)")
+
+
 def _option_help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+    """The option's help as ``--help`` expands it, cut to its first sentence: the table is an index of the
+    options, ``rimd VERB --help`` gives each one's whole text."""
     formatter = parser._get_formatter()  # expands %(default)s and friends like --help does
     text = formatter._expand_help(action) if action.help else ""
+    text = SENTENCE_END.split(text, maxsplit=1)[0]
+    shown = str(action.default)
+    text = DEFAULT_NOTE.sub(lambda m: "" if shown in (m.group(1), m.group(2)) else m.group(0), text)
     for group in parser._mutually_exclusive_groups:
         if action in group._group_actions:
             others = [o.option_strings[0] for o in group._group_actions if o is not action and o.option_strings]
@@ -286,9 +301,7 @@ def render_verb(name: str) -> str:
     rows = [[_option_name(a), _option_default(a), _option_help(parser, a)]
             for a in parser._actions
             if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)]
-    usage = " ".join(parser.format_usage().split())
-    usage = usage.removeprefix("usage: ")
-    return f"`{_cell(usage)}`\n\n" + _table(["option", "default", "help"], rows)
+    return _table(["option", "default", "help"], rows)
 
 
 def render_validation_table() -> str:
@@ -340,20 +353,20 @@ def render_verbs() -> str:
     rows = []
     by_module: dict[str, list[str]] = {}
     for verb in cli.VERBS:
-        page = VERB_PAGES.get(verb.name, DEFAULT_VERB_PAGE)
+        page = VERB_GUIDES.get(verb.name, DEFAULT_VERB_GUIDE)
         status = "" if verb.module else " (not implemented yet)"
         if verb.module and verb.module in by_module:   # verbs of one module (pause, resume...) share a row
             by_module[verb.module].append(verb.name)
             continue
         if verb.module:
             by_module[verb.module] = [verb.name]
-        rows.append([verb.module or verb.name, _cell(verb.summary + status), f"[{Path(page).stem}]({page})"])
+        rows.append([verb.module or verb.name, _cell(verb.summary + status), f"[{Path(page).stem}]({Path(page).name})"])
     for row in rows:
         names = by_module.get(row[0], [row[0]])
-        row[0] = " ".join(f"`rimd {n}`" for n in names)
+        row[0] = " ".join(f"[`rimd {n}`](#rimd-{n})" for n in names)
         if len(names) > 1:
             row[1] = _cell("the rig's services " + ", ".join(n.replace("-", " ") for n in names) + ", in one line each")
-    return _table(["command", "what it does", "documented in"], rows)
+    return _table(["command", "what it does", "guide"], rows)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -366,7 +379,7 @@ def sections() -> list[Section]:
     from rimd_sim import cli
 
     out = [
-        Section("verbs", "README.md", render_verbs, "The `rimd` command"),
+        Section("verbs", CLI_PAGE, render_verbs, "The verbs"),
         Section("parameters", "docs/configuration.md", render_parameters, "Parameters"),
         Section("channel-parameters", "docs/configuration.md", render_channel_parameters, "Channel parameters"),
         Section("recorder-parameters", "docs/recording.md", render_recorder_parameters, "Recorder parameters"),
@@ -380,8 +393,8 @@ def sections() -> list[Section]:
     for verb in cli.VERBS:
         if verb.module is None:
             continue
-        out.append(Section(f"verb-{verb.name}", VERB_PAGES.get(verb.name, DEFAULT_VERB_PAGE),
-                           lambda name=verb.name: render_verb(name), f"`rimd {verb.name}` options"))
+        out.append(Section(f"verb-{verb.name}", CLI_PAGE, lambda name=verb.name: render_verb(name),
+                           f"rimd {verb.name}"))
     return out
 
 
