@@ -279,9 +279,14 @@ def entry() -> int:
     Its cycle collector (:mod:`rimd_sim.runtime.collector`: young objects collected less often, what the process
     has built frozen at the end so that its exit does not walk it again), and its figures drawn in a worker
     process started before the computation (:mod:`rimd_sim.analysis.figures`). A program that calls :func:`main`
-    keeps its own collector and draws in its own process.
+    keeps its own collector and draws in its own process. An unknown piece in ``RIMD_PLAIN``
+    (:mod:`rimd_sim.runtime.plain`) is refused here, exit status 2.
     """
-    collector.configure()
+    try:
+        collector.configure()
+    except RimdError as error:
+        print(f"rimd: {error}", file=sys.stderr)
+        return EXIT_USAGE
     figures.use_own_process()
     try:
         return main()

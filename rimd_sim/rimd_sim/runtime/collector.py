@@ -2,8 +2,8 @@
 
 Such a process imports numba, matplotlib, rclpy or Rerun before it does anything: some 70,000 objects that live
 as long as it does (160,000 after one ``rimd sweep`` point with its figure). With CPython's defaults the
-collector walks them over and over while they are made and once more at exit (a full pass over 160,000 objects
-is 0.07 s here): measured on one ``rimd sweep`` point, a quarter of its wall time (docs/benchmarks.md, "Latency").
+collector walks them over and over while they are made and once more at exit, a large share of a short
+command's wall time (docs/benchmarks.md, "Latency", gives the figures).
 
 * A command (:func:`configure`, then :func:`keep_what_exists` at its end): its youngest generation is collected
   every :data:`YOUNG_THRESHOLD` allocations instead of 700 (cycles are still collected, later and in fewer
@@ -14,12 +14,15 @@ is 0.07 s here): measured on one ``rimd sweep`` point, a quarter of its wall tim
 
 Entry points call these (:func:`rimd_sim.cli.entry`, :mod:`rimd_sim.ros.nodes._entry`, ``rimd node``), and the
 test suite's session for itself (tests/conftest.py); a program that imports the package (a notebook, a user's
-test session) keeps its own collector.
+test session) keeps its own collector. With ``RIMD_PLAIN=collector`` (a benchmarking switch,
+:mod:`rimd_sim.runtime.plain`) these functions leave the collector alone: CPython's defaults.
 """
 
 from __future__ import annotations
 
 import gc
+
+from rimd_sim.runtime.plain import plain
 
 __all__ = ["CPYTHON_YOUNG_THRESHOLD", "YOUNG_THRESHOLD", "configure", "for_node", "keep_what_exists"]
 
@@ -32,6 +35,8 @@ CPYTHON_YOUNG_THRESHOLD = 700
 
 def configure(young: int = YOUNG_THRESHOLD) -> None:
     """Collect the youngest generation every ``young`` allocations (a command's setting); the older unchanged."""
+    if plain("collector"):
+        return
     _, middle, oldest = gc.get_threshold()
     gc.set_threshold(young, middle, oldest)
 
@@ -49,4 +54,5 @@ def keep_what_exists() -> None:
     walk the whole heap again). A cycle already garbage at this moment is not collected any more: call this
     after a start-up or at the end, not in a loop.
     """
-    gc.freeze()
+    if not plain("collector"):
+        gc.freeze()

@@ -4,7 +4,9 @@ CPython before 3.14 names a thread for itself only: the kernel sees every thread
 look at a busy rig (``top -H -p PID``, ``ps -L``, ``perf``, the benchmarks' per-thread CPU) cannot say whether
 the pacing loop, the recorder's writer or the DDS writes take the time. :func:`named_thread` makes a thread that
 sets its kernel name (``/proc/PID/task/TID/comm``, at most 15 bytes) as it starts; :data:`OS_NAMES` lists the
-names the rig's threads take, which ``benchmarks/bench_rig.py`` reports the composed rig's CPU by.
+names the rig's threads take, which ``benchmarks/bench_rig.py`` reports the composed rig's CPU by. With
+``RIMD_PLAIN=threads`` (a benchmarking switch, :mod:`rimd_sim.runtime.plain`) the threads are named for Python
+only.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ import sys
 import threading
 from collections.abc import Callable
 from functools import cache
+
+from rimd_sim.runtime.plain import plain
 
 __all__ = ["OS_NAMES", "named_thread", "set_os_name"]
 
@@ -54,6 +58,9 @@ def set_os_name(name: str) -> bool:
 
 def named_thread(target: Callable[[], object], name: str, *, daemon: bool = True) -> threading.Thread:
     """A thread (not started) named ``name`` for Python and, as it starts, for the kernel (:func:`set_os_name`)."""
+    if plain("threads"):
+        return threading.Thread(target=target, name=name, daemon=daemon)
+
     def run() -> None:
         set_os_name(name)
         target()

@@ -19,12 +19,17 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from rimd_sim.errors import InputError
 from rimd_sim.ros.nodes._stop import install_stop_handlers
 from rimd_sim.ros.nodes.registry import NODES, NodeEntry
 from rimd_sim.runtime import collector
 
 install_stop_handlers()
-collector.configure()   # the imports to come, as a command's (rimd_sim.runtime.collector); for_node() after them
+try:
+    collector.configure()   # the imports to come, as a command's (rimd_sim.runtime.collector); for_node() after them
+except InputError as _refused:   # RIMD_PLAIN names no piece (rimd_sim.runtime.plain): refused before the node loads
+    print(_refused, file=sys.stderr)
+    sys.exit(2)
 
 #: The Fast DDS profile of the nodes (a 0.2 s heartbeat of reliable writers; see the file). A profile the
 #: user chose through the variable wins.

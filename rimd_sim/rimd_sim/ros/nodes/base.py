@@ -53,6 +53,7 @@ from rclpy.signals import SignalHandlerOptions
 from rimd_sim.errors import InputError
 from rimd_sim.ros.nodes._stop import StopRequest, install_stop_handlers
 from rimd_sim.ros.nodes.registry import READY_DIR_ENV
+from rimd_sim.runtime.plain import plain
 from rimd_sim.settings.config import misapplied_section, misapplied_section_message
 from rimd_sim.settings.params import Param
 
@@ -64,7 +65,8 @@ __all__ = ["EXECUTOR_ENV", "READY_DIR_ENV", "RimdNode", "declare", "descriptor",
 SPIN_PERIOD_S = 0.1
 
 #: Environment variable choosing the nodes' executor: ``events`` (default) or ``single`` (rclpy's
-#: SingleThreadedExecutor, for comparison or should the events executor misbehave on some platform).
+#: SingleThreadedExecutor, for comparison or should the events executor misbehave on some platform). Unset, it
+#: is ``single`` with ``RIMD_PLAIN=executor`` (a benchmarking switch, :mod:`rimd_sim.runtime.plain`).
 EXECUTOR_ENV = "RIMD_EXECUTOR"
 EXECUTORS = ("events", "single")
 
@@ -164,10 +166,12 @@ def log_at(node: Node, level: str, line: str) -> None:
 def executor_kind() -> str:
     """The executor chosen by ``RIMD_EXECUTOR``: ``events`` or ``single``.
 
+    Unset, it is ``single`` when ``RIMD_PLAIN`` makes the executor plain, else ``events``.
+
     Raises:
-        InputError: ``RIMD_EXECUTOR`` names no known executor.
+        InputError: ``RIMD_EXECUTOR`` names no known executor, or ``RIMD_PLAIN`` no known piece.
     """
-    choice = os.environ.get(EXECUTOR_ENV, "events") or "events"
+    choice = os.environ.get(EXECUTOR_ENV) or ("single" if plain("executor") else "events")
     if choice not in EXECUTORS:
         raise InputError(f"{EXECUTOR_ENV}={choice!r} refused: must be one of {', '.join(EXECUTORS)}")
     return choice
@@ -178,7 +182,7 @@ def make_executor() -> Executor:
 
     rclpy's ``SingleThreadedExecutor`` builds a wait set in Python for every callback it runs (one message,
     one pass over every subscription, timer, service and guard condition of the node): at the rig's 600
-    messages per second that was half the CPU of the recorder and of the Rerun bridge
+    messages per second that costs the recorder and the Rerun bridge a large share of their CPU
     (``benchmarks/bench_rig.py``, docs/benchmarks.md). The events executor (``rclpy.experimental``, in
     C++ since Jazzy) is told by the middleware which entity is ready and calls the callback directly.
 
@@ -338,8 +342,8 @@ class RimdNode(Node):
 
         Every refusal names the parameter and its rule (:func:`refuse_unnamed`), and a refusal leaves the
         descriptors as they were: rclpy sets a dynamically typed parameter's descriptor type (every real number
-        here) to the type of the value before the value is checked, so ``describe_parameters`` reported ``gap``
-        as a string after ``gap := 'abc'`` was refused.
+        here) to the type of the value before the value is checked, so without this ``describe_parameters`` would
+        report ``gap`` as a string after ``gap := 'abc'`` is refused.
         """
         refusal = refuse_unnamed(self, parameter_list)
         if refusal is not None:

@@ -3,6 +3,10 @@
 Under the events executor each message costs a dispatch from C++ to Python on top of its take; a timer that
 takes everything waiting serves the rig's 600 messages a second in 50 wake-ups (docs/rig.md, "CPU: executor and
 message handling").
+
+With ``RIMD_PLAIN=polling`` (a benchmarking switch, :mod:`rimd_sim.runtime.plain`) :class:`PolledSubscriptions`
+makes ordinary subscriptions instead, whose callbacks the executor runs one message at a time, and takes the
+in-process hand-overs at its fixed shortest period.
 """
 
 from __future__ import annotations
@@ -13,10 +17,11 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from rclpy.event_handler import EventHandler, QoSSubscriptionEventType
+from rclpy.event_handler import EventHandler, QoSSubscriptionEventType, SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from rimd_sim.ros.nodes.base import RimdNode
+from rimd_sim.runtime.plain import plain
 
 __all__ = ["LocalSubscription", "PollPeriod", "PolledSubscriptions", "PollingNode"]
 
@@ -58,9 +63,9 @@ class LocalSubscription:
 class PollPeriod:
     """How long until the next poll: soon when messages come fast, later when they come slowly.
 
-    Each wake-up of a mostly idle thread costs far more than its work suggests (measured on the rig's 2-core
-    machine: the simulator's pass for one block costs 4.7 times as much CPU when it runs every 10 ms as back to
-    back); so a poll should find a worthwhile batch. The next period is the time in which ``aim`` messages come,
+    Each wake-up of a mostly idle thread costs far more than its work suggests (its caches are cold: the
+    simulator's pass for one block costs several times as much CPU every 10 ms as back to back, docs/benchmarks.md);
+    so a poll should find a worthwhile batch. The next period is the time in which ``aim`` messages come,
     within ``[shortest, longest]``, at the faster of the last period's rate and the rate averaged over about
     ``memory`` s: a rig at real time is taken every ``longest`` s, a fast one (lockstep, a replay at speed) every
     ``shortest`` s even across the short pauses of lockstep's holds, and a burst after a quiet spell brings the
@@ -136,18 +141,23 @@ class PolledSubscriptions:
     With ``longest`` the period follows the traffic (:class:`PollPeriod`): ``period`` when it is fast, up to
     ``longest`` when it is slow (the subscriptions' depth must then hold ``longest`` s of traffic). ``after``,
     when set, is called after each timer's poll (a lockstep consumer sends its last progress there).
+
+    ``RIMD_PLAIN=polling`` (:attr:`plain`): :meth:`create` makes an ordinary subscription, whose handler the
+    executor calls per message without the message info, and the timer, made by the first :meth:`attach`,
+    keeps ``period``.
     """
 
     def __init__(self, node: Node, period: float, *, longest: float | None = None, aim: int = 40) -> None:
         self._node = node
+        self.plain = plain("polling")
         self._subs: list[tuple[Any, Callable[[bytes, dict], None]]] = []
         self._lost: list[tuple[_LostStatus, Callable[[int], None]]] = []
         self._hidden: set[int] = set()
-        self.pace = PollPeriod(period, longest, aim)
+        self.pace = PollPeriod(period, None if self.plain else longest, aim)
         self.after: Callable[[], None] | None = None
         self._last = time.monotonic()
         self._period_ns = round(period * 1e9)
-        self.timer = node.create_timer(period, self._on_timer)
+        self.timer: Any = None if self.plain else node.create_timer(period, self._on_timer)
 
     def create(self, msg_type: type, topic: str, qos: Any, handler: Callable[[bytes, dict], None],
                lost: Callable[[int], None] | None = None) -> Any:
@@ -156,8 +166,19 @@ class PolledSubscriptions:
         ``lost(count)``: called with the number of messages the transport newly declared lost (DDS's sample-lost
         status: a reliable reader told that samples are gone), read at each :meth:`poll`.
         """
+        events = None
+        if self.plain and lost is not None:   # plain: the lost status as an executor event
+            count = lost
+
+            def on_lost(status: Any) -> None:
+                count(status.total_count_change)
+
+            events = SubscriptionEventCallbacks(message_lost=on_lost)
         sub = self._node.create_subscription(msg_type, topic, lambda data: handler(data, {}),  # type: ignore[arg-type]
-                                             qos, raw=True)  # raw=True hands bytes, not the annotated message
+                                             qos, raw=True,  # raw=True hands bytes, not the annotated message
+                                             event_callbacks=events)
+        if self.plain:
+            return sub
         self._hidden.add(id(sub))
         self._subs.append((sub, handler))
         if lost is not None:
@@ -167,6 +188,8 @@ class PolledSubscriptions:
     def attach(self, sub: LocalSubscription, handler: Callable[[bytes, dict], None]) -> LocalSubscription:
         """Poll an in-process topic like the raw subscriptions: its messages go to ``handler(data, info)``."""
         self._subs.append((sub, handler))
+        if self.timer is None:
+            self.timer = self._node.create_timer(self.pace.shortest, self._on_timer)
         return sub
 
     def visible(self, subscriptions: Iterable[Any]) -> list[Any]:
