@@ -252,7 +252,7 @@ def test_samples_before_counts_on_the_exact_grid():
 def test_the_truth_and_motor_encoders_give_what_rosbags_serializes(first, rate, stamp, size, seed, motor, cycle):
     from types import SimpleNamespace
 
-    from rimd_sim.runtime.simulator import TRUTH_ARRAY_FIELDS, encode_motor, encode_truth
+    from rimd_sim.io.cdr_write import TRUTH_ARRAY_FIELDS, encode_motor, encode_truth
 
     rng = np.random.default_rng(seed)
     rows = rng.normal(size=(len(TRUTH_ARRAY_FIELDS) + 1, size))

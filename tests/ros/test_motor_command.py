@@ -27,8 +27,9 @@ from rclpy.serialization import deserialize_message
 
 from rimd_msgs.msg import MotorState
 from rimd_sim.instruments.rig_simulator import RigSimulator
+from rimd_sim.io.cdr_write import encode_truth
 from rimd_sim.io.reader import open_recording
-from rimd_sim.runtime.simulator import encode_truth, sample_stamp_ns
+from rimd_sim.runtime.stamps import sample_stamp_ns
 
 pytestmark = pytest.mark.ros
 
@@ -53,7 +54,8 @@ def test_the_command_client_loads_only_rclpy_rimd_msgs_and_the_standard_library(
     theirs = sorted({m.split(".")[0] for m in extra} - set(sys.stdlib_module_names) - {"rimd_sim"})
     ours = sorted(m for m in extra if m.startswith("rimd_sim") and m not in {
         "rimd_sim", "rimd_sim.ros", "rimd_sim.ros.clients", "rimd_sim.ros.clients.motor",
-        "rimd_sim.ros.clients.progress", "rimd_sim.runtime", "rimd_sim.runtime.progress"})
+        "rimd_sim.ros.clients.progress", "rimd_sim.runtime", "rimd_sim.runtime.progress", "rimd_sim.io",
+        "rimd_sim.io.cdr_progress"})
     assert not theirs and not ours, (theirs, ours)
 
 

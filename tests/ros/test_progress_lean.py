@@ -4,9 +4,9 @@ Hypotheses:
 
 - importing it loads nothing but the standard library, beyond what rclpy and ``rimd_msgs`` load themselves (the
   rclpy modules a node imports anyway: ``rclpy.node``, ``rclpy.qos``, ``rclpy.duration``), and of the package only
-  ``rimd_sim``, ``rimd_sim.ros``, ``rimd_sim.ros.clients``, ``rimd_sim.runtime`` (package modules that import
-  nothing), its books ``rimd_sim.runtime.progress`` (the standard library's) and itself: no numba, numpy, scipy,
-  mcap, or the twin's core (docs/daq-client.md);
+  ``rimd_sim``, ``rimd_sim.ros``, ``rimd_sim.ros.clients``, ``rimd_sim.runtime``, ``rimd_sim.io`` (package modules
+  that import nothing), its books ``rimd_sim.runtime.progress`` and its encoder ``rimd_sim.io.cdr_progress`` (the
+  standard library's) and itself: no numba, numpy, scipy, mcap, or the twin's core (docs/daq-client.md);
 - its reports are the bytes the package's CDR writer (rimd_sim.io.cdr) gives for them, so what goes on the wire
   is the message's layout (tests/io/test_cdr_blocks.py checks them against rclpy's own serialization), a
   controller's two fields (``controls``, ``commands``) included.
@@ -24,7 +24,7 @@ import pytest
 
 #: What the reporter may load of the package: the package modules on the way, and itself.
 ALLOWED = {"rimd_sim", "rimd_sim.ros", "rimd_sim.ros.clients", "rimd_sim.ros.clients.progress", "rimd_sim.runtime",
-           "rimd_sim.runtime.progress"}
+           "rimd_sim.runtime.progress", "rimd_sim.io", "rimd_sim.io.cdr_progress"}
 
 LOADED = """
 import json, sys

@@ -28,9 +28,10 @@ from harness.runtime_rig import Rig
 from harness.runtime_rig import make_rig as make_runtime_rig
 from rimd_sim.instruments.rig_simulator import RigSimulator
 from rimd_sim.io.cdr import CdrReader
+from rimd_sim.io.cdr_write import encode_truth
 from rimd_sim.runtime.closed_loop import Command, run_closed_loop
 from rimd_sim.runtime.pacing import Go, Hold, Pacer
-from rimd_sim.runtime.simulator import encode_truth, sample_stamp_ns
+from rimd_sim.runtime.stamps import sample_stamp_ns
 from rimd_sim.settings.lockstep import LockstepSettings
 
 MS = 1_000_000

@@ -8,8 +8,12 @@ block messages, ``rimd_msgs/msg/SampleBlock`` and ``rimd_msgs/msg/RigState``, st
 of the two byte orders; :func:`_read_block_head` and :meth:`SampleBlockEncoder.configure` the one description of
 the leading fields. On them stand what the nodes need without deserialising: the stamp (:func:`header_stamp`,
 :func:`with_header_stamp`, for any message whose first field is a header), the span of a block
-(:func:`block_span`: loss counting at a few hundred nanoseconds a message), the block's arrays as NumPy views
+(:func:`block_span`: loss counting without reading the samples), the block's arrays as NumPy views
 (:func:`read_block`: the Rerun bridge), and the simulator's encoder (:class:`SampleBlockEncoder`).
+
+The rig's other messages are encoded in :mod:`rimd_sim.io.cdr_write`, with :class:`CdrWriter`; a consumer's
+progress report in :mod:`rimd_sim.io.cdr_progress`, with the standard library only, for the clients that load no
+NumPy.
 """
 
 from __future__ import annotations
@@ -317,8 +321,8 @@ def block_span(data: bytes) -> tuple[int, int]:
 def read_block(data: bytes, type_name: str = "rimd_msgs/msg/SampleBlock", arrays: int | None = None) -> BlockView:
     """Read a serialized SampleBlock or RigState up to its ``arrays`` first ``float64[]`` fields (default all).
 
-    About ten times cheaper than ``rclpy.serialization.deserialize_message`` for the Rerun bridge: no message
-    objects, no copy of the samples.
+    What the Rerun bridge reads its blocks with: unlike ``rclpy.serialization.deserialize_message``, it builds no
+    message object and copies no sample.
 
     Raises:
         ValueError: Bytes too short for what the layout says, or not CDR.

@@ -40,14 +40,15 @@ Clients in other languages publish the message themselves: it is documented fiel
 lockstep". :func:`listen_for_progress` is the publishers' side (the simulator, the replay).
 
 This module is what a user's DAQ node imports: it imports rclpy, ``rimd_msgs`` and the standard library only
-(and the ``rimd_sim``, ``rimd_sim.ros`` and ``rimd_sim.ros.clients`` package modules, which import nothing), so a
-consumer does not load the twin's numerical stack (numba, numpy, scipy, mcap...) to report its progress
-(tests/ros/test_progress_lean.py checks it). Its few lines of CDR are written with :mod:`struct`.
+(and, of the package, only modules that import nothing beyond the standard library: the ``rimd_sim``,
+``rimd_sim.ros``, ``rimd_sim.ros.clients``, ``rimd_sim.runtime`` and ``rimd_sim.io`` packages, the books
+:mod:`rimd_sim.runtime.progress` and the report's encoder :mod:`rimd_sim.io.cdr_progress`), so a consumer does not
+load the twin's numerical stack (numba, numpy, scipy, mcap...) to report its progress
+(tests/ros/test_progress_lean.py checks it).
 """
 
 from __future__ import annotations
 
-import struct
 import time
 import uuid
 from collections.abc import Callable, Sequence
@@ -58,6 +59,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rimd_msgs.msg import ConsumerProgress, RigSession
+from rimd_sim.io.cdr_progress import encode_progress
 from rimd_sim.runtime.progress import LedgerState, ProgressLedger, ReportOrder, stamp_ns
 
 __all__ = ["PROGRESS_QOS", "PROGRESS_TOPIC", "SESSION_TOPIC", "ProgressReporter", "listen_for_progress"]
@@ -81,72 +83,6 @@ PROGRESS_SUBSCRIPTION_QOS = (
 #: QoS of the session topic: transient local (the current run reaches a late joiner).
 SESSION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-#: CDR's encapsulation header of a little-endian message (what ROS 2 publishes).
-_CDR_LE = b"\0\x01\0\0"
-_U32 = struct.Struct("<I")
-_TIME = struct.Struct("<iI")   # builtin_interfaces/Time: int32 sec, uint32 nanosec (4-byte aligned, no padding)
-
-
-class _Cdr:
-    """The little-endian CDR of ConsumerProgress's field kinds, each aligned to its size from the body's start."""
-
-    def __init__(self) -> None:
-        self.parts: list[bytes] = []
-        self.pos = 0
-
-    def _put(self, data: bytes, align: int) -> None:
-        pad = -self.pos % align
-        if pad:
-            self.parts.append(b"\0" * pad)
-        self.parts.append(data)
-        self.pos += pad + len(data)
-
-    def u32(self, value: int) -> None:
-        self._put(_U32.pack(value), 4)
-
-    def string(self, text: str) -> None:
-        if "\0" in text:   # a ROS 2 string is a C string: every reader would cut it there
-            raise ValueError(f"a ROS 2 string cannot hold a NUL character: {text!r}")
-        raw = text.encode("utf-8") + b"\0"
-        self.u32(len(raw))
-        self._put(raw, 1)
-
-    def boolean(self, value: bool) -> None:
-        self._put(b"\1" if value else b"\0", 1)
-
-    def time(self, ns: int) -> None:
-        self._put(_TIME.pack(*divmod(ns, 1_000_000_000)), 4)
-
-    def message(self) -> bytes:
-        return _CDR_LE + b"".join(self.parts)
-
-
-def encode_progress(consumer: str, done_ns: int, instance: str, topics: dict[str, int] | None = None,
-                    leaving: bool = False, node: str = "", controls: bool = False, commands: int = 0) -> bytes:
-    """A serialized ``rimd_msgs/msg/ConsumerProgress`` (what ``serialize_message`` gives, tested), for a raw publish.
-
-    A consumer reports up to a few hundred times a second; rclpy's conversion of the message object (its arrays
-    of Time above all) cost the Rerun bridge half a millisecond a report.
-    """
-    per_topic = dict(topics) if topics else {}
-    names = sorted(per_topic)
-    w = _Cdr()
-    w.string(consumer)
-    w.time(min(per_topic.values()) if per_topic else done_ns)
-    w.u32(len(names))
-    for name in names:
-        w.string(name)
-    w.u32(len(names))
-    for name in names:
-        w.time(per_topic[name])
-    w.string(instance)
-    w.boolean(leaving)
-    w.string(node)
-    w.boolean(controls)
-    w.u32(commands)
-    return w.message()
 
 
 def listen_for_progress(node: Node, on_report: Callable[[ConsumerProgress], None],

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import importlib
 import re
-import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -46,6 +45,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_srvs.srv import Trigger
 
 from rimd_msgs.srv import GetReplayState, Seek, SetRate
+from rimd_sim.io.cdr import header_stamp
 from rimd_sim.runtime.playback_control import PlaybackControl, ReplayUnavailable
 from rimd_sim.runtime.replay import PlayerState
 from rimd_sim.runtime.threads import named_thread
@@ -88,7 +88,6 @@ DISCOVERY_PERIOD_S = 1.0
 PLAYBACK_POLL_S = 0.2
 TIME_PERIOD_S = 0.05
 CLOCK_TOPIC = "/clock"
-_TIME = struct.Struct("<iI")
 #: ROS parameter type constants <-> the sink's kinds, and the ParameterValue field of each.
 _KINDS = {ParameterType.PARAMETER_BOOL: "bool", ParameterType.PARAMETER_INTEGER: "integer",
           ParameterType.PARAMETER_DOUBLE: "double", ParameterType.PARAMETER_STRING: "string",
@@ -368,9 +367,8 @@ class FoxgloveRelay:
 
     def on_message(self, topic: str, data: bytes) -> None:
         """Forward one serialized message of ``topic`` (full name) as received."""
-        if topic == CLOCK_TOPIC and len(data) >= 12 and data[1] == 1:   # little-endian CDR
-            sec, nanosec = _TIME.unpack_from(data, 4)
-            self._clock_ns = sec * 1_000_000_000 + nanosec
+        if topic == CLOCK_TOPIC and (stamp := header_stamp(data)) is not None:   # Clock: a Time first
+            self._clock_ns = stamp
         self.forwarded += 1
         self.sink.log(topic, data, self.now_ns())
 

@@ -5,8 +5,8 @@ commands, the run's identity, diagnostics) and serializes every message; this no
 
 * declares the parameters (:class:`~rimd_sim.settings.config.SimConfig` and the node's own
   :class:`~rimd_sim.settings.config.SimulatorNodeSettings`, one declaration each) and builds the runtime;
-* creates one publisher per :func:`rimd_sim.runtime.simulator.outputs` entry and publishes the runtime's bytes
-  on it, from a pacing thread that runs :meth:`SimulatorRuntime.step` and waits as long as it says;
+* creates one publisher per :func:`rimd_sim.runtime.publishers.outputs` entry (:mod:`._sim_publishers`) and
+  publishes the runtime's bytes on it, from a pacing thread that runs :meth:`SimulatorRuntime.run`;
 * maps the services, parameter changes, ``/rig/progress`` reports and ``/rig/motor/command`` commands onto the
   runtime, and its answers onto the responses and ``/diagnostics``;
 * waits, bounded, for DDS to match the readers the ROS graph shows before the first block and when a lockstep
@@ -16,7 +16,6 @@ commands, the run's identity, diagnostics) and serializes every message; this no
 from __future__ import annotations
 
 import functools
-import importlib
 import sys
 import threading
 import time
@@ -25,11 +24,10 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import Executor
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
 from rimd_msgs.msg import ConsumerProgress, MotorCommand
@@ -37,11 +35,14 @@ from rimd_msgs.srv import InjectFault, Perturb, SetMotorFrequency
 from rimd_sim.errors import ConfigError
 from rimd_sim.ros.clients.motor import COMMAND_QOS
 from rimd_sim.ros.clients.progress import listen_for_progress
+from rimd_sim.ros.nodes._sim_publishers import diagnostic_array, feeding_send, message_class, offered, qos_profile
 from rimd_sim.ros.nodes._stop import StopRequest
 from rimd_sim.ros.nodes.base import RimdNode, spin_until_stopped
 from rimd_sim.ros.nodes.feed import InProcessFeed
 from rimd_sim.ros.nodes.outbox import Outbox
-from rimd_sim.runtime.simulator import Answer, Qos, SimulatorRuntime, load_settings, outputs
+from rimd_sim.runtime.progress import stamp_ns
+from rimd_sim.runtime.reader_matches import MATCH_TIMEOUT_LOCKSTEP_S, MATCH_TIMEOUT_S
+from rimd_sim.runtime.simulator import Answer, SimulatorRuntime, load_settings, outputs
 from rimd_sim.runtime.threads import named_thread
 from rimd_sim.settings.config import NODE_PARAMETERS, PARAMETERS
 
@@ -49,39 +50,6 @@ __all__ = ["SimulatorNode", "main"]
 
 NODE_NAME = "rimd_simulator"
 DEFAULT_NAMESPACE = "rig"
-#: Longest the rig waits for DDS to match the readers the graph already shows before its first block (s).
-MATCH_TIMEOUT_S = 2.0
-#: The same in lockstep (s), before the first block and whenever a consumer joins, where nothing may be lost
-#: however loaded the machine: a reader that misses the first block after its consumer joined holds the run until
-#: lockstep.timeout, with on_timeout wait for good (the slow start sends that block alone and waits for its
-#: confirmation). A join waits only for the readers that consumer has (named in its report, or those the graph
-#: shows for its node) and ends as soon as they are matched, a few milliseconds; the bound is reached only when
-#: they never match (a ``node`` the graph does not show, a reader whose QoS its writer cannot serve), and the
-#: warning then names them.
-MATCH_TIMEOUT_LOCKSTEP_S = 15.0
-
-
-def to_time(ns: int) -> Time:
-    """``builtin_interfaces/Time`` from integer nanoseconds."""
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def from_time(t: Time) -> int:
-    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
-    return int(t.sec) * 1_000_000_000 + int(t.nanosec)
-
-
-def qos_profile(qos: Qos) -> QoSProfile:
-    """The ROS QoS profile of the runtime's :class:`Qos` (keep last; the other policies ROS's defaults)."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=qos.depth,
-                      reliability=ReliabilityPolicy.RELIABLE if qos.reliable else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if qos.latched else DurabilityPolicy.VOLATILE)
-
-
-def message_class(type_name: str) -> type:
-    """The message class of ``package/msg/Name``."""
-    package, _, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{package}.msg"), name)
 
 
 class SimulatorNode(RimdNode):
@@ -111,12 +79,13 @@ class SimulatorNode(RimdNode):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=(
             PublisherEventCallbacks(matched=self._on_diagnostics_matched)))
         self._stop = threading.Event()
-        self._outbox: Outbox | None = None   # the composed rig's DDS writes (_feeding)
+        self._outbox: Outbox | None = None   # the composed rig's DDS writes (feeding_send)
         send: Callable[[str, bytes], None] = lambda key, data: self._pubs[key].publish(data)  # noqa: E731
         if feed is not None:
             for out in outs:
-                feed.offer(self._pubs[out.key].topic_name, out.type_name, self._offered(self._pubs[out.key]))
-            send = self._feeding(feed, {out.key for out in outs if out.qos.latched})
+                pub = self._pubs[out.key]
+                feed.offer(pub.topic_name, out.type_name, offered(self, pub, MATCH_TIMEOUT_S))
+            self._outbox, send = feeding_send(feed, self._pubs, {out.key for out in outs if out.qos.latched})
         self._lockstep = settings.lockstep.enabled   # read by the wait for matches
         self._rt = SimulatorRuntime(
             config, settings, send=send,
@@ -128,53 +97,20 @@ class SimulatorNode(RimdNode):
             listen_for_progress(self, self._on_progress, "progress")
         # Commands at any rate (docs/control.md); reliable, volatile, as the controllers' writer (COMMAND_QOS).
         self.create_subscription(MotorCommand, "motor/command", self._on_motor_command, COMMAND_QOS)
-        self.create_service(SetMotorFrequency, "set_motor_frequency", self._on_set_motor_frequency)
-        self.create_service(Perturb, "perturb", self._on_perturb)
-        for name, call in (("reset", self._rt.reset), ("pause", self._rt.pause), ("resume", self._rt.resume),
-                           ("clear_faults", self._rt.clear_faults)):
-            self.create_service(Trigger, name, functools.partial(self._on_trigger, call))
-        self.create_service(InjectFault, "inject_fault", self._on_inject_fault)
+        rt, at = self._rt, lambda r: (r.start_stamp.sec, r.start_stamp.nanosec)  # noqa: E731
+        for kind, name, call in (   # each service's request onto the runtime's method, answered by _serve
+                (SetMotorFrequency, "set_motor_frequency",
+                 lambda r: rt.set_motor_frequency(r.frequency_hz, r.ramp_rate, at(r))),
+                (Perturb, "perturb", lambda r: rt.perturb(r.velocity, at(r))),
+                (Trigger, "reset", lambda r: rt.reset()), (Trigger, "pause", lambda r: rt.pause()),
+                (Trigger, "resume", lambda r: rt.resume()), (Trigger, "clear_faults", lambda r: rt.clear_faults()),
+                (InjectFault, "inject_fault",
+                 lambda r: rt.inject_fault(r.channel, r.kind, r.start, r.duration, r.magnitude, after=r.after))):
+            self.create_service(kind, name, functools.partial(self._serve, call))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._publish_diagnostics)
         self._thread = named_thread(self._run, "rimd-pacing")
         self.get_logger().info(self._rt.describe())
-
-    def _feeding(self, feed: InProcessFeed, latched: set[str]) -> Callable[[str, bytes], None]:
-        """``send(key, data)`` of the composed rig: to the in-process consumers, then on DDS.
-
-        The DDS writes go through an :class:`~rimd_sim.ros.nodes.outbox.Outbox` (without the GIL, and on a thread
-        of their own when the rig runs fast), flushed after each pass of the pacing loop; a message of a volatile
-        topic that no other process reads is not written at all. ``latched``: the keys of the transient local
-        topics (always written: a later reader gets them from the history).
-        """
-        outbox = self._outbox = Outbox()
-        # (topic, writer, the publisher when its topic is volatile) per key
-        pubs = {key: (pub.topic_name, outbox.writer(pub), None if key in latched else pub)
-                for key, pub in self._pubs.items()}
-        hand_over = feed.send
-        post = outbox.send
-
-        def send(key: str, data: bytes) -> None:
-            topic, writer, volatile = pubs[key]
-            hand_over(topic, data)
-            # A volatile message reaches only the readers matched when it is written: with none (no process but
-            # this one takes the topic) the write would be for nobody, and the rig skips it. A reader matched
-            # just after the check is one matched just after the write, as DDS discovery makes it anyway.
-            if volatile is None or volatile.get_subscription_count():
-                post(writer, data)
-
-        return send
-
-    def _offered(self, pub: Any) -> list[QoSProfile]:
-        """The QoS this publisher offers, as the graph shows it to a recorder (what it stores with the channel)."""
-        deadline = time.monotonic() + MATCH_TIMEOUT_S
-        me = self.get_fully_qualified_name()
-        while True:
-            mine = [i.qos_profile for i in self.get_publishers_info_by_topic(pub.topic_name)
-                    if i.node_namespace.rstrip("/") + "/" + i.node_name == me]
-            if mine or time.monotonic() > deadline:
-                return mine or [pub.qos_profile]
-            time.sleep(0.005)
 
     @property
     def runtime(self) -> SimulatorRuntime:
@@ -207,24 +143,13 @@ class SimulatorNode(RimdNode):
         self.shutdown()
 
     def _run(self) -> None:
-        """The pacing thread: the runtime's steps, waiting as long as each says (a command or report wakes it)."""
-        rt = self._rt
-        outbox = self._outbox
-        try:
-            while not self._stop.is_set():
-                step = rt.step()
-                if outbox is not None:
-                    outbox.flush()   # raises a write that failed on its thread
-                if step.report:
-                    self._publish_diagnostics()
-                if step.stopped:
-                    return
-                if step.wait:
-                    rt.wake.wait(step.wait)
-                    rt.wake.clear()
+        """The pacing thread: the runtime's loop (:meth:`SimulatorRuntime.run`) until the stop."""
+        try:   # the outbox's flush raises a write that failed on its thread
+            self._rt.run(self._stop, after_pass=self._outbox.flush if self._outbox is not None else None,
+                         report=self._publish_diagnostics)
         except Exception as exc:  # noqa: BLE001 - at shutdown the context goes away while publishing: not an error
             if self.context.ok():   # a defect: say so where a user looks (log, /diagnostics ERROR), keep services
-                rt.fail(f"internal error {type(exc).__name__}: {exc}")
+                self._rt.fail(f"internal error {type(exc).__name__}: {exc}")
                 self.get_logger().error(f"simulation stopped by an internal error (please report it):\n"
                                         f"{traceback.format_exc()}")
 
@@ -254,11 +179,23 @@ class SimulatorNode(RimdNode):
             return
         if unmatched:
             self.get_logger().warning(f"publishing although readers of {', '.join(unmatched)} are not matched after "
-                                      f"{timeout:g} s: they may miss blocks")
+                                      f"{timeout:g} s: they may miss blocks; {self._graph_view(joining)}")
             return
         for node, topics in readers.items():
             self.get_logger().info(f"lockstep: the readers of {node} are matched after {time.monotonic() - start:.3f} "
                                    f"s: {', '.join(topics) if topics else 'none of the published topics'}")
+
+    def _graph_view(self, joining: Mapping[str, list[str] | None]) -> str:
+        """What this node's graph shows of the joining nodes: for the log line of a wait that timed out."""
+        nodes = sorted(ns.rstrip("/") + "/" + name for name, ns in self.get_node_names_and_namespaces())
+        seen = ", ".join(n for n in nodes if n in joining) or "none joining"
+        parts = [f"the graph shows {len(nodes)} nodes ({seen})"]
+        for p in self._pubs.values():
+            readers = [i.node_namespace.rstrip("/") + "/" + i.node_name
+                       for i in self.get_subscriptions_info_by_topic(p.topic_name)]
+            parts.append(f"{p.topic_name}: {p.get_subscription_count()} matched of {len(readers)} "
+                         f"({', '.join(sorted(readers))})")
+        return "; ".join(parts)
 
     def _unmatched(self, joining: Mapping[str, list[str] | None]) -> tuple[list[str], dict[str, list[str]]]:
         """What is not matched yet, and per joining node the published topics whose readers are waited for.
@@ -286,12 +223,18 @@ class SimulatorNode(RimdNode):
         return out, readers
 
     def _reads(self, node: str) -> list[str] | None:
-        """The topics the graph shows ``node`` (``/ns/name``) subscribing to; None when it does not show the node."""
-        namespace, _, name = node.rpartition("/")
-        try:
-            return [topic for topic, _ in self.get_subscriber_names_and_types_by_node(name, namespace or "/")]
-        except Exception:  # noqa: BLE001 - rclpy's NodeNameNonExistentError (not exported), or a name it refuses
+        """The published topics the graph shows ``node`` (``/ns/name``) subscribing to; None when it does not show it.
+
+        Read from each published topic's endpoints rather than by node name: a consumer restarted under the name of
+        one that was killed shares that name with the dead node until its lease expires, and a lookup by name
+        answers for one of the two only.
+        """
+        shown = {ns.rstrip("/") + "/" + name for name, ns in self.get_node_names_and_namespaces()}
+        if node not in shown:
             return None
+        return [topic for topic in (p.topic_name for p in self._pubs.values())
+                if any(i.node_namespace.rstrip("/") + "/" + i.node_name == node
+                       for i in self.get_subscriptions_info_by_topic(topic))]
 
     def _log_line(self, level: str, line: str) -> None:
         """The runtime's log: ``debug`` (each motor command from the topic) on its own call site, the rest as usual."""
@@ -301,8 +244,8 @@ class SimulatorNode(RimdNode):
             self.log(level, line)
 
     def _on_progress(self, msg: ConsumerProgress) -> None:
-        self._rt.progress(msg.consumer, from_time(msg.done_through), instance=msg.instance, topics=list(msg.topics),
-                          topics_done_ns=[from_time(d) for d in msg.topics_done_through], leaving=msg.leaving,
+        self._rt.progress(msg.consumer, stamp_ns(msg.done_through), instance=msg.instance, topics=list(msg.topics),
+                          topics_done_ns=[stamp_ns(d) for d in msg.topics_done_through], leaving=msg.leaving,
                           node=msg.node, controls=msg.controls, commands=msg.commands)
 
     def _on_motor_command(self, msg: MotorCommand) -> None:
@@ -319,41 +262,24 @@ class SimulatorNode(RimdNode):
 
     def _publish_diagnostics(self) -> None:
         subscribers = {p.topic_name: p.get_subscription_count() for p in self._pubs.values()}
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [DiagnosticStatus(level=bytes([s.level]), name=s.name, message=s.message,
-                                       hardware_id=s.hardware_id,
-                                       values=[KeyValue(key=k, value=v) for k, v in s.values.items()])
-                      for s in self._rt.diagnostics(subscribers)]
-        self._pub_diag.publish(arr)
+        self._pub_diag.publish(diagnostic_array(self._rt.diagnostics(subscribers), self.get_clock().now().to_msg()))
 
     # ---- services and parameters -------------------------------------------------------------------
 
-    def _on_trigger(self, call: Callable[[], Answer], request: Any, response: Any) -> Any:
-        """A Trigger service (reset, pause, resume, clear_faults): the runtime's answer."""
-        return self._answer(call(), response)
-
     @staticmethod
-    def _answer(answer: Answer, response: Any) -> Any:
-        """Fill ``response`` (success, message, effective_stamp, frequency_hz where it has them) from ``answer``."""
+    def _serve(call: Callable[[Any], Answer], request: Any, response: Any) -> Any:
+        """Answer a service: ``response`` filled from the runtime's :class:`Answer` to ``request``, ``call(request)``.
+
+        Its success and message, and its effective_stamp and frequency_hz where the service's response has them.
+        """
+        answer = call(request)
         response.success, response.message = answer.success, answer.message
         if answer.stamp_ns is not None:
-            response.effective_stamp = to_time(answer.stamp_ns)
+            sec, nanosec = divmod(answer.stamp_ns, 1_000_000_000)
+            response.effective_stamp = Time(sec=sec, nanosec=nanosec)
         if answer.frequency_hz is not None:
             response.frequency_hz = answer.frequency_hz
         return response
-
-    def _on_set_motor_frequency(self, request: Any, response: Any) -> Any:
-        stamp = (request.start_stamp.sec, request.start_stamp.nanosec)
-        return self._answer(self._rt.set_motor_frequency(request.frequency_hz, request.ramp_rate, stamp), response)
-
-    def _on_perturb(self, request: Any, response: Any) -> Any:
-        stamp = (request.start_stamp.sec, request.start_stamp.nanosec)
-        return self._answer(self._rt.perturb(request.velocity, stamp), response)
-
-    def _on_inject_fault(self, request: Any, response: Any) -> Any:
-        return self._answer(self._rt.inject_fault(request.channel, request.kind, request.start, request.duration,
-                                                  request.magnitude, after=request.after), response)
 
     def _on_set_parameters(self, params: list) -> SetParametersResult:
         reason = self._rt.set_parameters([(p.name, p.value) for p in params])
