@@ -1,7 +1,8 @@
 """``rimd replay REC``: replay a recording on the rig topics, alone or driven from Foxglove's timeline.
 
-A thin verb over :func:`rimd_sim.ros.bringup.plan_replay` (the replay node ``rimd_replay``; with ``--foxglove`` the
-bridge serving Foxglove, pointed at the replay) and :class:`rimd_sim.ros.bringup.Rig` (start, watch, stop).
+A thin verb over :func:`rimd_sim.ros.bringup.plan.plan_replay` (the replay node ``rimd_replay``; with
+``--foxglove`` the bridge serving Foxglove, pointed at the replay) and :class:`rimd_sim.ros.bringup.processes.Rig`
+(start, watch, stop).
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ def main(args: argparse.Namespace) -> int:
     """Start the replay (and the bridge), wait until it ends or Ctrl-C; return non-zero if a node failed."""
     from rimd_sim.cli import CommandError
     from rimd_sim.errors import ConfigError
-    from rimd_sim.ros.bringup import Rig, plan_replay
+    from rimd_sim.ros.bringup.plan import plan_replay
+    from rimd_sim.ros.bringup.processes import Rig
 
     if args.port is not None and not args.foxglove:
         raise CommandError("--port is for --foxglove (the Foxglove server's port)")

@@ -130,7 +130,8 @@ def simulator_settings(settings: list[tuple[str, Any, str]], config: Path | None
 def main(args: argparse.Namespace) -> int:
     """Start the rig's nodes and wait; return non-zero if a node failed."""
     from rimd_sim.cli import CommandError
-    from rimd_sim.ros.bringup import Rig, plan_rig
+    from rimd_sim.ros.bringup.plan import plan_rig
+    from rimd_sim.ros.bringup.processes import Rig
 
     if args.consumer and not args.lockstep:
         raise CommandError("--consumer is for --lockstep (the names the lockstep rig waits for)")

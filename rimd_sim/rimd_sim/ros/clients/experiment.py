@@ -218,7 +218,7 @@ class ExperimentRecorder:
         proc = self.proc
         if proc is None:
             return None
-        from rimd_sim.ros.bringup import stop_process
+        from rimd_sim.ros.bringup.processes import stop_process
 
         return stop_process(proc, ((signal.SIGINT, 20.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)))
 

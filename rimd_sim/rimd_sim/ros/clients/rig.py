@@ -7,7 +7,7 @@ answer, both within one timeout (the client's, or the call's own ``timeout``), a
 domain. A ``check`` given to the client runs at every turn of its waits (the pytest plugin's raises at once when
 a process of the rig has exited, instead of waiting out the timeout). The one-shot verbs (``rimd motor``,
 ``rimd perturb``, ``rimd inject``, ``rimd pause``...) and the pytest plugin's
-:class:`rimd_sim.ros.testing.RigHandle` stand on it.
+:class:`rimd_sim.ros.rig_handle.RigHandle` stand on it.
 """
 
 from __future__ import annotations

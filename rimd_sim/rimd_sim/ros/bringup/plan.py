@@ -1,35 +1,22 @@
-"""Bringing up the rig from a configuration, like a launch file: behind ``rimd rig``, ``rimd replay``, the plugin.
+"""Planning the rig: what ``rimd rig`` and ``rimd replay`` start, read and checked from a configuration.
 
-:func:`plan_rig` reads and checks a configuration and decides what to start: the recorder, the Rerun bridge
-(Rerun and/or Foxglove) and the simulator, each a separate process run with ``--ros-args --params-file
-CONFIG`` (and an overrides file when parameters are given). Nothing starts when the configuration is refused.
-:class:`Rig` starts the plan's processes (consumers first, the simulator last), makes sure the consumers see
-sample 0, watches them, and stops them in reverse order (simulator first, recorder last, so the recording gets
-everything), each with SIGINT, then SIGTERM, then SIGKILL after bounded waits.
+:func:`plan_rig` reads a parameter file, checks every node's section and decides the processes: the recorder, the
+Rerun bridge (Rerun and/or Foxglove) and the simulator, each run with ``--ros-args --params-file CONFIG`` (and an
+overrides file when parameters are given). :func:`plan_replay` plans a replay of a recording: the replay node and,
+to drive it from Foxglove's timeline, the bridge serving Foxglove only, pointed at it (``foxglove.playback_node``).
 
-Two ways to make the consumers see sample 0:
-
-* open loop (default): the simulator starts paused and is resumed once every consumer subscribes to every rig
-  topic (and the simulator's first resume waits until DDS has matched them);
-* lockstep (``lockstep=True``): the simulator waits for its consumers by itself (``lockstep.consumers``: the
-  recorder and the bridge under their node names, plus the names given), and never runs ahead of the slowest
-  (docs/rig.md, "Pacing: lockstep").
-
-:func:`plan_replay` plans a replay of a recording the same way (``rimd replay``): the replay node and, to drive it
-from Foxglove's timeline, the bridge serving Foxglove only, pointed at it (``foxglove.playback_node``).
+Planning starts no process and imports no rclpy: a configuration that is refused starts nothing. The one file it
+writes is the overrides file, when parameters are given. :class:`rimd_sim.ros.bringup.processes.Rig` starts a plan.
 """
 
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
 import sys
-import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import yaml
 
@@ -45,11 +32,7 @@ from rimd_sim.settings.config import (
 )
 from rimd_sim.settings.yaml_file import read_yaml, resolve_config
 
-__all__ = ["PlannedNode", "Rig", "RigPlan", "StopSignals", "plan_replay", "plan_rig"]
-
-#: Topics every open-loop consumer subscribes to before the simulator is resumed.
-RIG_TOPICS = ("/rig/cart/displacement", "/rig/rimd/displacement", "/rig/rimd/acceleration", "/rig/impact/force",
-              "/rig/impact/events", "/rig/motor/state", "/rig/truth")
+__all__ = ["COMPOSED", "REPLAY_NODE", "PlannedNode", "RigPlan", "composed_process", "plan_replay", "plan_rig"]
 
 
 @dataclass(frozen=True)
@@ -77,7 +60,10 @@ class PlannedNode:
 
 @dataclass(frozen=True)
 class RigPlan:
-    """What :class:`Rig` starts, decided from a configuration (see :func:`plan_rig`; a replay has none)."""
+    """What :class:`~rimd_sim.ros.bringup.processes.Rig` starts, decided by :func:`plan_rig` or :func:`plan_replay`.
+
+    ``config_path`` and ``config`` are None for a replay, which reads no parameter file.
+    """
 
     config_path: Path | None
     config: SimConfig | None
@@ -122,8 +108,6 @@ def composed_process(nodes: Sequence[PlannedNode]) -> PlannedNode:
     the process); the parameter files are the simulator's (the same for every node). The simulator does not start
     paused: its consumers are fed in the process from sample 0.
     """
-    from rimd_sim.ros.nodes.registry import by_name
-
     names = {n.name for n in nodes}
     args = ["--record", str("rimd_recorder" in names).lower(), "--bridge", str("rimd_rerun" in names).lower()]
     ros_args: list[str] = []
@@ -146,8 +130,8 @@ _NODES = tuple((n.executable, n.name, n.consumer, n.namespace) for n in rig_node
 def _section(config_path: Path, doc: Any, name: str) -> dict | None:
     """The flat parameters of node ``name`` in the file (document ``doc``), or None when it has no section for it.
 
-    Only a missing section means "none": a section that is not a mapping with ``ros__parameters`` is refused
-    (it used to be taken for a missing one, and the node ran with its defaults).
+    Only a missing section means "none". A section that is not a mapping with ``ros__parameters`` is refused,
+    so that a mistyped section stops the bring-up instead of leaving the node on its defaults.
     """
     if not isinstance(doc, Mapping) or all(doc.get(key) is None for key in ("/**", f"/**/{name}", name, f"/{name}")):
         return None
@@ -350,228 +334,3 @@ def _bridge_checked(config_path: Path, section: dict, rerun: bool, foxglove: boo
     except (SinkError, FoxgloveError) as exc:
         raise InputError(f"{config_path}, section rimd_rerun: {exc}") from None
     return websocket_url(host, port) if port else "the ws:// address the bridge logs (foxglove.port 0: a free port)"
-
-
-class StopSignals:
-    """SIGINT and SIGTERM, within its ``with`` block, set :attr:`requested` instead of stopping this process.
-
-    A verb that runs a rig then stops it cleanly (its recording closed) whichever of the two arrives.
-    """
-
-    def __init__(self) -> None:
-        self.requested = False
-        self._previous: dict[int, Any] = {}
-
-    def _on_signal(self, signum: int, frame: Any) -> None:
-        self.requested = True
-
-    def __enter__(self) -> StopSignals:
-        """Take SIGINT and SIGTERM."""
-        self._previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        """Give the signals back to their previous handlers."""
-        for s, handler in self._previous.items():
-            signal.signal(s, handler)
-
-
-@dataclass
-class Rig:
-    """The processes of a :class:`RigPlan`: start, watch, stop. A context manager; :meth:`stop` is idempotent.
-
-    Args:
-        plan: What to start.
-        env: The processes' environment (default: this process's).
-        output: Where the processes write (default: this process's stdout/stderr); a file per node when a
-            directory is given (``log_dir``).
-        log_dir: Write each node's output to ``log_dir/<node>.log``.
-    """
-
-    plan: RigPlan
-    env: Mapping[str, str] | None = None
-    log_dir: Path | None = None
-    processes: dict[str, subprocess.Popen] = field(default_factory=dict)
-    _logs: list[TextIO] = field(default_factory=list)
-
-    def __enter__(self) -> Rig:
-        """Start the rig."""
-        self.start()
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        """Stop the rig."""
-        self.stop()
-
-    def start(self) -> None:
-        """Start every process (consumers first, the simulator last; or the composed rig's one)."""
-        for node in self.plan.processes:
-            out: Any = None
-            if self.log_dir is not None:
-                self.log_dir.mkdir(parents=True, exist_ok=True)
-                out = open(self.log_dir / f"{node.name}.log", "w")   # closed in stop()
-                self._logs.append(out)
-            self.processes[node.name] = subprocess.Popen(
-                node.command(), start_new_session=True, env=dict(self.env) if self.env is not None else None,
-                stdout=out, stderr=subprocess.STDOUT if out is not None else None, stdin=subprocess.DEVNULL)
-
-    def resume_when_connected(self, timeout: float = 20.0) -> bool:
-        """Open loop: once every consumer subscribes to every rig topic, resume the simulator.
-
-        Returns True when they all connected in time; otherwise the simulator is resumed all the same (the
-        consumers may miss the first blocks) and False comes back. Nothing to do in lockstep, or without
-        consumers (True).
-        """
-        consumers = tuple(n.name for n in self.plan.processes if n.consumer)   # none composed: fed in the process
-        if self.plan.lockstep_consumers or not consumers:
-            return True
-        domain = int(self.env["ROS_DOMAIN_ID"]) if self.env and self.env.get("ROS_DOMAIN_ID") else None
-        if _resume_when_connected(consumers, self.processes, timeout, domain):
-            return True
-        if self.failed() is None:
-            _resume_when_connected((), self.processes, 10.0, domain)
-        return False
-
-    def failed(self) -> tuple[str, int] | None:
-        """A process that has exited, as (name, status), or None."""
-        gone = self.exited()
-        return gone[0] if gone else None
-
-    def exited(self) -> list[tuple[str, int]]:
-        """Every process that has exited, as (name, status), in start order (a status < 0: killed by that signal)."""
-        return [(name, proc.returncode) for name, proc in self.processes.items() if proc.poll() is not None]
-
-    def watch(self, stop: StopSignals, duration: float = 0.0, ends_itself: str | None = None) -> tuple[str, int] | None:
-        """Wait until ``stop`` is requested, ``duration`` s have passed (0: no limit) or a process exits.
-
-        Returns the process that exited, as (name, status), unless it is ``ends_itself`` with status 0 (a replay
-        that reached its end); None otherwise.
-        """
-        deadline = time.monotonic() + duration if duration > 0 else None
-        while not stop.requested and (deadline is None or time.monotonic() < deadline):
-            failed = self.failed()
-            if failed is not None:
-                return None if failed == (ends_itself, 0) else failed
-            time.sleep(0.1)
-        return None
-
-    def run(self, verb: str, announce: Callable[[], None], *, duration: float = 0.0,
-            ends_itself: str | None = None) -> int:
-        """Start, ``announce()``, :meth:`watch` within :class:`StopSignals`, then stop: the status of ``rimd VERB``.
-
-        1 when a process exited by itself (said on stderr as ``rimd VERB: NAME exited with status N``) or
-        :meth:`stop` found an error; 0 otherwise. The rig is stopped whatever happens.
-        """
-        status = 0
-        with StopSignals() as stop:
-            try:
-                self.start()
-                announce()
-                failed = self.watch(stop, duration=duration, ends_itself=ends_itself)
-                if failed is not None:
-                    print(f"rimd {verb}: {failed[0]} exited with status {failed[1]}", file=sys.stderr)
-                    status = 1
-            finally:
-                status = self.stop() or status
-        return status
-
-    def stop(self) -> int:
-        """Stop every process in reverse order; 0, or 1 when a node exited with an error."""
-        status = 0
-        for name, proc in reversed(list(self.processes.items())):
-            code = _stop(proc, name)
-            if code not in (0, None) and code != -signal.SIGINT:
-                status = 1
-        for log in self._logs:
-            log.close()
-        self._logs.clear()
-        if self.plan.overrides_path is not None:
-            self.plan.overrides_path.unlink(missing_ok=True)
-        return status
-
-
-def stop_process(proc: subprocess.Popen, waits: Sequence[tuple[int, float]] = (
-        (signal.SIGINT, 10.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)), *,
-        send: Callable[[int], None] | None = None, on_timeout: Callable[[int], None] | None = None) -> int | None:
-    """Send ``proc`` each signal of ``waits`` in turn and wait its bounded time (s), until it has exited.
-
-    Args:
-        proc: The child process.
-        waits: (signal, seconds) in order; by default SIGINT (a node finishes its work), SIGTERM, SIGKILL.
-        send: How a signal is sent (default ``proc.send_signal``; ``os.killpg`` for a process group); the
-            process gone meanwhile ends the sequence.
-        on_timeout: Called with the signal that did not stop it in its time.
-
-    Returns:
-        Its exit status (None if it outlived even the last signal's wait).
-    """
-    for sig, wait in waits:
-        if proc.poll() is not None:
-            break
-        try:
-            (send or proc.send_signal)(sig)
-        except ProcessLookupError:
-            break
-        try:
-            proc.wait(wait)
-        except subprocess.TimeoutExpired:
-            if on_timeout is not None:
-                on_timeout(sig)
-    return proc.returncode
-
-
-def _stop(proc: subprocess.Popen, name: str) -> int | None:
-    def say(sig: int) -> None:
-        print(f"rimd rig: {name} did not stop on {signal.Signals(sig).name}", file=sys.stderr)
-
-    return stop_process(proc, send=lambda sig: os.killpg(proc.pid, sig), on_timeout=say)
-
-
-def _subscribed(node: Any, topic: str, consumers: tuple[str, ...]) -> bool:
-    names = {info.node_name for info in node.get_subscriptions_info_by_topic(topic)}
-    return all(name in names for name in consumers)
-
-
-def _resume_when_connected(consumers: tuple[str, ...], procs: Mapping[str, subprocess.Popen],
-                           timeout: float = 20.0, domain_id: int | None = None) -> bool:
-    """Wait until each consumer node subscribes to every rig topic, then call /rig/resume. True when resumed.
-
-    Subscribed in the graph is not yet matched: a volatile topic reaches only the readers its writer has matched,
-    and the simulator's own view of the graph may lag this process's under load (the recorder then missed the
-    first blocks). So the resume also waits until the simulator's /diagnostics say that each rig topic's
-    publisher has matched as many subscriptions as the graph shows here.
-
-    ``domain_id``: the rig's ROS domain (default: this process's ``ROS_DOMAIN_ID``).
-    """
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.signals import SignalHandlerOptions
-    from std_srvs.srv import Trigger
-
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-    try:
-        node = rclpy.create_node("rimd_rig", context=context, start_parameter_services=False)
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        matched: dict[str, int] = {}   # topic -> subscriptions its publisher has matched (the simulator says)
-
-        def on_diagnostics(msg: DiagnosticArray) -> None:
-            for status in msg.status:
-                if "rimd_simulator" in status.name:
-                    matched.update({kv.key[:-len(" subscribers")]: int(kv.value) for kv in status.values
-                                    if kv.key.endswith(" subscribers")})
-
-        node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
-        deadline = time.monotonic() + timeout
-        client = node.create_client(Trigger, "/rig/resume")
-        while time.monotonic() < deadline and all(p.poll() is None for p in procs.values()):
-            if (all(_subscribed(node, t, consumers) for t in RIG_TOPICS) and client.service_is_ready()
-                    and (not consumers or all(matched.get(t, -1) >= node.count_subscribers(t) for t in RIG_TOPICS))):
-                future = client.call_async(Trigger.Request())
-                executor.spin_until_future_complete(future, timeout_sec=5.0)
-                return bool(future.done() and future.result().success)
-            executor.spin_once(timeout_sec=0.05)
-        return False
-    finally:
-        context.try_shutdown()
