@@ -4,24 +4,24 @@ Prints, in one run (ratios are measured within the run; the machine is shared, s
 the load average is printed with each figure):
 
 1. The steps, on an S x S Peterka map (default 60 x 60, 3 starts per cell), local pool on all cores:
-   a. before: one ``RigModel`` per trajectory through ``steady_orbit``, fixed 60 + 36 cycles
-      (as before the ensemble kernel);
+   a. per trajectory: one ``RigModel`` per trajectory through ``steady_orbit``, fixed 60 + 36 cycles
+      (no ensemble kernel);
    b. batching: the ensemble kernel (every trajectory of a gap row in one compiled call), same fixed cycles;
-   c. early stop: the ensemble kernel stopping each trajectory when its motion is known (the former ``window``
-      stop), cap 96 cycles;
-   d. early stop with the cap at twice the former cycles (120 + 72), the former ``window`` stop;
-   e. the default now: the same cap, the ``contraction`` stop (docs/analyses.md, Maps at scale).
+   c. early stop: the ensemble kernel stopping each trajectory when its motion is known (the ``window`` stop),
+      cap 96 cycles;
+   d. early stop with the cap at 192 cycles (120 + 72), the ``window`` stop;
+   e. the default: the same cap, the ``contraction`` stop (docs/analyses.md, Maps at scale).
    Speed-up of each step against the one before, and of d and e against a.
-2. The default 31 x 61 map: early stop (d) against the fixed-length run with twice the former cycles: agreement
+2. The default 31 x 61 map: early stop (d) against the fixed-length run of 192 cycles: agreement
    per start and every differing cell, with a 10x longer run's class.
 3. 200 x 200 with the default (the ``contraction`` stop, target <= 30 s on 2 workers) and, in the same run, with
-   the former ``window`` stop (the ratio); then an N x N map (default 400) to project 1000 x 1000 (measured there
+   the ``window`` stop (the ratio); then an N x N map (default 400) to project 1000 x 1000 (measured there
    if --big 1000).
 4. Scaling: the S x S map through a real Dask scheduler with 1 and then 2 ``dask worker`` processes (one thread
    each) on loopback: efficiency t1 / (2 t2) (target >= 90 %); the time per cell-cycle against one
    trajectory's own speed in the core.
 6. Agreement with a reference ten times as long: on an R x R map (default 100, ``--reference-size``), the class
-   from rest of the default map (``contraction``) and of the former ``window`` stop against ``rest_classes``: every
+   from rest of the default map (``contraction``) and of the ``window`` stop against ``rest_classes``: every
    trajectory from rest run 1920 cycles (ten times the cap, no early stop), its last 72 classified (target
    >= 99.5 % of the cells); the cells each gets wrong where the other is right; the time of both maps (ratio).
 7. How reproducible that reference is: on an N x N map (default 40, ``--tolerance-size``), the 1920-cycle class
@@ -61,9 +61,12 @@ sys.path.insert(0, str(ROOT / "rimd_sim"))
 sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
+from _figures import record  # noqa: E402 - benchmarks/_figures.py: the headline figures for report.py
 
 from rimd_sim.analysis.dynamics import peterka as pk  # noqa: E402
+from rimd_sim.analysis.dynamics.steady import steady_orbit  # noqa: E402
 from rimd_sim.analysis.executor import run_tasks  # noqa: E402
+from rimd_sim.errors import IntegrationError  # noqa: E402
 from rimd_sim.model.rig_model import RigModel  # noqa: E402
 from rimd_sim.settings.config import SimConfig  # noqa: E402
 
@@ -76,11 +79,39 @@ def grid(n: int, m: int | None = None):
     return np.linspace(0, 3e-3, n), np.linspace(1.82, 9.1, m or n)
 
 
+def _classify(config, f, theta0, theta_dot0, transient, measure):
+    """The class and final state of one trajectory through ``steady_orbit`` (one ``RigModel``, a fixed length)."""
+    try:
+        orbit = steady_orbit(config, f, theta0=theta0, theta_dot0=theta_dot0, transient_cycles=transient,
+                             measure_cycles=measure)
+    except IntegrationError:
+        return "integration failed", (0.0, 0.0)
+    return orbit.label, orbit.final_state
+
+
+def per_trajectory_row(args):
+    """One gap row of the Peterka map's three starts, one ``RigModel`` per trajectory, at a fixed length."""
+    base, gap, freqs, transient, measure, continued_transient = args
+    cfg = base.with_parameters({"gap": gap})
+    rig = cfg.rig
+    kick = rig.omega_n * (gap + 2.0 * rig.amplitude) / rig.length  # rad/s
+    out = []
+    state = (0.0, 0.0)
+    for f in freqs:
+        rest, final = _classify(cfg, f, 0.0, 0.0, transient, measure)
+        kicked, _ = _classify(cfg, f, 0.0, kick, transient, measure)
+        cont, state = _classify(cfg, f, state[0], state[1], continued_transient, measure)
+        if cont == "integration failed":
+            state = final
+        out.append((rest, kicked, cont))
+    return out
+
+
 def legacy_map(config, gaps, freqs, workers=None):
     """Step a: the per-trajectory path, fixed 60 + 36 (continued 30 + 36) cycles."""
     jobs = [(config, float(g), list(freqs), 60, 36, 30) for g in gaps]
     t0 = time.perf_counter()
-    rows, n, _ = run_tasks(pk._row, jobs, workers=workers)
+    rows, n, _ = run_tasks(per_trajectory_row, jobs, workers=workers)
     return time.perf_counter() - t0, np.array(rows, dtype=object).transpose(2, 0, 1)
 
 
@@ -154,6 +185,7 @@ def big(config, workers, n_big, skip_big):
     t200, r200 = timed_map(config, gaps, freqs, workers=workers)
     print(f"  200 x 200, default (contraction stop): {t200:.1f} s on {r200.workers} processes (target <= 30 s on 2), "
           f"mean {r200.cycles.mean():.1f} cycles per trajectory   {load()}")
+    record("maps", f"Peterka 200 × 200, pool of {r200.workers}", t200, "s", "<= 30")
     tw, rw = timed_map(config, gaps, freqs, stop="window", workers=workers)
     same = float((rw.primary == r200.primary).mean())
     print(f"  200 x 200, former (window stop):       {tw:.1f} s, mean {rw.cycles.mean():.1f} cycles: the default "
@@ -219,7 +251,7 @@ def compare_trees(other: Path, size: int, workers: int, rounds: int) -> None:
 
 
 def reference_agreement(config, workers, size):
-    """Section 6: the default and the former stop against 1920 cycles from rest, on a size x size map."""
+    """Section 6: the default and the ``window`` stop against 1920 cycles from rest, on a size x size map."""
     gaps, freqs = grid(size)
     print(f"\n6. {size} x {size} map against a reference ten times as long (1920 cycles from rest, last 72 "
           f"classified), {load()}")
@@ -237,10 +269,12 @@ def reference_agreement(config, workers, size):
           f"(target >= 99.5 %); the default wrong where the former is right: {int((~ok_new & ok_old).sum())} "
           f"cells, the reverse: {int((ok_new & ~ok_old).sum())}; both wrong: {int((~ok_new & ~ok_old).sum())}, of "
           f"which the former ran to the cap: {int((~ok_new & ~ok_old & (old.cycles[0] > 192)).sum())}")
+    record("maps", f"{size} × {size} cells classed as by 1,920 cycles", 100 * ok_new.mean(), "%", ">= 99.5")
     wrong = Counter(zip(new.primary[~ok_new].tolist(), ref[~ok_new].tolist(), strict=True))
     print("  the default's differing cells (map, reference: cells): "
           + ", ".join(f"{a} vs {b}: {n}" for (a, b), n in wrong.most_common(8)))
     ok_long = long.primary == ref
+    record("maps", "the same, `--rest-cycles 1920`", 100 * ok_long.mean(), "%", ">= 99.5")
     wrong = Counter(zip(long.primary[~ok_long].tolist(), ref[~ok_long].tolist(), long.cycles[0][~ok_long].tolist(),
                         strict=True))
     print(f"  --rest-cycles 1920: {100 * ok_long.mean():.2f} % of the cells (target >= 99.5 %); its differing cells "

@@ -16,6 +16,7 @@ nothing, so ``rimd --help`` stays fast.
 
 from __future__ import annotations
 
+from rimd_sim.analysis.dynamics.basins import BasinsResult, basins, default_basin_ranges
 from rimd_sim.analysis.dynamics.bifurcation import BifurcationBranch, BifurcationPoint, bifurcation
 from rimd_sim.analysis.dynamics.continuation import (
     Bifurcation,
@@ -30,14 +31,7 @@ from rimd_sim.analysis.dynamics.continuation import (
 )
 from rimd_sim.analysis.dynamics.lyapunov import CHAOS_THRESHOLD, LyapunovResult, is_chaotic, largest_lyapunov
 from rimd_sim.analysis.dynamics.maps import ParameterMap, mappable_parameters, parameter_map
-from rimd_sim.analysis.dynamics.peterka import (
-    START_NAMES,
-    BasinsResult,
-    PeterkaResult,
-    basins,
-    default_basin_ranges,
-    peterka,
-)
+from rimd_sim.analysis.dynamics.peterka import START_NAMES, PeterkaResult, peterka
 from rimd_sim.analysis.dynamics.steady import Orbit, steady_orbit
 from rimd_sim.analysis.dynamics.sweep import SweepPoint, SweepResult, band_peak, sweep
 from rimd_sim.analysis.executor import SchedulerError, TaskRunner, open_executor, run_tasks

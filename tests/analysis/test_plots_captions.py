@@ -1,6 +1,7 @@
 """The figures name their design: the caption of the configuration, the PNG's metadata, band marks, sweep markers.
 
-docs/analyses.md, "Plots". In-process: the verbs run tiny grids (one sweep direction: no worker process).
+docs/analyses.md, "What every analysis verb does". In-process: the verbs run tiny grids (one sweep direction: no
+worker process).
 """
 
 from __future__ import annotations
@@ -15,11 +16,12 @@ from rimd_sim.analysis import plots
 from rimd_sim.analysis.captions import DEFAULTS, describe, describe_parameters
 from rimd_sim.analysis.dynamics.bifurcation import BifurcationBranch, BifurcationPoint
 from rimd_sim.analysis.dynamics.sweep import SweepPoint, SweepResult, band_peak
+from rimd_sim.analysis.plots import recorded
 from rimd_sim.errors import ConfigError
 from rimd_sim.settings.config import RigParams, SimConfig, load_config
 from rimd_sim.settings.params import parameters
 
-#: The new design of docs/analyses.md, "Plots": four parameters away from the defaults.
+#: The new design of docs/analyses.md, "What every analysis verb does": four parameters away from the defaults.
 DESIGN = {"mass": 1.0, "natural_frequency": 10.5, "damping_ratio": 0.02, "gap": 0.25e-3}
 DESIGN_WORDS = ("mass 1 kg", "natural_frequency 10.5 Hz", "damping_ratio 0.02", "gap 0.25 mm")
 YAML = """/**/rimd_simulator:
@@ -140,7 +142,7 @@ def test_sweep_without_band_b_writes_no_band_b_and_keeps_band_a_inside():
         letters = [t for t in ax.texts if t.get_text() == "A"]
         assert len(letters) == 1
         box = letters[0].get_window_extent(renderer)
-        # Inside the frame, not touching it (the old label above the peak ran into the top edge).
+        # Inside the frame, not touching it (a label above the peak would run into the top edge).
         assert frame.x0 < box.x0 and box.x1 < frame.x1 and frame.y0 < box.y0 and box.y1 < frame.y1
         # The motor frequency in Hz on top of Omega/omega_n (f_n = 10.5 Hz).
         (top,) = ax.child_axes
@@ -195,7 +197,7 @@ def test_the_impacts_figure_labels_its_steps_inside_the_axes_whatever_the_forces
     peaks = np.where(t < 5.0, 79.2, 76.7)
     steps = [Step(0, 3.75, 0.0, 0.5, 1.5, 5.0), Step(1, 4.0, 5.0, 5.6, 6.5, 10.0)]
     drawn = {}
-    real_save = plots._save
+    real_save = recorded._save
 
     def keep(fig, path, *args, **kwargs):
         fig.canvas.draw()
@@ -206,11 +208,11 @@ def test_the_impacts_figure_labels_its_steps_inside_the_axes_whatever_the_forces
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")   # a layout that cannot be made is an error here
-        plots._save, saved = keep, plots._save
+        recorded._save, saved = keep, recorded._save
         try:
             plots.plot_recorded_impacts(t, peaks, t, peaks + 0.05, steps, tmp_path / "impacts.png", "impacts")
         finally:
-            plots._save = saved
+            recorded._save = saved
     assert [text for text, _ in drawn["labels"]] == ["3.75 Hz", "4 Hz"]
     box = drawn["axes"]
     for text, extent in drawn["labels"]:

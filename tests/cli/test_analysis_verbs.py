@@ -285,7 +285,7 @@ def test_the_gap_is_the_configurations_unless_given_and_a_paper_default_says_so(
 
 
 def test_a_short_pendulums_default_basin_region_is_one_basins_accepts():
-    from rimd_sim.analysis.dynamics.peterka import MAX_BASIN_ANGLE, default_basin_ranges
+    from rimd_sim.analysis.dynamics.basins import MAX_BASIN_ANGLE, default_basin_ranges
     from rimd_sim.settings.config import load_config
 
     short = load_config(None, {"natural_frequency": 10.5, "gap": 0.25e-3})   # l = 2.25 mm, 3 A0 / l > 1.5

@@ -57,18 +57,20 @@ def _measure(n: int, seed: int) -> np.ndarray:
 
 
 def _peterka_result(n: int):
-    from rimd_sim.analysis.dynamics.peterka import PeterkaResult
+    from rimd_sim.analysis.dynamics.peterka import PeterkaResult, cell_rules
 
     named = np.stack([_classes(n), _classes(n), _classes(n, 3)])
+    rules = np.stack([_rules(n), _rules(n, 1), _rules(n, 2)])
     gaps = np.linspace(0.0, 3.0, n)
     freqs = np.linspace(1.82, 9.1, n)
     return PeterkaResult(
         gaps, freqs, gaps / 2.0, freqs / 1.82, named, 1.0, 2, 192, np.full(named.shape, 100), True, "local",
-        np.stack([_rules(n), _rules(n, 1), _rules(n, 2)]), np.stack([_measure(n, s) for s in range(3)]),
+        rules, np.stack([_measure(n, s) for s in range(3)]),
         np.stack([_measure(n, s) for s in range(3, 6)]), {"points": n * n},
         extra_labels=_classes(n, 7)[None], extra_invalid_rules=_rules(n, 4)[None],
         extra_max_abs_theta=_measure(n, 6)[None], extra_max_force=_measure(n, 7)[None],
-        peak_force=_measure(n, 8), impact_velocity=_measure(n, 9), stop="contraction", rest_cycles=640)
+        peak_force=_measure(n, 8), impact_velocity=_measure(n, 9), stop="contraction", rest_cycles=640,
+        invalid_rule=cell_rules(np.concatenate([rules, _rules(n, 4)[None]])))
 
 
 def _map_result(n: int):
@@ -82,7 +84,7 @@ def _map_result(n: int):
 
 
 def _basins_result(n: int):
-    from rimd_sim.analysis.dynamics.peterka import BasinsResult
+    from rimd_sim.analysis.dynamics.basins import BasinsResult
 
     labels = _classes(n)
     ids = np.searchsorted(np.sort(CLASSES), labels)
@@ -102,7 +104,7 @@ VERBS = {
                        "0.2", str(n)],
             ("rimd_sim.analysis.dynamics.maps", "parameter_map"), _map_result, "plot_map"),
     "basins": (lambda n: ["basins", "--size", str(n)],
-               ("rimd_sim.analysis.dynamics.peterka", "basins"), _basins_result, "plot_basins"),
+               ("rimd_sim.analysis.dynamics.basins", "basins"), _basins_result, "plot_basins"),
 }
 
 

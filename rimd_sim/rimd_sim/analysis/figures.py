@@ -1,11 +1,11 @@
 """Where a command draws its figures: in a process of its own, started before the computation, or here.
 
 A command that computes and then plots waits, after its computation, for matplotlib's import and the plotting
-module (0.22 s of one sweep point's 0.82 s, docs/benchmarks.md "Latency") before it draws. With the figure
+module before it draws: a large part of one sweep point's time (docs/benchmarks.md, "Latency"). With the figure
 process on, :class:`Figures` starts one worker process at once, which imports :mod:`rimd_sim.analysis.plots`
 (matplotlib, not the model: the results it draws unpickle from data-only modules) on the other core while this
 process computes, then draws a throwaway figure (:func:`~rimd_sim.analysis.plots.warm_up`: a process's first
-figure is about 0.1 s slower than the next). Each :meth:`Figures.draw` hands it a plotting function's name and
+figure is slower than the next). Each :meth:`Figures.draw` hands it a plotting function's name and
 arguments (pickled), and leaving the ``with`` block waits for every figure, raising the first failure as it was
 raised in the worker. With it off (the default), the figures are drawn here, at the call, exactly the same way.
 ``rimd sweep``, the command a study scripts point by point, draws through :class:`Figures` when its sweep runs in

@@ -14,8 +14,8 @@ Early stopping (the rules)
 The stroboscopic point of cycle ``c`` is the state at ``t = c / f`` in the non-dimensional coordinates of
 :mod:`rimd_sim.analysis.dynamics.steady` (``u = l sin(theta) / A0``, ``v = l theta' cos(theta) / (A0 Omega)``),
 paired with the number of impacts that start in cycle ``c``. Two methods (:data:`STOP_METHODS`, the rule's
-``method``): ``window``, the former rule (the default of :class:`StopRule`, so of every map but the Peterka map),
-and ``contraction``, the Peterka map's default.
+``method``): ``window``, a fixed confirmation window (the default of :class:`StopRule`, so of every map but the
+Peterka map), and ``contraction``, the Peterka map's default.
 
 ``contraction``: a convergence test on the stroboscopic (Poincare) map, without a fixed confirmation window.
 After each cycle ``c``, for the smallest period ``n <= max_period`` for which it holds, the trajectory stops when
@@ -42,8 +42,8 @@ running maximum is read per call and restored after it, so the valid domain's la
 No floor of cycles: a motion that starts on its attractor (a continuation) stops after ``2 h + n`` cycles (9 for a
 period 1). Trajectories that never converge run to the cap, as with ``window``.
 
-``window``, the former rule: after each cycle, once at least ``min_cycles`` cycles have run, the trajectory stops
-when, for some period ``n <= max_period`` (12),
+``window``, the confirmation window: after each cycle, once at least ``min_cycles`` cycles have run, the trajectory
+stops when, for some period ``n <= max_period`` (12),
 
 * every point of the last ``L = max(min_window, confirm * n)`` cycles lies within ``stop_tolerance`` (in
   ``u`` and in ``v``) of the point of the same phase in the period just before them (cycle ``c - L - n`` +
@@ -106,8 +106,8 @@ __all__ = [
 ]
 
 KIND_PERIODIC, KIND_CHAOTIC, KIND_FAILED = 0, 1, 2
-#: The early-stopping methods (module docstring): the convergence test on the stroboscopic map, and the former
-#: fixed confirmation window (kept to reproduce earlier maps bit for bit).
+#: The early-stopping methods (module docstring): the fixed confirmation window (``rimd map`` and ``rimd basins``),
+#: and the convergence test on the stroboscopic map (the Peterka map).
 STOP_METHODS = ("window", "contraction")
 #: Repetition below which the ``contraction`` method takes points as converged without a ratio (exact repeats).
 EXACT = 1e-12

@@ -116,7 +116,8 @@ def test_peterka_finds_the_no_impact_motion_beside_1_1_at_2_4mm_2_548hz(name):
     no-impact motion beside 1/1 (config/rimd.yaml: 33 of 576 initial conditions; config/paper_model.yaml: 1).
     The three named starts all end on 1/1; the default extra start (the no-impact forced response) finds it, and
     so do Halton starts over the basins' region without it (rimd.yaml: the 3rd point)."""
-    from rimd_sim.analysis.dynamics.peterka import DEFAULT_EXTRA_STARTS, extra_starts, peterka, stop_rule
+    from rimd_sim.analysis.dynamics.cells import stop_rule
+    from rimd_sim.analysis.dynamics.peterka import DEFAULT_EXTRA_STARTS, extra_starts, peterka
     from rimd_sim.model.ensemble import run_cells
     from rimd_sim.model.rig_model import model_for
 
@@ -139,7 +140,8 @@ def test_peterka_finds_the_no_impact_motion_beside_1_1_at_2_4mm_2_548hz(name):
 
 
 def test_extra_starts_nest_and_stay_in_the_basins_region():
-    from rimd_sim.analysis.dynamics.peterka import default_basin_ranges, extra_starts, free_response
+    from rimd_sim.analysis.dynamics.basins import default_basin_ranges
+    from rimd_sim.analysis.dynamics.peterka import extra_starts, free_response
 
     cfg = load_config(find_config_file("rimd.yaml"), {"gap": 1e-3})
     th, om = extra_starts(cfg, [2.0, 3.0], 16)

@@ -1,8 +1,8 @@
 """Maps at scale (docs/analyses.md): early stopping, the ensemble kernel, and the Dask executor seam.
 
 * The ensemble kernel without early stopping is the fixed-length ``steady_orbit`` run, cell for cell (class
-  and final state), so the fixed-length reference of the agreement test is the same computation as before.
-* Early stopping classifies the Peterka map as the fixed-length run with twice the former cycles does, in
+  and final state), so the agreement test's fixed-length reference is ``steady_orbit``'s computation.
+* Early stopping classifies the Peterka map as the fixed-length run to its cap (192 cycles) does, in
   >= 99 % of the cells, every differing cell listed in ``summary.json`` with both classes and a much longer
   run's. The test runs every sixth gap row of the default 31 x 61 map (6 x 61 = 366 cells, 0 to 3 mm, the three
   named starts each: ``--starts 0``; the extra start looks for coexisting attractors and neither the class from
@@ -77,8 +77,8 @@ def test_early_stop_stops_settled_motions_early_and_runs_chaos_to_the_cap():
 def test_the_contraction_stop_classifies_as_a_run_ten_times_the_cap():
     """The default stop (``contraction``) on a 4 x 7 grid of the default rig: the class from rest of every cell
     (1/1, 3/1, 2/2, 1/2, 5/12, 1/3, no impact and chaotic among them) equals that of a fixed run of 1920 cycles
-    (ten times the cap), with far fewer cycles than the former rule; ``stop="window"`` is the former rule, cell for
-    cell the ensemble run with its rule (``StopRule()``: the 24-cycle window after at least 30 cycles)."""
+    (ten times the cap), with far fewer cycles than the ``window`` rule; ``stop="window"`` gives, cell for cell,
+    the ensemble run with that rule (``StopRule()``: the 24-cycle window after at least 30 cycles)."""
     from rimd_sim.analysis.dynamics.peterka import peterka, rest_classes
 
     config = load_config(None)
@@ -101,20 +101,17 @@ def test_the_contraction_stop_classifies_as_a_run_ten_times_the_cap():
         peterka(config, gaps, freqs, stop="confirm", workers=1)
 
 
-def test_rimd_peterka_stop_window_is_the_former_rule(tmp_path):
-    """``rimd peterka --stop window`` writes the former rule's map (its classes and cycles as the API's
-    ``stop="window"``) and says so in ``summary.json``; the default says ``contraction``."""
+def test_rimd_peterka_writes_the_default_rule_map(tmp_path):
+    """``rimd peterka`` writes the map of the API's default stop rule (its classes and cycles) and names the rule,
+    ``contraction``, in ``summary.json``."""
     from rimd_sim.analysis.dynamics.peterka import peterka
 
     grid = ["--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "2", "--f-min", "3", "--f-max", "8", "--freqs", "3",
             "--starts", "0", "--workers", "1"]
-    assert cli.main(["peterka", *grid, "--stop", "window", "--out", str(tmp_path / "w")]) == 0
     assert cli.main(["peterka", *grid, "--out", str(tmp_path / "c")]) == 0
-    old, new = read_json(tmp_path / "w" / "summary.json"), read_json(tmp_path / "c" / "summary.json")
-    assert (old["stop"], new["stop"]) == ("window", "contraction")
-    assert new["cycles_run"]["mean"] < old["cycles_run"]["mean"]
-    api = peterka(load_config(None), [0.0, 2.4e-3], [3.0, 5.5, 8.0], starts=0, stop="window", workers=1)
-    with np.load(tmp_path / "w" / "peterka.npz") as npz:
+    assert read_json(tmp_path / "c" / "summary.json")["stop"] == "contraction"
+    api = peterka(load_config(None), [0.0, 2.4e-3], [3.0, 5.5, 8.0], starts=0, workers=1)
+    with np.load(tmp_path / "c" / "peterka.npz") as npz:
         assert npz["cycles"].tolist() == api.cycles.tolist()
         assert npz["classes"][npz["codes"][0]].tolist() == api.primary.tolist()
 
@@ -122,7 +119,7 @@ def test_rimd_peterka_stop_window_is_the_former_rule(tmp_path):
 @pytest.mark.process
 def test_early_stop_agrees_with_twice_the_cycles(tmp_path):
     """Every sixth gap row of the default map: >= 99 % of the cells (class from rest) as the fixed-length run
-    with the same caps (twice the former 96 cycles, 640 from rest); every differing cell listed in the summary with
+    with the same caps (192 cycles, 640 from rest); every differing cell listed in the summary with
     both classes and the class of a run ten times the cap (1920 cycles), which is ``steady_orbit``'s over the same
     cycles (its last 72)."""
     out = tmp_path / "pk"
@@ -168,7 +165,7 @@ class Cluster:
                     "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
         self.env.pop("RIMD_DASK_SCHEDULER", None)
         # The scheduler picks its own free port and writes its address to a file: a port chosen here and bound
-        # later could be taken in between by another test's server (the client then hung on a foreign socket).
+        # later could be taken in between by another test's server (the client would then hang on a foreign socket).
         scheduler_file = tmp / "scheduler.json"
         self._start("scheduler", [DASK, "scheduler", "--host", "127.0.0.1", "--port", "0", "--scheduler-file",
                                   str(scheduler_file), "--no-dashboard", "--no-show"])
@@ -234,14 +231,11 @@ PETERKA = ["peterka", "--gap-min-mm", "0", "--gap-max-mm", "2.4", "--gaps", "6",
            "--freqs", "12", "--transient-cycles", "60", "--measure-cycles", "36"]
 
 
-def test_rimd_peterka_offers_the_analysis_stop_methods_and_default():
-    """The verb mirrors the methods, the default and the largest --rest-cycles without importing the analysis to
-    build its parser."""
-    from rimd_sim.analysis.dynamics.peterka import DEFAULT_STOP, MAX_REST_CYCLES
+def test_rimd_peterka_mirrors_the_largest_rest_cycles():
+    """The verb mirrors the largest --rest-cycles without importing the analysis to build its parser."""
+    from rimd_sim.analysis.dynamics.peterka import MAX_REST_CYCLES
     from rimd_sim.cli.verbs import peterka as verb
-    from rimd_sim.model.ensemble import STOP_METHODS
 
-    assert (tuple(verb.STOP_METHODS), verb.DEFAULT_STOP) == (STOP_METHODS, DEFAULT_STOP)
     assert verb.MAX_REST_CYCLES == MAX_REST_CYCLES
 
 

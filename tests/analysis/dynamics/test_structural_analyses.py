@@ -25,9 +25,10 @@ import pytest
 
 from harness.outputs import read_json
 from rimd_sim import cli
+from rimd_sim.analysis.dynamics.basins import basins
 from rimd_sim.analysis.dynamics.bifurcation import bifurcation
 from rimd_sim.analysis.dynamics.lyapunov import largest_lyapunov
-from rimd_sim.analysis.dynamics.peterka import basins, peterka
+from rimd_sim.analysis.dynamics.peterka import peterka
 from rimd_sim.analysis.dynamics.steady import steady_orbit
 from rimd_sim.analysis.dynamics.sweep import sweep
 from rimd_sim.model.ensemble import StopRule, run_cells

@@ -78,13 +78,13 @@ def test_coexisting_attractors_at_gap_2_4mm():
     ("rimd.yaml", 0.0, *[{4.5: 1.0, 4.75: 1.0, 6.5: 0.5, 9.0: 5 / 6, 9.25: 2 / 3}] * 2),
     # config/paper_model.yaml at 2.4 mm: 1/1 below 3.25 Hz; down, 5/8 at 4.5 Hz and 1/3 up high (read 0.62, 0.32,
     # 0.34). Up, the sweep falls onto the coexisting non-impacting motion at 3.25 Hz and stays there (which of the
-    # two it meets there turns on the last bits of the arithmetic: it stayed on the impacting ones before the
-    # Runge-Kutta step took fused multiply-adds).
+    # two it meets there turns on the last bits of the arithmetic, so this pin holds the integrator's exact
+    # operations).
     ("paper_model.yaml", 2.4e-3, {2.5: 1.0, 3.0: 1.0, 4.5: 0.0},
      {2.5: 1.0, 4.5: 5 / 8, 8.5: 1 / 3, 9.0: 1 / 3, 9.5: 1 / 3}),
 ])
 def test_impacts_per_cycle_of_a_steady_motion_is_exactly_p_over_n(name, gap, up, down):
-    """docs/analyses.md, "Stepped frequency sweep": a steady p/n point of an up and of a down sweep reads exactly
+    """docs/analyses.md, "`rimd sweep`": a steady p/n point of an up and of a down sweep reads exactly
     p / n (the classification of its last measured whole cycles), not a count over a window of time."""
     from rimd_sim.settings.config import find_config_file, load_config
 

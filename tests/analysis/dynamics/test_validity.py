@@ -136,9 +136,8 @@ def test_bifurcation_marks_its_points(fn11):
 
 
 def test_a_paper_point_is_valid_and_its_outputs_unchanged(tmp_path, capsys):
-    """config/paper_model.yaml, gap 0, 4 Hz: the same peak force as before the valid domain (pinned from the code
-    before it: 170.19 N; re-pinned when the Runge-Kutta step took fused multiply-adds, a change of 2e-8 relative),
-    valid, and the verb exits 0 with no validity line."""
+    """config/paper_model.yaml, gap 0, 4 Hz: the validity checks leave the result alone (the peak force, 170.19 N,
+    pinned bit for bit), the point is valid, and the verb exits 0 with no validity line."""
     config = load_config(find_config_file("paper_model.yaml"))
     point = sweep(config, [4.0], "rest", cycles=40, measure_cycles=10, workers=1).points[0]
     assert point.peak_force_n.hex() == "0x1.545fde93befb8p+7"
@@ -220,13 +219,13 @@ def test_researchers_basins_are_marked_and_the_verb_exits_3(fn11, tmp_path, caps
 
 def test_paper_map_cells_are_valid_and_their_classes_unchanged(tmp_path, capsys):
     """The single-mass set's map at gap 0 and 2.4 mm: every cell valid, the verb exits 0 with no validity line,
-    and the classes and cycles are those of the map before the valid domain (pinned from the code before it, whose
-    stop rule was the confirmation window)."""
+    and the validity checks leave the classes and cycles alone (pinned, with the ``window`` stop rule and its
+    common cap from rest)."""
     from rimd_sim.analysis.dynamics.peterka import peterka
 
     result = peterka(SimConfig().with_parameters(SINGLE_MASS_SET), [0.0, 2.4e-3], [3.0, 5.5, 8.0], transient_cycles=30,
                      measure_cycles=24,
-                     stop="window", rest_cycles=54, workers=1)   # the common cap from rest, as then
+                     stop="window", rest_cycles=54, workers=1)   # the common cap from rest of the pinned map
     assert result.labels.tolist() == [[["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
                                       [["1/1", "3/2", "1/2"], ["no impact", "no impact", "1/3"]],
                                       [["1/1", "3/2", "1/2"], ["no impact", "no impact", "no impact"]]]

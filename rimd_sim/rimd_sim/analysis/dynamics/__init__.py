@@ -1,1 +1,1 @@
-"""Analyses of the model's dynamics: sweeps, bifurcation, Peterka map, Lyapunov exponent, one impact."""
+"""Analyses of the model's dynamics: sweeps, bifurcation, continuation, maps and basins, Lyapunov, one impact."""

@@ -8,21 +8,11 @@ computes their Floquet multipliers, and detects and locates where their stabilit
 
 Method
 ------
-* **Shooting.** ``G(x, lambda) = P^n(x; lambda) - x`` is evaluated with the event-exact integrator every other
-  analysis uses (:mod:`rimd_sim.model.shooting` runs a batch of starts in one compiled call), at tightened
-  tolerances (:data:`SHOOTING_TOLERANCES`). The unknowns are scaled: ``theta`` by ``A0 / l``, ``theta_dot`` by
-  ``Omega A0 / l``, the parameter by a fiftieth of the range.
-* **Jacobian and monodromy matrix by central differences of the flow through the impacts.** Each column of
-  ``dP^n/dx`` (and ``dP^n/dlambda``) is ``(P^n(x + h e_j) - P^n(x - h e_j)) / 2h``; a perturbed run crosses
-  the switching surfaces (contact onset ``delta = 0``, release ``F = 0``) where its own dynamics puts it, so
-  the jumps of the linearised flow at the switches (the saltation matrices of a tangent-linear method, Müller
-  1995; di Bernardo et al. 2008, ch. 2) are in the difference, without a formula per contact law. The step
-  ``h`` is :data:`FD_STEP` in scaled units: the truncation error is ``O(h^2)`` ~ 1e-10 and the integrator's
-  error enters as its *variation* between neighbouring runs (the step sequences coincide), well below 1e-6.
-  Shown in tests/analysis/dynamics/test_continuation.py: the multipliers agree with an independent monodromy
-  matrix built from ``RigModel`` runs to 1e-4, and with the exact ``exp(A T)`` of the linear oscillator.
-  The Floquet multipliers are the eigenvalues of ``M = dP^n/dx`` at the fixed point; the orbit is stable when
-  they all lie inside the unit circle.
+* **Shooting** (:mod:`rimd_sim.analysis.dynamics.fixed_points`): ``G(x, lambda) = P^n(x; lambda) - x`` is
+  evaluated with the event-exact integrator at tightened tolerances, its Jacobian and the monodromy matrix
+  ``M = dP^n/dx`` by central differences of the flow through the impacts (so the saltation at each switch is in
+  the difference). The Floquet multipliers are the eigenvalues of ``M`` at the fixed point; the orbit is stable
+  when they all lie inside the unit circle.
 * **Pseudo-arclength continuation** (Keller 1977; the predictor-corrector of AUTO, COCO and BifurcationKit.jl's
   ``PALC``): from a point ``z = (x, lambda)`` with unit tangent ``t`` (the null vector of
   ``[dG/dx, dG/dlambda]``), predict ``z + ds t`` and correct by Newton's method on ``G = 0`` together with
@@ -58,16 +48,27 @@ Continuation (COCO's ``hspo`` toolbox of hybrid periodic orbits); R. Veltz, Bifu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from rimd_sim.analysis.dynamics.steady import CHAOTIC, check_frequency, constant_frequency, steady_orbit
-from rimd_sim.analysis.peaks import sampled_peak
-from rimd_sim.errors import AnalysisError, ConfigError, IntegrationError
-from rimd_sim.model import kernel as k
-from rimd_sim.model.rig_model import ChatteringError, RigModel, model_for
-from rimd_sim.model.shooting import flow_points
+from rimd_sim.analysis.dynamics.fixed_points import (
+    FD_STEP,
+    FREQUENCY,
+    SHOOTING_TOLERANCES,
+    FlowFailed,
+    Problem,
+    Solved,
+    correct,
+    floquet_multipliers,
+    full_point,
+    measure_orbit,
+    shooting_problem,
+    unit_tangent,
+)
+from rimd_sim.analysis.dynamics.steady import CHAOTIC, check_frequency, steady_orbit
+from rimd_sim.errors import AnalysisError, ConfigError
+from rimd_sim.model.rig_model import ChatteringError
 from rimd_sim.model.validity import CHATTERING, PointMeasures, domain, joined
 from rimd_sim.settings.config import SimConfig
 
@@ -76,20 +77,15 @@ __all__ = [
     "ContinuationResult", "ContinuationSettings", "StartOutsideDomain", "continuation", "fixed_point", "monodromy",
 ]
 
-#: Integrator tolerances of the shooting runs (the continuation's accuracy rests on them; module docstring).
-SHOOTING_TOLERANCES = {"integrator.rtol": 1e-10, "integrator.atol": 1e-12}
-#: Central-difference step of the Jacobian, in scaled units (module docstring).
-FD_STEP = 1e-5
 #: The kinds of :class:`Bifurcation`.
 BIFURCATION_KINDS = ("period_doubling", "fold", "neimark_sacker", "grazing", "branch_point")
-FREQUENCY = "frequency"
 #: Largest penetration (m) within which a non-impacting orbit is said to graze the stop.
 GRAZE_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
 class ContinuationSettings:
-    """How a branch is followed (docs/analyses.md, "Continuation", says how to choose them).
+    """How a branch is followed (docs/analyses.md, "`rimd continue`", says how to choose them).
 
     Attributes:
         ds: First arclength step (scaled units: the parameter's range is 50).
@@ -237,200 +233,10 @@ class StartOutsideDomain(AnalysisError):
         self.invalid_rule = invalid_rule
 
 
-class _FlowFailed(IntegrationError):
-    """A shooting run failed (the chattering guard, a non-finite state); the corrector takes it as no convergence."""
-
-    def __init__(self, status: int = k.ST_OK):
-        super().__init__(f"a shooting run stopped with the driver's status {status}")
-        self.status = status
-
-
-@dataclass
-class _Problem:
-    """``G(x, lambda) = P^n(x) - x`` in scaled coordinates."""
-
-    config: SimConfig          # tolerances tightened
-    parameter: str
-    frequency_hz: float        # fixed frequency when the parameter is another one
-    period: int
-    scale: np.ndarray          # of the point
-    lam_scale: float
-    evaluations: list = field(default_factory=lambda: [0])
-    _params: dict = field(default_factory=dict)
-
-    @property
-    def model(self) -> str:
-        return self.config.rig.structure.model
-
-    def config_at(self, lam: float) -> SimConfig:
-        if self.parameter == FREQUENCY:
-            return self.config
-        return self.config.with_parameters({self.parameter: float(lam)})
-
-    def params_at(self, lam: float) -> np.ndarray:
-        key = float(lam) if self.parameter != FREQUENCY else 0.0
-        p = self._params.get(key)
-        if p is None:
-            cfg = self.config_at(lam)
-            p = model_for(cfg).params(cfg)
-            if len(self._params) > 4096:
-                self._params.clear()
-            self._params[key] = p
-        return p
-
-    def frequency_at(self, lam: float) -> float:
-        return float(lam) if self.parameter == FREQUENCY else self.frequency_hz
-
-    def with_period(self, period: int) -> _Problem:
-        return _Problem(self.config, self.parameter, self.frequency_hz, period, self.scale, self.lam_scale,
-                        self.evaluations, self._params)
-
-    def unscale(self, z: np.ndarray) -> tuple[np.ndarray, float]:
-        return z[:-1] * self.scale, float(z[-1] * self.lam_scale)
-
-    def scaled(self, x: np.ndarray, lam: float) -> np.ndarray:
-        return np.append(np.asarray(x, dtype=float) / self.scale, lam / self.lam_scale)
-
-    def flow(self, xs: np.ndarray, lams: np.ndarray, periods: int | None = None) -> np.ndarray:
-        periods = self.period if periods is None else periods
-        params = np.array([self.params_at(lam) for lam in lams])
-        freqs = np.array([self.frequency_at(lam) for lam in lams])
-        out, status = flow_points(self.model, params, freqs, xs, periods)
-        self.evaluations[0] += len(lams) * periods
-        bad = status != k.ST_OK
-        if bad.any():
-            raise _FlowFailed(int(status[bad][0]))
-        return out
-
-    def evaluate(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(G, [dG/dxi, dG/dlambda], M)`` at scaled ``z``: residual, Jacobian (scaled) and monodromy matrix."""
-        d = z.size - 1
-        x, lam = self.unscale(z)
-        h = FD_STEP
-        xs = [x]
-        lams = [lam]
-        for j in range(d):
-            for sgn in (1.0, -1.0):
-                xp = x.copy()
-                xp[j] += sgn * h * self.scale[j]
-                xs.append(xp)
-                lams.append(lam)
-        # The parameter's column: central, or one-sided at a bound of the parameter (a gap of 0).
-        offsets = [h, -h]
-        for i, off in enumerate(offsets):
-            try:
-                self.params_at(lam + off * self.lam_scale)
-            except ConfigError:
-                offsets[i] = 0.0
-        if offsets == [0.0, 0.0]:
-            raise ConfigError(self.parameter, lam, "has no valid neighbour for the derivative")
-        for off in offsets:
-            xs.append(x)
-            lams.append(lam + off * self.lam_scale)
-        out = self.flow(np.array(xs), np.array(lams))
-        g = (out[0] - x) / self.scale
-        jac = np.empty((d, d + 1))
-        for j in range(d):
-            jac[:, j] = (out[1 + 2 * j] - out[2 + 2 * j]) / (2.0 * h) / self.scale
-        jac[:, d] = (out[1 + 2 * d] - out[2 + 2 * d]) / (offsets[0] - offsets[1]) / self.scale
-        monodromy_scaled = jac[:, :d].copy()
-        jac[:, :d] -= np.eye(d)
-        return g, jac, monodromy_scaled
-
-
-def _multipliers(a: np.ndarray) -> np.ndarray:
-    mu = np.linalg.eigvals(a)
-    return mu[np.argsort(-np.abs(mu), kind="stable")]
-
-
-def _tangent(jac: np.ndarray, prev: np.ndarray | None) -> np.ndarray:
-    """Unit null vector of ``jac`` (d x d+1), oriented along ``prev``."""
-    if prev is None:
-        _, _, vt = np.linalg.svd(jac)
-        t = vt[-1]
-    else:
-        t = np.linalg.solve(np.vstack([jac, prev]), np.append(np.zeros(jac.shape[0]), 1.0))
-    t = t / np.linalg.norm(t)
-    if prev is not None and t @ prev < 0:
-        t = -t
-    return t
-
-
-@dataclass
-class _Solved:
-    z: np.ndarray
-    jac: np.ndarray
-    mono: np.ndarray
-    iterations: int
-
-
-def _correct(problem: _Problem, z_pred: np.ndarray, normal: np.ndarray | None, tol: float, max_iter: int
-             ) -> _Solved | None:
-    """Newton on ``G = 0`` and ``normal . (z - z_pred) = 0`` (``normal`` None: the parameter fixed)."""
-    z = z_pred.copy()
-    d = z.size - 1
-    if normal is None:
-        normal = np.zeros(d + 1)
-        normal[-1] = 1.0
-    step_norm = math.inf
-    for it in range(max_iter + 1):
-        try:
-            g, jac, mono = problem.evaluate(z)
-        except (_FlowFailed, ConfigError):
-            return None
-        res = float(np.linalg.norm(g))
-        if res <= tol * max(1.0, float(np.linalg.norm(z[:-1]))) and step_norm <= 1e2 * tol * max(
-                1.0, float(np.linalg.norm(z))):
-            return _Solved(z, jac, mono, it)
-        if it == max_iter or not math.isfinite(res):
-            return None
-        a = np.vstack([jac, normal])
-        rhs = -np.append(g, normal @ (z - z_pred))
-        try:
-            dz = np.linalg.solve(a, rhs)
-        except np.linalg.LinAlgError:
-            return None
-        step_norm = float(np.linalg.norm(dz))
-        z = z + dz
-        # A converged residual with a tiny correction still needs the Jacobian at the corrected point: the loop
-        # evaluates it and returns there.
-    return None
-
-
-def _measure(problem: _Problem, x: np.ndarray, lam: float) -> dict:
-    """One period of the orbit through ``x`` run by :class:`RigModel`: its stroboscopic points, impacts, extremes.
-
-    Two periods are run from the fixed point and the second is measured, so that an impact in progress at the
-    start (the point taken mid-contact) is counted once, at its onset.
-    """
-    n = problem.period
-    f = problem.frequency_at(lam)
-    cfg = constant_frequency(problem.config_at(lam), f, float(x[0]), float(x[1])).with_parameters(
-        {"truth.sample_rate": float(min(2.0e6, 2000.0 * f))})
-    model = RigModel(cfg, channels=False, truth=True, strobe=True, initial_modes=tuple(x[2:]))
-    model.advance(n / f)
-    out = model.advance((2 * n + 0.5) / f)
-    orbit = np.array([[s.theta, s.theta_dot] for s in out.strobe if n <= s.cycle_index < 2 * n])
-    impacts = [i for i in out.impacts if n <= i.cycle_index < 2 * n]
-    assert out.truth is not None
-    first, rows = out.truth
-    times = (first + np.arange(rows.shape[1])) / cfg.truth_rate
-    inside = times < 2 * n / f
-    delta = rows[k.T_DELTA][inside]
-    dmax = sampled_peak(delta)
-    return {
-        "orbit": orbit,
-        "impacts": len(impacts),
-        "peak": max((i.peak_force for i in impacts), default=0.0),
-        "max_delta": dmax,
-        "max_theta": float(np.max(np.abs(rows[k.T_THETA][inside]))) if inside.any() else float(abs(x[0])),
-    }
-
-
-def _point(problem: _Problem, solved: _Solved, rules) -> tuple[BranchPoint, dict]:
+def _point(problem: Problem, solved: Solved, rules) -> tuple[BranchPoint, dict]:
     x, lam = problem.unscale(solved.z)
-    mu = _multipliers(solved.mono)
-    m = _measure(problem, x, lam)
+    mu = floquet_multipliers(solved.mono)
+    m = measure_orbit(problem, x, lam)
     verdict = rules.check(PointMeasures(m["max_theta"], m["peak"], m["impacts"] / problem.period))
     bp = BranchPoint(lam, problem.frequency_at(lam), x, mu, bool(np.all(np.abs(mu) < 1.0)), m["orbit"], m["peak"],
                      m["impacts"], m["max_delta"], m["max_theta"], verdict.valid, verdict.invalid_rule)
@@ -441,7 +247,7 @@ def _point(problem: _Problem, solved: _Solved, rules) -> tuple[BranchPoint, dict
 class _Node:
     """A converged point with what detection needs."""
 
-    solved: _Solved
+    solved: Solved
     tangent: np.ndarray
     point: BranchPoint
 
@@ -484,15 +290,7 @@ class _Continuer:
         self.parameter = parameter
         self.lam_lo, self.lam_hi = min(lam_start, lam_end), max(lam_start, lam_end)
         self.lam_start, self.lam_end = lam_start, lam_end
-        cfg = config.with_parameters(SHOOTING_TOLERANCES)
-        rig = cfg.rig
-        theta_scale = rig.amplitude / rig.length
-        f_ref = lam_start if parameter == FREQUENCY else frequency_hz
-        n_modes = model_for(cfg).n_modes
-        scale = np.array([theta_scale, theta_scale * 2.0 * math.pi * f_ref]
-                         + [rig.amplitude * 1e-3, rig.amplitude * 1e-3 * 2.0 * math.pi * 1e3] * (n_modes // 2))
-        lam_scale = abs(lam_end - lam_start) / 50.0
-        self.base = _Problem(cfg, parameter, frequency_hz, 1, scale, lam_scale)
+        self.base = shooting_problem(config, parameter, lam_start, lam_end, frequency_hz)
         self.branches: list[Branch] = []
         self.bifurcations: list[Bifurcation] = []
 
@@ -502,12 +300,12 @@ class _Continuer:
         span = self.lam_hi - self.lam_lo
         return self.lam_lo - 1e-9 * span <= lam <= self.lam_hi + 1e-9 * span
 
-    def node(self, problem: _Problem, solved: _Solved, prev_t: np.ndarray | None) -> _Node:
-        t = _tangent(solved.jac, prev_t)
+    def node(self, problem: Problem, solved: Solved, prev_t: np.ndarray | None) -> _Node:
+        t = unit_tangent(solved.jac, prev_t)
         bp, _ = _point(problem, solved, self.rules)
         return _Node(solved, t, bp)
 
-    def follow(self, problem: _Problem, first: _Node, parent: int | None, origin: np.ndarray | None = None
+    def follow(self, problem: Problem, first: _Node, parent: int | None, origin: np.ndarray | None = None
                ) -> int:
         """Follow a branch from ``first`` along its tangent; record it and its bifurcations; return its index."""
         s = self.settings
@@ -520,7 +318,7 @@ class _Continuer:
         while len(nodes) < s.max_points:
             cur = nodes[-1]
             z_pred = cur.solved.z + ds * cur.tangent
-            solved = _correct(problem, z_pred, cur.tangent, s.newton_tolerance, s.max_newton)
+            solved = correct(problem, z_pred, cur.tangent, s.newton_tolerance, s.max_newton)
             if solved is None:
                 ds *= 0.5
                 if ds < s.ds_min:
@@ -534,7 +332,7 @@ class _Continuer:
                 step = solved.z - cur.solved.z
                 z_end = cur.solved.z + step * (edge - cur.solved.z[-1]) / step[-1]
                 z_end[-1] = edge
-                last = _correct(problem, z_end, None, s.newton_tolerance, 2 * s.max_newton)
+                last = correct(problem, z_end, None, s.newton_tolerance, 2 * s.max_newton)
                 end = "end of the range"
                 if last is not None:
                     try:
@@ -564,7 +362,7 @@ class _Continuer:
                         end = f"joins a period-{problem.period // 2} orbit (a period doubling's other end)"
                         nodes.append(new)
                         break
-                except _FlowFailed:
+                except FlowFailed:
                     pass
             pending.extend(self.detect(cur, new))
             nodes.append(new)
@@ -615,10 +413,10 @@ class _Continuer:
 
     # ---- location ---------------------------------------------------------------------------------
 
-    def on_chord(self, problem: _Problem, a: _Node, b: _Node, sigma: float, prev_t: np.ndarray) -> _Node | None:
+    def on_chord(self, problem: Problem, a: _Node, b: _Node, sigma: float, prev_t: np.ndarray) -> _Node | None:
         chord = b.solved.z - a.solved.z
         normal = chord / np.linalg.norm(chord)
-        solved = _correct(problem, a.solved.z + sigma * chord, normal, self.settings.newton_tolerance,
+        solved = correct(problem, a.solved.z + sigma * chord, normal, self.settings.newton_tolerance,
                           self.settings.max_newton)
         if solved is None:
             return None
@@ -627,7 +425,7 @@ class _Continuer:
         except ChatteringError:
             return None
 
-    def locate(self, problem: _Problem, branch: int, kind: str, a: _Node, b: _Node) -> None:
+    def locate(self, problem: Problem, branch: int, kind: str, a: _Node, b: _Node) -> None:
         s = self.settings
         lo, hi = 0.0, 1.0
         na, nb = a, b
@@ -687,7 +485,7 @@ class _Continuer:
             if new is not None:
                 self.bifurcations[self.bifurcations.index(bif)] = replace(bif, new_branch=new)
 
-    def graze_ahead(self, problem: _Problem, branch: int, a: _Node, b: _Node) -> Bifurcation | None:
+    def graze_ahead(self, problem: Problem, branch: int, a: _Node, b: _Node) -> Bifurcation | None:
         """Locate the grazing a non-impacting branch runs into (its corrector failed there).
 
         The largest penetration ``g`` of the orbit is smooth in the parameter on the non-impacting side: secant
@@ -710,7 +508,7 @@ class _Continuer:
                 break
             z = pts[-1].solved.z.copy()
             z[-1] = (p1.parameter + (0.9 if abs(g1) > 1e3 * GRAZE_TOLERANCE else 1.0) * step) / problem.lam_scale
-            solved = _correct(problem, z, None, s.newton_tolerance, s.max_newton)
+            solved = correct(problem, z, None, s.newton_tolerance, s.max_newton)
             if solved is None:
                 break
             try:
@@ -732,7 +530,7 @@ class _Continuer:
 
     # ---- branch switching -------------------------------------------------------------------------
 
-    def switch(self, problem: _Problem, parent: int, at: _Node) -> int | None:
+    def switch(self, problem: Problem, parent: int, at: _Node) -> int | None:
         double = problem.with_period(2 * problem.period)
         for b in self.branches:  # a bubble's other end: its period-2n branch is already followed
             if b.period == double.period and any(
@@ -746,13 +544,13 @@ class _Continuer:
         tan = np.append(v, 0.0)
         z0 = at.solved.z
         for amp in (0.02, 0.08, 0.3, 1.0):
-            solved = _correct(double, z0 + amp * tan, tan, self.settings.newton_tolerance, self.settings.max_newton)
+            solved = correct(double, z0 + amp * tan, tan, self.settings.newton_tolerance, self.settings.max_newton)
             if solved is None:
                 continue
             x, lam = double.unscale(solved.z)
             try:
                 y = problem.flow(x[None, :], np.array([lam]))[0]
-            except _FlowFailed:
+            except FlowFailed:
                 continue
             if np.linalg.norm((y - x) / problem.scale) < 1e-4 or not self.in_range(lam):
                 continue  # fell back onto the period-n orbit, or out of the range
@@ -786,14 +584,13 @@ def fixed_point(config: SimConfig, frequency_hz: float, start, *, period: int = 
         AnalysisError: When Newton's method does not converge from ``start``.
     """
     f = check_frequency(config, frequency_hz)
-    c = _Continuer(config, FREQUENCY, f, f + 1.0, f, ContinuationSettings(newton_tolerance=tolerance))
-    problem = c.base.with_period(period)
-    x0 = _full_point(config, start)
-    solved = _correct(problem, problem.scaled(x0, f), None, tolerance, 12)
+    problem = shooting_problem(config, FREQUENCY, f, f + 1.0, f).with_period(period)
+    x0 = full_point(config, start)
+    solved = correct(problem, problem.scaled(x0, f), None, tolerance, 12)
     if solved is None:
         raise AnalysisError(f"no period-{period} orbit found near {tuple(x0)} at {f:g} Hz (Newton did not converge)")
     x, _ = problem.unscale(solved.z)
-    return x, _multipliers(solved.mono)
+    return x, floquet_multipliers(solved.mono)
 
 
 def monodromy(config: SimConfig, frequency_hz: float, point, *, period: int = 1) -> np.ndarray:
@@ -809,21 +606,10 @@ def monodromy(config: SimConfig, frequency_hz: float, point, *, period: int = 1)
         The square matrix, one row and column per component of the point.
     """
     f = check_frequency(config, frequency_hz)
-    c = _Continuer(config, FREQUENCY, f, f + 1.0, f, ContinuationSettings())
-    problem = c.base.with_period(period)
-    x0 = _full_point(config, point)
+    problem = shooting_problem(config, FREQUENCY, f, f + 1.0, f).with_period(period)
+    x0 = full_point(config, point)
     _, _, mono = problem.evaluate(problem.scaled(x0, f))
     return mono * problem.scale[:, None] / problem.scale[None, :]
-
-
-def _full_point(config: SimConfig, start) -> np.ndarray:
-    n_modes = model_for(config).n_modes
-    x = np.zeros(2 + n_modes)
-    start = np.asarray(start, dtype=float).ravel()
-    if start.size not in (2, 2 + n_modes):
-        raise ConfigError("start", tuple(start), f"must be (theta, theta_dot) or the full point of {2 + n_modes}")
-    x[:start.size] = start
-    return x
 
 
 def continuation(config: SimConfig, start: float, end: float, *, parameter: str = FREQUENCY,
@@ -896,7 +682,7 @@ def continuation(config: SimConfig, start: float, end: float, *, parameter: str 
     solved = None
     for period, guess in starts:
         problem = c.base.with_period(int(period))
-        solved = _correct(problem, problem.scaled(_full_point(cfg0, guess), start), None,
+        solved = correct(problem, problem.scaled(full_point(cfg0, guess), start), None,
                           settings.newton_tolerance, 12)
         if solved is not None:
             break

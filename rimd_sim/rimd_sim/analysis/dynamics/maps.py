@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rimd_sim.analysis.dynamics.peterka import class_codes, cycles_summary, stop_rule
+from rimd_sim.analysis.dynamics.cells import class_codes, cycles_summary, stop_rule
 from rimd_sim.analysis.dynamics.steady import check_frequencies, check_frequency
 from rimd_sim.analysis.executor import run_tasks
 from rimd_sim.analysis.outputs import rows_of

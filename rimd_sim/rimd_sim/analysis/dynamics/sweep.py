@@ -16,9 +16,9 @@ contact onset, ``Impact.impact_velocity``) and the number of impacts per cycle; 
 Impacts per cycle: the last ``measure_cycles`` whole motor cycles (stroboscopic point to stroboscopic point)
 that ended at least half a cycle before the point's end are classified as in
 :func:`rimd_sim.analysis.dynamics.steady.classify`; a periodic ``p/n`` motion reads exactly ``p / n``. A
-window of ``measure_cycles`` periods of time ending at the point's end, the only reading before, can miss
-the impact in progress at its end (its record closes with the contact) and, for a period that does not
-divide ``measure_cycles``, cannot hold a whole number of periods: a steady 1/1 read 0.98. Where the window
+window of ``measure_cycles`` periods of time ending at the point's end would miss the impact in progress at
+its end (its record closes with the contact) and, for a period that does not divide ``measure_cycles``,
+could not hold a whole number of periods (a steady 1/1 would read 0.98). Where the window
 is not periodic (chaotic, or not yet settled to the classification tolerance) the impacts per cycle are still
 that count over the time window. The class (``motion_class``: ``p/n``, ``no impact``, ``chaotic/non-periodic``)
 is that classification's label; ``integration failed`` where the chattering guard stopped the run, and empty

@@ -72,7 +72,7 @@ class SweepResult:
         return tuple(p for p in self.points if not p.valid)
 
     def summary(self) -> dict:
-        """The ``summary.json`` content (its keys: docs/interface.md, "Commands")."""
+        """The ``summary.json`` content (its keys: docs/analyses.md, "`rimd sweep`")."""
         def band(p: SweepPoint | None) -> dict | None:
             return None if p is None else {"frequency_hz": p.frequency_hz, "peak_force_n": p.peak_force_n,
                                            "force_ratio": p.force_ratio}

@@ -40,7 +40,7 @@ def main(args: argparse.Namespace) -> int:
     """Compute the basins and write their files."""
     clock = VerbClock()
     from rimd_sim.analysis.captions import describe
-    from rimd_sim.analysis.dynamics.peterka import basins, basins_columns, default_basin_ranges
+    from rimd_sim.analysis.dynamics.basins import basins, basins_columns, default_basin_ranges
     from rimd_sim.analysis.plots import plot_basins
     from rimd_sim.model.validity import Verdict, domain
 

@@ -3,7 +3,7 @@
 Writes ``DIR/branch.csv`` (one row per orbit of every branch: parameter, fixed point, stability, Floquet
 multipliers, peak force, impacts per period, validity), ``DIR/bifurcations.json`` (period doublings, folds,
 Neimark-Sacker points, grazings, located), ``DIR/continuation.png`` (the branches, stable solid, unstable dashed,
-over the brute-force bifurcation diagram) and ``DIR/summary.json``. Method: docs/analyses.md, "Continuation".
+over the brute-force bifurcation diagram) and ``DIR/summary.json``. Method: docs/analyses.md, "`rimd continue`".
 """
 
 from __future__ import annotations

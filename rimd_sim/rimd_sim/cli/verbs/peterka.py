@@ -30,8 +30,6 @@ from rimd_sim.cli.verbs._analysis_io import (
 
 #: ``rimd_sim.analysis.dynamics.peterka.DEFAULT_EXTRA_STARTS``, without importing the analysis to build the parser.
 DEFAULT_EXTRA_STARTS = 1
-#: ``rimd_sim.model.ensemble.STOP_METHODS`` and ``rimd_sim.analysis.dynamics.peterka.DEFAULT_STOP``, likewise.
-STOP_METHODS, DEFAULT_STOP = ("window", "contraction"), "contraction"
 #: ``rimd_sim.analysis.dynamics.peterka.MAX_REST_CYCLES``, likewise.
 MAX_REST_CYCLES = 1_000_000
 
@@ -50,11 +48,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"extra starts per cell looking for coexisting attractors, default "
                              f"{DEFAULT_EXTRA_STARTS} (the no-impact forced response; more: points spread over "
                              f"the region of rimd basins); 0: the three-start map")
-    parser.add_argument("--stop", choices=STOP_METHODS, default=DEFAULT_STOP,
-                        help="how a trajectory is judged settled: contraction (default: its stroboscopic points "
-                             "repeat and their repetition shrinks, so they are within 1e-4 of their limit) or "
-                             "window (the former rule: a 24-cycle confirmation window after at least 30 cycles, "
-                             "to reproduce earlier maps bit for bit)")
     parser.add_argument("--rest-cycles", type=count("--rest-cycles", 1, MAX_REST_CYCLES), default=None,
                         help="cap of the start from rest, which gives each cell its class: a trajectory from rest "
                              "still unsettled at the cap of the others runs on until it settles or reaches this "
@@ -74,10 +67,10 @@ def main(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rimd_sim.analysis.captions import describe
+    from rimd_sim.analysis.dynamics.cells import cycles_summary
     from rimd_sim.analysis.dynamics.peterka import (
         START_NAMES,
         compare_maps,
-        cycles_summary,
         peterka,
         peterka_columns,
         save_peterka_npz,
@@ -96,7 +89,7 @@ def main(args: argparse.Namespace) -> int:
     freqs = np.linspace(args.f_min, args.f_max, args.freqs)
     result = peterka(config, gaps, freqs, transient_cycles=args.transient_cycles,
                      measure_cycles=args.measure_cycles, early_stop=not args.fixed_length, starts=args.starts,
-                     stop=args.stop, rest_cycles=args.rest_cycles, workers=args.workers,
+                     rest_cycles=args.rest_cycles, workers=args.workers,
                      scheduler=args.scheduler, progress=progress_printer("peterka", "gap rows"))
     comparison, compared = None, 0.0
     if args.compare_fixed and not args.fixed_length:
@@ -150,6 +143,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"{unsettled} cell(s) ({100 * unsettled / result.primary.size:.1f} %) classified at the cap of "
               f"{result.rest_cap} cycles from rest without having settled (chaotic, or a transient longer than the "
               f"cap){longer}", file=sys.stdout)
-    sentence = domain(config).sentence((Verdict.of(r) for r in result.invalid_rule.ravel().tolist()), "cells")
+    rules = [] if result.invalid_rule is None else result.invalid_rule.ravel().tolist()
+    sentence = domain(config).sentence((Verdict.of(r) for r in rules), "cells")
     return validity_exit("peterka", sentence, args.accept_invalid,
                          f"the invalid_rule column of {args.out / 'peterka.csv'}")

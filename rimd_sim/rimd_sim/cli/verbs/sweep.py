@@ -1,6 +1,6 @@
 """``rimd sweep``: simulated steady peak impact force F_i/mg and impacts per cycle versus Omega/omega.
 
-Writes ``DIR/summary.json`` (its keys: docs/interface.md, "Commands"), ``DIR/sweep.csv`` and ``DIR/sweep.png``
+Writes ``DIR/summary.json`` (its keys: docs/analyses.md, "`rimd sweep`"), ``DIR/sweep.csv`` and ``DIR/sweep.png``
 (not with ``--no-plot``: no plotting library is then loaded, nor a figure worker started).
 """
 
