@@ -4,7 +4,7 @@ It subscribes (reliable, raw bytes: it counts, it does not deserialise) to the r
 truth a RigState, the others SampleBlock), checks that
 each one's blocks are contiguous (``first_index`` = the previous one's + its sample count), and on SIGINT or SIGTERM
 writes what it saw as JSON to ``--out``. With ``--lockstep NAME`` it is also a lockstep consumer of that name, the
-way docs/rig.md ("Lockstep") tells a Python node to be one: a
+way docs/rig.md ("Pacing: lockstep") tells a Python node to be one: a
 :class:`rimd_sim.ros.clients.progress.ProgressReporter` and ``done(stamp, subscription)`` after each message (it
 does nothing else with them: what it costs the rig is the transport and the reporting). ``--batched``: instead of a
 callback per message, a timer every ``--period`` s takes every message waiting and reports once per topic

@@ -1,4 +1,4 @@
-"""Memory an MCAP file's chunk index takes in the recorder while the file is written (docs/recording.md, "Memory").
+"""Memory an MCAP file's chunk index takes in the recorder while the file is written (docs/recording.md, "Recorder").
 
 An MCAP summary indexes every chunk, so a writer keeps one entry per chunk until the file is finished; the
 recorder closes a chunk at least every ``flush_interval`` (1 s): 3,600 entries per hour at real time. This writes

@@ -13,7 +13,7 @@ interference (the live share is larger: a thread woken every few ms runs its wor
 
 ``--display-interval S`` maps the channels as the live bridge's display stream (each channel's min and max sample
 per S seconds: ``display_interval``, docs/rerun.md; the bridge's default is 0.005); the default 0 maps every sample,
-as ``rimd rig --rerun-full-rate`` and ``rimd rerun`` do (and as checkouts without the display stream did).
+as ``rimd rig --rerun-full-rate`` and ``rimd rerun`` do (and as a checkout without the display stream does).
 
 With ``--compare DIR`` (another checkout), the same measurement runs from this tree and from DIR's package
 alternately (fresh processes, ``--rounds`` each), and the median ratio DIR / this is printed (> 1: this tree is
@@ -74,7 +74,7 @@ def measure(seconds: float, display_interval: float = 0.0) -> dict:
     """The bridge's path on ``seconds`` of messages: CPU s in all and per part (one untimed second first).
 
     ``display_interval`` > 0: the channels as the display stream (given to the mapper only then, so that a checkout
-    without it measures at full rate as before).
+    without it measures at full rate).
     """
     import rerun as rr
     from rclpy.serialization import deserialize_message

@@ -11,7 +11,7 @@ Fast DDS profile as the nodes (``rimd_sim/nodes/fastdds_profiles.xml``), a ROS d
 Printed: for 0, 1 and 2 subscribers (the rig has two, the recorder and the bridge), the CPU of the publisher
 and of each subscriber in % of one core over --seconds (utime + stime from /proc), and the messages each
 subscriber received. With two subscribers the publisher's figure is the least the simulator can cost at
-real time on this machine with rclpy and Fast DDS, before it computes anything.
+real time on the machine that runs it, with rclpy and Fast DDS, before it computes anything.
 
 Run (after ``source env.sh``, the machine otherwise idle): python benchmarks/bench_dds_floor.py [--seconds 30]
 """

@@ -9,7 +9,7 @@ defaults), then ``rig.motor(4.0)``, then the rig is stopped. Two kinds of repeat
 * **warm**: the project's own cache (``__pycache__`` beside the sources, filled by ``make setup``).
 
 For each repeat it prints the seconds from the call to the fixture returning (the rig ready:
-docs/testing.md, "Ready when it returns"), to the first ``rig.motor`` answered, and to the rig stopped; then
+docs/testing.md, "The fixture"), to the first ``rig.motor`` answered, and to the rig stopped; then
 per kind the median, minimum and maximum. The fixture's default ready timeout (120 s) is meant to cover a cold
 run on a slow 2-core runner with margin: compare with the cold figures.
 
@@ -73,6 +73,10 @@ def main() -> int:
             values = [r[key] for r in runs]
             print(f"{kind} ({len(runs)} runs) {what}: median {statistics.median(values):.2f} s, min "
                   f"{min(values):.2f} s, max {max(values):.2f} s")
+    from _figures import record  # the headline figures for report.py
+
+    if cold := [r["returned_s"] for r in results if r["kind"] == "cold"]:   # warm: bench_latency.py's figure
+        record("setup", "fixture ready, empty numba cache", statistics.median(cold), "s")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
     if args.json:
         args.json.write_text(json.dumps({"results": results}, indent=1))

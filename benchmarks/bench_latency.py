@@ -100,6 +100,15 @@ def load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
+#: Per measurement: the figure's name in docs/benchmarks.md and its target.
+LATENCY_FIGURES = {
+    "help": ("`rimd --help`", "<= 0.3"),
+    "sweep": ("one `rimd sweep` point with its figure", "<= 0.5"),
+    "sweep-files": ("the same with `--no-plot`", "<= 0.5"),
+    "rig": ("`rimd_rig` call to its first answered `rig.motor`", "<= 1.5"),
+}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement and tree (default 5)")
@@ -139,6 +148,12 @@ def main() -> int:
             ratios = [c["seconds"] / t["seconds"] for t, c in pairs]
             print(f"{kind:5s} ratio compare/this: median {statistics.median(ratios):.2f} "
                   f"(min {min(ratios):.2f}, max {max(ratios):.2f}; > 1: this tree is faster)")
+    if "compare" not in trees:   # the headline figures for report.py: this tree alone
+        from _figures import record
+
+        for kind in kinds:
+            what, target = LATENCY_FIGURES[kind]
+            record("latency", what, statistics.median(r["seconds"] for r in results[kind]["this"]), "s", target)
     print(f"load average after: {load()}", flush=True)
     if args.json:
         args.json.write_text(json.dumps({"trees": {k: str(v) for k, v in trees.items()}, "results": results},

@@ -158,6 +158,12 @@ def main() -> int:
                   f"the first {FIRST_S:g} s {r['speed_first_20s']:.1f}x, after {r['speed_after']:.1f}x, ratio "
                   f"{r['ratio']:.2f} ({'within' if abs(r['ratio'] - 1) <= 0.2 else 'NOT within'} 20 %); load "
                   f"average at the start {r['load_average']}", flush=True)
+    if results:
+        from _figures import record  # the headline figures for report.py
+
+        ratios = sorted(r["ratio"] for r in results)
+        record("lockstep", "hold at a consumer's join, worst run", max(r["hold_s"] for r in results), "s", "<= 1")
+        record("lockstep", "after the join: speed in 20 s / next 20 s", ratios[len(ratios) // 2], "", "0.8..1.2")
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
     return 0

@@ -116,6 +116,11 @@ def main() -> None:
         print(f"  every block from sample 0 present (independent check): {complete}; "
               f"recorder reports loss: {'LOSS' in log}")
         print(f"  recorder CPU: median {statistics.median(cpu):.0f} % of one core")
+        import _figures  # the headline figures for report.py (its record is not this file's record)
+
+        lost = "" if complete and "LOSS" not in log else ", WITH LOSS"
+        _figures.record("recording", f"rig speed the recorder takes{lost}", factor, "×",
+                        ">= 20" if not lost else None)
 
         # ---- replay CPU at 1x ------------------------------------------------------------------------------
         out = tmp / "real_time"

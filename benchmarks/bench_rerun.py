@@ -95,6 +95,9 @@ def live(seconds: float, sink: str, tmp: Path, batch: int) -> None:
           f"{max(s[6] for s in status[1:]):.1f} ms (growth {p50[-1] - p50[0]:+.1f} ms); {samples:.0f} samples, "
           f"{status[-1][2]:.0f} impacts, {gaps:.0f} dropped blocks"
           + (f"; .rrd {size / 1e6:.1f} MB ({size / 1e6 / (seconds + 2):.2f} MB/s)" if size else ""))
+    from _figures import record  # the headline figures for report.py
+
+    record("rerun", f"bridge node at real time, sink `{sink}`", statistics.median(cpu), "%", "<= 20")
     if gaps or max(s[6] for s in status[1:]) > 1000:
         print("  status lines (a stall or dropped blocks: see the lag and slowest message per window):")
         for m in STATUS.finditer(bridge_log.read_text(errors="replace")):

@@ -252,6 +252,20 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path
         return result
 
 
+def record_figures(results: dict) -> None:
+    """The headline figures for report.py (benchmarks/_figures.py): each layout's whole rig, the separate nodes."""
+    from _figures import record
+
+    for layout, result in results.items():
+        procs, total = result["processes"], rig_total(result["processes"])[0]
+        if layout == "composed":
+            record("rig", "composed (`make run`): whole rig", total, "%", f"<= {GOAL_COMPOSED_PERCENT:g}")
+            continue
+        for name, limit in GOALS_PERCENT.items():
+            record("rig", f"separate: {name}", procs.get(name, {}).get("cpu_percent"), "%", f"<= {limit:g}")
+        record("rig", "separate: whole rig", total, "%", f"<= {GOAL_RIG_PERCENT:g}")
+
+
 def compare(args: argparse.Namespace, block_rate: float) -> dict:
     """This tree's rig and ``args.compare``'s, alternately, ``args.rounds`` times each; the whole rig's CPU."""
     layout = args.only or "composed"
@@ -321,6 +335,8 @@ def main() -> None:
         composed, separate = (rig_total(results[n]["processes"])[0] for n in ("composed", "separate"))
         print(f"\nthe whole rig, composed against separate processes, in this run: {composed:.1f} % against "
               f"{separate:.1f} % of one core ({composed - separate:+.1f} points)")
+    if args.rerun == "display":   # the rig as make run starts it
+        record_figures(results)
     soak.write_json(results, args.json)
 
 

@@ -90,7 +90,7 @@ PARENT = "rimd rig (parent)"
 RERUN_SERVER = "rerun server"
 BENCH = "this bench"
 
-GOAL_GROWTH_MB_PER_H = 5.0
+GOAL_GROWTH_MB_PER_H = 2.0   # MB/h: flat memory over a long run
 GOAL_P99_MS = 5.0
 WARMUP_S = 60.0
 
@@ -715,6 +715,22 @@ def goals(result: dict) -> dict:
     return out
 
 
+def record_figures(result: dict) -> None:
+    """The headline figures for report.py (benchmarks/_figures.py): loss, each node process's memory, lateness."""
+    from _figures import record
+
+    minutes, t = result["run"]["minutes"], result["recording"]["topics"]
+    lost = sum(t[name]["lost_samples"] for name in BLOCK_TOPICS) + t[EVENTS_TOPIC]["lost"] + t[MOTOR_TOPIC]["lost"]
+    record("soak", f"data lost in {minutes:g} min", lost, "", "<= 0")
+    for name in node_processes(result["run"]["separate"]):
+        growth = result["processes"].get(name, {}).get("growth_mb_per_h")
+        record("soak", f"{name}: memory growth", growth, "MB/h", f"<= {GOAL_GROWTH_MB_PER_H:g}")
+    sim = result["recording"]["simulator"]
+    record("soak", "simulator pacing p99, worst 10 s window", sim.get("p99_max_ms"), "ms", f"<= {GOAL_P99_MS:g}")
+    if (server := result["processes"].get(RERUN_SERVER, {}).get("rss_end_mb")) is not None:
+        record("soak", "Rerun server's memory at the end", server, "MB")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0, help="wall time of the soak from sample 0 (default 60)")
@@ -760,6 +776,7 @@ def main() -> None:
                              f"{(tmp / 'rig.log').read_text(errors='replace')[-3000:]}") from None
         result["goals"] = goals(result)
         report(result)
+        record_figures(result)
         write_json(result, args.json)
 
 

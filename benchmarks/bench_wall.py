@@ -144,6 +144,25 @@ def table(rows: list[dict]) -> None:
               f"{r['wall'] - r['all']:9.1f} {r['load']:5.2f}")
 
 
+def record_figures(rows: list[dict]) -> None:
+    """The headline figures for report.py (benchmarks/_figures.py).
+
+    Every verb at its default size but ``rimd sweep`` and ``rimd identify`` (bench_analysis.py's Table 1 run and
+    bench_identify.py ``--time`` give theirs); the Peterka map at its large size too, against its target of at
+    most 35 s.
+    """
+    from _figures import record
+
+    for r in rows:
+        c = r["case"]
+        if "error" in r or c.size == "quick" or c.verb in ("sweep", "identify"):
+            continue
+        if c.size == "default":
+            record("analyses", f"`rimd {c.verb}`, {c.label}", r["wall"], "s")
+        elif c.verb == "peterka":
+            record("maps", f"`rimd peterka`, {c.label}", r["wall"], "s", "<= 35")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes instead of the defaults (seconds each)")
@@ -168,6 +187,7 @@ def main() -> None:
                 print(f"  {case.verb} {case.size} ({case.label}): {r['wall']:.1f} s, exit {r['status']}", flush=True)
     print()
     table(rows)
+    record_figures(rows)
     print(f"\n{_load()} at the end")
 
 
