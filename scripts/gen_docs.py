@@ -50,7 +50,7 @@ MARKER = re.compile(r"^<!-- (BEGIN|END) GENERATED: ([\w.-]+) -->[ \t]*$", re.MUL
 
 #: The guide that explains each verb (the CLI reference, docs/cli.md, links each verb's table to it).
 VERB_GUIDES = {
-    "rig": "docs/recording.md",
+    "rig": "docs/rig.md",
     "node": "docs/rig.md",
     "rerun": "docs/rerun.md",
     "sweep": "docs/analyses.md",
@@ -96,6 +96,10 @@ class Section:
 # ------------------------------------------------------------------------------------------------------------
 
 
+#: The end of a text's first sentence: a period and a capital, not after "e.g." or "i.e.".
+SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)\.\s+(?=[A-Z`])")
+
+
 def _cell(text: Any) -> str:
     """A Markdown table cell: one line, pipes escaped."""
     return " ".join(str(text).split()).replace("|", "\\|")
@@ -126,6 +130,11 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def _first_sentence(text: str) -> str:
+    """A description cut to its first sentence: the tables index; the declaration keeps the whole text."""
+    return SENTENCE_END.split(text, maxsplit=1)[0]
+
+
 def _type_name(value: Any) -> str:
     return {bool: "bool", int: "int", float: "float", str: "str", list: "string list"}.get(type(value),
                                                                                         type(value).__name__)
@@ -139,7 +148,7 @@ def _type_name(value: Any) -> str:
 def parameter_table(table: Mapping[str, Any], *, skip: Callable[[str], bool] = lambda name: False) -> str:
     """A node's parameters as a table, from their one declaration (rimd_sim.settings.params.Param)."""
     rows = [[f"`{name}`", _value(p.default), _cell(p.kind), _cell(p.unit or "—"), _cell(p.rule),
-             _cell(p.description + (" (read at start)" if p.read_only else ""))]
+             _cell(_first_sentence(p.description) + (" (read at start)" if p.read_only else ""))]
             for name, p in table.items() if not skip(name)]
     return _table(["parameter", "default", "type", "unit", "rule", "description"], rows)
 
@@ -175,7 +184,7 @@ def render_channel_parameters() -> str:
     rows = []
     for field, spec in fields.items():
         row = [f"`channels.<name>.{field}`", _cell(spec.kind), _cell(spec.unit or "—"), _cell(spec.rule),
-               _cell(spec.description)]
+               _cell(_first_sentence(spec.description))]
         for channel in channels:
             full = f"channels.{channel}.{field}"
             row.append(_value(specs[full].default) if full in specs else "—")
@@ -271,20 +280,18 @@ def _option_default(action: argparse.Action) -> str:
     return _value(action.default)
 
 
-#: The end of a help text's first sentence: a period and a capital, not after "e.g." or "i.e.".
-SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)\.\s+(?=[A-Z`])")
-
-
 #: A help text's ", default X" or " (default X)", removed when X is the default column's value.
 DEFAULT_NOTE = re.compile(r" \(default:? ([^()\s]+)\)|, default ([^,;()\s]+)(?=[,;]|$)")
 
 
 def _option_help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
-    """The option's help as ``--help`` expands it, cut to its first sentence: the table is an index of the
-    options, ``rimd VERB --help`` gives each one's whole text."""
+    """The option's help as ``--help`` expands it, cut to its first sentence.
+
+    The table indexes the options; ``rimd VERB --help`` gives each one's whole text.
+    """
     formatter = parser._get_formatter()  # expands %(default)s and friends like --help does
     text = formatter._expand_help(action) if action.help else ""
-    text = SENTENCE_END.split(text, maxsplit=1)[0]
+    text = _first_sentence(text)
     shown = str(action.default)
     text = DEFAULT_NOTE.sub(lambda m: "" if shown in (m.group(1), m.group(2)) else m.group(0), text)
     for group in parser._mutually_exclusive_groups:

@@ -214,3 +214,61 @@ def test_the_reference_scan_finds_what_it_is_for(tmp_path):
     assert [line.split(": ")[0:2] for line in found] == [
         ["docs/a.md:2", "the name of the outside contract document"], ["docs/a.md:3", "a numbered issue reference"]]
     assert any("pending.py:1" in line for line in _unopenable_references(tmp_path, ()))
+
+
+#: A reference from code, configuration or scripts to a page of the docs: ``page.md#anchor``, or the page and
+#: the start of a heading in quotes (``rig.md, "The composed rig"``).
+CODE_REFERENCE = re.compile(r"\b([a-z][a-z_-]*)\.md(?:#([a-z0-9_-]+)|,? \(?\"([^\"\n]{3,80})\")")
+REFERRING = ("rimd_sim", "tests", "benchmarks", "scripts", "config", "Makefile", ".ci", "rimd_msgs")
+
+
+def _headings(path: Path) -> list[str]:
+    text = re.sub(r"^```.*?^```[ \t]*$", "", path.read_text(), flags=re.MULTILINE | re.DOTALL)
+    return [m.group(1).strip("` ").lower() for m in re.finditer(r"^#{1,6}\s+(.+?)\s*#*\s*$", text, re.MULTILINE)]
+
+
+def broken_code_references(root: Path) -> list[str]:
+    """Every reference from the code to a docs page or heading that does not exist, as ``file:line: reference``."""
+    pages = {p.stem: p for p in [root / "README.md", *sorted((root / "docs").glob("*.md"))]}
+    files = [f for name in REFERRING for f in ([root / name] if (root / name).is_file()
+                                                 else sorted((root / name).rglob("*")))
+             if f.is_file() and f.suffix in (".py", ".yaml", ".xml", ".sh", ".toml", "")
+             and "__pycache__" not in f.parts and f.name != Path(__file__).name]   # its examples are no references
+    broken = []
+    for path in files:
+        try:
+            text = path.read_text()
+        except (UnicodeDecodeError, OSError):
+            continue
+        for number, line in enumerate(text.splitlines(), 1):
+            for match in CODE_REFERENCE.finditer(line):
+                page = pages.get(match.group(1))
+                where = f"{path.relative_to(root)}:{number}: {match.group(0)}"
+                if page is None:
+                    if match.group(1) in {"readme"} or (root / "docs" / f"{match.group(1)}.md").exists():
+                        continue
+                    if match.group(2) or match.group(3):
+                        broken.append(where)
+                    continue
+                if match.group(2) and match.group(2) not in _anchors(page):
+                    broken.append(where)
+                elif match.group(3) and not any(h.startswith(match.group(3).strip("` ").lower())
+                                                for h in _headings(page)):
+                    broken.append(where)
+    return broken
+
+
+def test_references_from_the_code_to_the_docs_name_existing_pages_and_headings():
+    broken = broken_code_references(ROOT)
+    assert not broken, "references to a docs page or heading that does not exist:\n" + "\n".join(broken)
+
+
+def test_the_code_reference_scan_finds_a_missing_heading(tmp_path):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "rig.md").write_text("# Rig\n\n## The composed rig\n")
+    (tmp_path / "README.md").write_text("# R\n")
+    (tmp_path / "rimd_sim").mkdir()
+    (tmp_path / "rimd_sim" / "a.py").write_text('# rig.md, "The composed rig"\n# rig.md, "Pacing: lockstep"\n'
+                                                "# rig.md#the-composed-rig rig.md#gone\n")
+    assert broken_code_references(tmp_path) == ['rimd_sim/a.py:2: rig.md, "Pacing: lockstep"',
+                                                "rimd_sim/a.py:3: rig.md#gone"]
