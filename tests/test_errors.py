@@ -79,8 +79,8 @@ def _instance(cls: type[RimdError]) -> RimdError:
 
 @pytest.mark.parametrize("name", sorted(n for n, c in EXCEPTIONS.items() if issubclass(c, RimdError)))
 def test_every_error_of_the_family_pickles_as_itself(name):
-    """A worker process (the sweeps' pools, Dask) sends its error back pickled: a ConfigError (three constructor
-    arguments) used to fail to unpickle, and the pool broke instead of the refusal reaching the user."""
+    """A worker process (the sweeps' pools, Dask) sends its error back pickled: an error that failed to unpickle
+    (a ConfigError has three constructor arguments) would break the pool instead of reaching the user."""
     error = _instance(EXCEPTIONS[name])
     copy = pickle.loads(pickle.dumps(error))
     assert type(copy) is type(error) and str(copy) == str(error) and vars(copy) == vars(error)

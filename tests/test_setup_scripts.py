@@ -163,7 +163,7 @@ def test_run_tests_fails_when_no_test_is_collected(repo_root, tmp_path):
 
 @pytest.mark.process
 def test_env_sh_works_in_a_strict_script_and_keeps_its_options(repo_root):
-    # colcon's setup.sh reads the unset COLCON_TRACE: under `set -u` the caller used to exit silently.
+    # colcon's setup.sh reads the unset COLCON_TRACE: under `set -u` the caller would exit silently.
     script = (
         "set -euo pipefail\n"
         f"cd {repo_root}\n"
@@ -220,7 +220,7 @@ def test_env_sh_uses_the_venv_ros_ws_was_built_with(repo_root, tmp_path):
     chosen = _source_env(root, VENV=str(default))
     assert chosen.stdout.splitlines()[-1] == f"venv {default}"
     assert f"env.sh: warning: ros_ws was built with another venv ({elsewhere}), not {default}" in chosen.stderr
-    # No record of the build's venv: .venv, as before.
+    # No record of the build's venv: .venv, the default.
     (root / "ros_ws" / "install" / ".rimd-venv").unlink()
     unrecorded = _source_env(root)
     assert unrecorded.stdout.splitlines()[-1] == f"venv {default}"

@@ -7,10 +7,10 @@ recent enough version: the module is *pip-only* there, installed into a venv mad
 ``--system-site-packages``, docs/ros-install.md). ``package.xml`` declares the rosdep keys; the wheel declares
 the distributions; tests check both against the package's imports.
 
-The rosdep keys were checked against the public rosdep database (``rosdep/python.yaml`` and
-``rosdep/base.yaml`` of ros/rosdistro, and ``jazzy/distribution.yaml`` for the ROS packages): a key exists and
-resolves on Ubuntu 24.04 (noble), and noble's apt version lies in the row's range (docs/ros-install.md says
-which versions were confirmed and what was run against them). ``zstandard`` and ``lz4`` have no rosdep key;
+Each rosdep key is a key of the public rosdep database (``rosdep/python.yaml`` and ``rosdep/base.yaml`` of
+ros/rosdistro, and ``jazzy/distribution.yaml`` for the ROS packages) that resolves on Ubuntu 24.04 (noble), and
+noble's apt version lies in the row's range (docs/ros-install.md lists those versions and what runs against
+them). ``zstandard`` and ``lz4`` have no rosdep key;
 ``numba`` has one (``python3-numba``) but noble's is older than the range; ``pytest``'s (``python3-pytest``) is
 7.4 on noble, below the plugin's range: those are pip-only.
 

@@ -41,17 +41,17 @@ full disk), which ``rimd_sim.cli.main`` renders in the same one line naming the 
 ``TypeError`` for a caller's programming mistake (a bad argument to a function, not a user's input); and
 ``KeyboardInterrupt``.
 
-No mixin with a built-in exception: ``ConfigError`` and ``CommandError`` used to be ``ValueError`` as well,
-``IntegrationError`` a ``RuntimeError``, ``DesignError`` a ``ValueError`` and ``MessageDefinitionError`` a
-``LookupError``. That made ``except ValueError`` (around ``float(text)``, or a library's own failure) swallow
-configuration refusals by accident. Nothing outside the package needs them: argparse's ``type=`` callables of
-``rimd_sim.cli`` raise ``argparse.ArgumentTypeError`` themselves and call nothing that raises the family, and the
-ROS parameter callbacks catch ``ConfigError``/``CommandError`` by name. So the family's classes derive from
-``Exception`` only, through :class:`RimdError`; catch the family's class, not a built-in one.
+No mixin with a built-in exception: the family's classes derive from ``Exception`` only, through
+:class:`RimdError`, so that an ``except ValueError`` (around ``float(text)``, or a library's own failure) never
+swallows a configuration refusal by accident. Nothing outside the package needs a built-in base: argparse's
+``type=`` callables of ``rimd_sim.cli`` raise ``argparse.ArgumentTypeError`` themselves and call nothing that
+raises the family, and the ROS parameter callbacks catch ``ConfigError``/``CommandError`` by name. Catch the
+family's class, not a built-in one.
 
 Every error of the family pickles whatever its constructor's signature (:meth:`RimdError.__reduce__`), so one
-raised in a worker process (the sweeps' process pools, Dask) reaches the caller as itself: a
-:class:`ConfigError` used to break the pool instead (its constructor takes three arguments).
+raised in a worker process (the sweeps' process pools, Dask) reaches the caller as itself. Python's default
+pickling calls the constructor with the message alone, which fails for :class:`ConfigError` (three arguments)
+and would break the pool instead.
 """
 
 from __future__ import annotations

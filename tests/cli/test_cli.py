@@ -123,8 +123,9 @@ def _numeric_options():
 
 
 def test_every_numeric_option_of_every_verb_is_checked_and_names_itself_in_its_refusal():
-    """Once `rimd rig --duration -5` ran until killed and `--gap-mm 2400` answered in metres. Every number a
-    verb takes is converted by `cli.number` (finite, within its bounds, refused naming the option as typed)."""
+    """Every number a verb takes is converted by `cli.number` (finite, within its bounds, refused naming the
+    option as typed): `rimd rig --duration -5` is refused instead of running until killed, and the refusal of
+    `--gap-mm 2400` speaks of the option in mm, not of the parameter in metres."""
     import argparse
 
     options = list(_numeric_options())

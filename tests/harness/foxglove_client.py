@@ -117,7 +117,7 @@ class FoxgloveClient:
         elif op == "status":
             r.statuses.append(msg)
             # The SDK can send a channel's advertisement a moment before it takes subscriptions to it: a client
-            # that subscribes at once may hear "Unknown channel ID: N" (seen under load); it asks again.
+            # that subscribes at once may hear "Unknown channel ID: N" (more likely under load); it asks again.
             unknown = re.fullmatch(r"Unknown channel ID: (\d+)", msg.get("message", ""))
             if unknown and int(unknown.group(1)) in r.channels and len(r.statuses) < 200:
                 channel = int(unknown.group(1))

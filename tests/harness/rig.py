@@ -33,7 +33,7 @@ class RawCollector:
         executor.add_node(self.node)
         self.messages: dict[str, list[bytes]] = {t: [] for t in topics}
         # When DDS received each (its reader's timestamp, s): not when this process's executor took it, which a
-        # loaded test process delays (a CI run measured a 2x replay at 0.82 of the recorded span so).
+        # loaded test process delays enough to make a replay's span look markedly shorter than the recorded one.
         self.times: dict[str, list[float]] = {t: [] for t in topics}
         qos = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
         self.subscriptions = []

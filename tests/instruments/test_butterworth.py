@@ -1,7 +1,8 @@
 """The instruments' Butterworth sections (rimd_sim.instruments.butterworth) are scipy.signal.butter's, bit for bit.
 
-The simulator node no longer imports scipy.signal (half a second of its start); its readings stay
-bit-identical only if the coefficients are the same floating-point numbers, signs of zeros included.
+The simulator node does not import scipy.signal (a slow import that delays its start); its readings are
+bit-identical to scipy's design only if the coefficients are the same floating-point numbers, signs of zeros
+included.
 """
 
 from __future__ import annotations

@@ -70,8 +70,8 @@ def probe(src: Path, cache: Path, *models: str) -> dict:
 @pytest.mark.process
 def test_two_models_loaded_from_the_cache_keep_their_own_code(tmp_path):
     """Compiled in two processes (each caches its model's functions), then both loaded from the cache into a third:
-    each model computes what it computed when compiled. (Before the fix, the functions of the two models shared
-    their compiled symbols' names, and the two-mass model ran the rigid model's code without an error.) The third
+    each model computes what it computed when compiled. (The two models' functions need compiled symbols of their
+    own names: with shared names, the two-mass model would run the rigid model's code without an error.) The third
     process compiles nothing."""
     rigid_alone = probe(SRC, tmp_path, "rigid")["rigid"]
     two_alone = probe(SRC, tmp_path, "two_mass")["two_mass"]
@@ -107,7 +107,7 @@ def test_the_drivers_cache_key_holds_the_kernels_own_source():
     """The driver's namespace, whose name is its compiled code's cache key, is named after the digest of
     ``kernel.py`` too, not only of the physics: a cached caller in another file (the ensemble loop) holds the
     driver's compiled code, numba checks only that caller's file, so with the physics alone in the key an edit of
-    ``kernel.py`` was served stale through it. Every model's driver."""
+    ``kernel.py`` would be served stale through it. Every model's driver."""
     for name, spec in MODELS.items():
         key = kernel.source_key(kernel, spec.physics, *spec.sources)
         assert spec.driver.__name__ == f"{kernel.__name__}.driver_{name}_{key}", name

@@ -229,8 +229,8 @@ def test_no_period_doubling_below_the_window_paper_model():
 
 def test_grazing_release_at_gap_2_4mm_does_not_chatter():
     """Regression: at gap 2.4 mm and 3.5 Hz a release leaves delta a rounding error above 0 when the
-    impact closes; the integrator must not switch again and again on that state (it once raised the
-    chattering guard at t = 0.517 s)."""
+    impact closes; the integrator must not switch again and again on that state (which would raise the
+    chattering guard within the first second)."""
     model = RigModel(at_frequency(3.5, gap=2.4e-3), channels=False, truth=False)
     impacts = model.advance(150 / 3.5).impacts
     assert impacts and model.stats["switches"] < 3 * len(impacts) + 10

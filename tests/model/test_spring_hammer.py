@@ -1,12 +1,10 @@
 """The hammer with its own spring: a pendulum length set apart from the natural frequency.
 
-Without a spring (``pendulum_length: 0``, the default) the model must be bit-identical to the gravity pendulum
-it was before the spring existed. ``REFERENCE`` held the SHA-256 of the public calls' outputs computed by
-:func:`public_hashes` on the code before the spring was added (commit 5a54004, numba and numpy of the lock), and
-they held until the Runge-Kutta step took fused multiply-adds and the Peterka map's start from rest its own
-default cap (640 cycles), which change every output's last bits on purpose: the hashes were re-taken then, on the
-commit that made both changes, so that the test goes on catching any change nobody meant. This file prints them
-again with ``python tests/model/test_spring_hammer.py`` (run it against another tree by putting that tree's
+Without a spring (``pendulum_length: 0``, the default) the model is the gravity pendulum, bit for bit.
+``REFERENCE`` holds the SHA-256 of the public calls' outputs computed by :func:`public_hashes` (numba and numpy of
+the lock), so that the test catches any change of those outputs that nobody meant. A change meant to alter the
+outputs' last bits (the integrator's order of operations, a default cap) re-takes the hashes in the same commit.
+``python tests/model/test_spring_hammer.py`` prints them (run it against another tree by putting that tree's
 ``rimd_sim`` first on ``PYTHONPATH``).
 
 With a spring: a hammer at f_n 10 Hz with l = 23 mm (a gravity pendulum would be 2.48 mm) keeps g = 9.81, runs in
@@ -26,7 +24,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "config"
 
-#: ``public_hashes()`` as re-taken at the step's fused multiply-adds (see the module docstring).
+#: The expected ``public_hashes()`` (see the module docstring).
 REFERENCE = {
     'model.paper': 'e1f0789457969179324a6d9acb98d7d058751876fef791c2d0a7907a1eb36c80',
     'model.rimd': '800833b9f812b7c22d90cbee789e3d18add7c1bc7e24b07f222485569ebbaea9',

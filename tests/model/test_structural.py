@@ -87,8 +87,8 @@ def test_reconfigured_to_rigid_while_ringing_runs_on(structural):
 
 def test_stiff_link_and_mount_tend_to_the_paper_model():
     """The rigid case is also the limit: with the link and the mount 1e10 N/m the pulse's contact impulse
-    and duration come within 2 % of the rigid model's (the peak differs more: the dashpot's jump of c v at
-    first contact now accelerates the sensor's mass first)."""
+    and duration come within 2 % of the rigid model's (the peak differs more: in the two-mass model the dashpot's
+    jump of c v at first contact accelerates the sensor's mass first)."""
     v = 0.07
     rigid = pulse(SimConfig(), v).summary
     stiff = pulse(SimConfig().with_parameters({
@@ -164,8 +164,7 @@ def test_fitted_preset_double_peak_and_ringing_at_3_75_hz(structural):
 
 #: Paper Table 1 (band A, band B) per gap.
 TABLE1 = {0.0: (3.75, 7.25), 1.0e-3: (3.00, 6.25), 2.4e-3: (2.50, 5.25)}
-#: What the fitted preset gave when it was fitted: a regression pin (docs/physics.md reports the miss
-#: at 1.0 mm).
+#: The fitted preset's resonances: a regression pin (docs/physics.md reports the miss at 1.0 mm).
 TABLE1_STRUCTURAL = {0.0: (3.75, 7.25), 1.0e-3: (3.00, 6.50), 2.4e-3: (2.50, 5.25)}
 
 
@@ -173,7 +172,7 @@ TABLE1_STRUCTURAL = {0.0: (3.75, 7.25), 1.0e-3: (3.00, 6.50), 2.4e-3: (2.50, 5.2
 def test_table1_from_rest_with_the_structural_preset(structural, gap):
     """Paper Table 1 with config/structural.yaml, each frequency of the 0.25 Hz grid from rest, steady state
     over the last 50 of 150 cycles (the machinery of the paper model's Table 1 test). The resonances measured
-    are within 0.25 Hz (one grid step) of the paper's, and they are the ones the preset gave when it was fitted
+    are within 0.25 Hz (one grid step) of the paper's, and they are the fitted preset's
     (regression pin: five exact, band B at 1.0 mm 6.50 Hz); at gap 0 both peaks within 10 % of 82.4 N and
     120 N (paper)."""
     rows = []

@@ -11,8 +11,8 @@ Hypotheses:
 1. at real time, a Cyclone reader that joins the running rig gets each of the four channels without a hole in
    ``first_index`` from its first block on, every stamp ``t0 + first_index / sample_rate`` with ``t0`` the run's
    ``start_stamp`` (``/rig/session``). A Cyclone reader delivers nothing from a Fast DDS writer until that writer's
-   first heartbeat after their match and keeps only the first 128 samples meanwhile; with Fast DDS's default
-   heartbeat (3 s), the 2 kHz channels lost 71-72 blocks 1.28 s after the reader's first block in every run;
+   first heartbeat after their match and keeps only the first 128 samples meanwhile, so with Fast DDS's default
+   heartbeat (3 s) the 2 kHz channels would lose a second's worth of blocks soon after the reader's first block;
 2. in lockstep, as fast as the consumer allows, a Cyclone consumer that publishes its own
    ``rimd_msgs/msg/ConsumerProgress`` (as a client in another language does) joins, gets every block of the four
    channels from sample 0 with stamps ``first_index / sample_rate``, and its leave is heard.

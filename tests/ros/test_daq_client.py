@@ -90,8 +90,8 @@ def test_my_daq_sees_every_impact_and_names_the_faults(rimd_rig, tmp_path):
 @pytest.mark.timeout(180)
 def test_against_a_rig_at_real_time_joined_late_the_client_counts_the_runs_seconds(ros_processes, tmp_path):
     """``rimd rig`` runs at real time and stamps in wall-clock time; the client, started after it, acquires
-    ``--until`` seconds from the first sample it gets, and its times are the run's simulation seconds (it took the
-    stamps for simulation time: a lab engineer's first run stopped at once, one block per channel, exit 0)."""
+    ``--until`` seconds from the first sample it gets, and its times are the run's simulation seconds (a client
+    that took the stamps for simulation time would stop at once, after one block per channel, with exit 0)."""
     sim = ros_processes.start_node("rimd_simulator", name="sim_wall_clock")
     sim.wait_for_output(r"rig ready: .* stamps: wall clock", timeout=90)
     report_file = tmp_path / "report.json"

@@ -137,7 +137,7 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, rimd_ri
 
     # Every step took effect at its scheduled stamp, one dwell apart, and the recording is exactly what the
     # core computes offline for that schedule: the same schedule gives the same data however loaded the
-    # machine was (the requests travel late; the rig applies them at the stamps they name).
+    # machine is (the requests travel late; the rig applies them at the stamps they name).
     schedule = read_json(out / "experiment.json")["steps"]
     starts = [s["scheduled_stamp_ns"] for s in schedule]
     assert [s["effective_stamp_ns"] for s in schedule] == starts and starts[0] == round(START * 1e9)

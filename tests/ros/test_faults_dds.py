@@ -417,7 +417,7 @@ def test_analyze_reports_the_faults_seen_in_the_recording_and_the_captures(fault
     assert seen and float(seen.group(1)) == pytest.approx(1e4, rel=0.01), out
     # The captures against the 20 kHz channel, in the run without faults (with them, the channel's own
     # faults, offset, gain, drift, make it disagree, as they should; the scope is separate hardware).
-    # (the report alone: the whole analysis, figures included, takes ~10 s more on this machine)
+    # (the report alone: the whole analysis, figures included, takes far longer)
     from rimd_sim.analysis.recordings import recorded as rec
     from rimd_sim.analysis.recordings.faultreport import fault_report, format_fault_report
 

@@ -14,8 +14,8 @@ Hypotheses:
    the join at the match, and the consumer receives every block of both channels from sample 0;
 2. a consumer that names its node but no topics, started once the rig is up, holds the run only for the
    readers it has: the rig's join waits for its readers of the two channels it takes (the log names them), not
-   for the topics it does not read (no "publishing although readers of ... are not matched" warning, which named
-   /rig/truth and the rest and came after 15 s). How long that wait lasts, and the run's speed over its first
+   for the topics it does not read (no "publishing although readers of ... are not matched" warning, which would
+   name /rig/truth and the rest). How long that wait lasts, and the run's speed over its first
    20 s against after, are figures of benchmarks/bench_lockstep_join.py, not asserted here (wall-clock
    thresholds flake on a loaded machine).
 """

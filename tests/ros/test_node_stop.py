@@ -134,7 +134,8 @@ def test_replay_stopped_at_random_moments_exits_0(ros_processes, tmp_path):
 
 def test_the_nodes_use_the_fast_dds_profile_with_a_short_heartbeat(tmp_path):
     """The entry module points Fast DDS at the package's profile (unless the user chose one), and the profile
-    sets the reliable writers' heartbeat to 0.2 s (Fast DDS's default, 3 s, lost blocks under load)."""
+    sets the reliable writers' heartbeat to 0.2 s (with Fast DDS's default, 3 s, a reader loses blocks under
+    load)."""
     import subprocess
     import sys
     import xml.etree.ElementTree as ET

@@ -1,8 +1,8 @@
 """The progress reporter of a user's DAQ node, in-process over DDS: what it says when it cannot join.
 
 Hypothesis: a subscription on a misspelt topic matches no publisher, so the reporter never joins and a rig in
-lockstep waits for it before its first block, silently on the DAQ's side (a lab engineer's node on
-``/rig/impact_force`` printed nothing and timed out). Once a lockstep publisher listens and a subscription has
+lockstep waits for it before its first block, silently on the DAQ's side (a node on ``/rig/impact_force``
+would print nothing and time out). Once a lockstep publisher listens and a subscription has
 gone ``unmatched_warning`` seconds without a publisher, the reporter's node warns, naming that topic and the
 published topics of its type; a reporter whose subscriptions all matched joins and says nothing.
 """

@@ -115,7 +115,7 @@ def test_restamp_and_playback_duration(ros_processes, ros_executor, recording):
     kept = [m for m in messages if m.log_time <= first + 10**9]
     expected = len([m for m in kept if m.topic in collector.messages])   # up to 1 s
     # The replay's end waits for the subscribers' acknowledgements, not for this test to take what arrived: wait
-    # for both (a CI run counted at the replay's exit and found 356 of the 609 taken).
+    # for both (at the replay's exit, many of the messages may still be untaken).
     assert spin_until(ros_executor, lambda: replay.returncode is not None and _received(collector) >= expected, 30), (
         _received(collector), expected, replay.tail())
     assert _received(collector) == expected

@@ -95,9 +95,9 @@ def test_rig_refuses_a_bad_rerun_section(ros_processes, tmp_path, repo_root):
 def test_a_section_ros_would_not_apply_is_refused_and_a_wildcard_one_is_applied(ros_processes, tmp_path):
     """Hypothesis: ROS applies a parameter-file section only to the node whose fully qualified name it matches,
     and says nothing otherwise; a plain ``rimd_simulator:`` key is ``/rimd_simulator``, not the simulator in
-    ``/rig``. Before this test the presets used that key and the node silently ran with its defaults. Now the
-    node and ``rimd rig`` refuse such a file naming the section and the key that works, and the presets'
-    ``/**/rimd_simulator`` key is applied (the node reports the file's gap)."""
+    ``/rig``, so a file with that key would leave the node silently on its defaults. The node and ``rimd rig``
+    refuse such a file naming the section and the key that works, and the presets' ``/**/rimd_simulator`` key
+    is applied (the node reports the file's gap)."""
     plain = tmp_path / "plain.yaml"
     plain.write_text("rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n")
     node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(plain))

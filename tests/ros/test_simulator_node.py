@@ -83,7 +83,7 @@ def test_channels_contiguous_exact_stamps_and_impacts(fast_rig, ros_executor):
     start = _ns(response.effective_stamp)
     assert spin_until(ros_executor, lambda: len(events) >= 3, timeout=60)
     # The events and the blocks come on topics of their own: the blocks holding the impacts may still be on their
-    # way when the third event is taken (seen in a CI run under load: only the first, weaker impact's blocks in).
+    # way when the third event is taken (under load, only the first, weaker impact's blocks may be in).
     third = _ns(events[2].header.stamp)
     assert spin_until(ros_executor, lambda: all(received and _ns(received[-1].header.stamp) > third + 20_000_000
                                                 for received in blocks.values()), timeout=30), \
@@ -175,8 +175,9 @@ def test_bad_requests_refused_and_the_rig_keeps_publishing(fast_rig, ros_executo
 
 def test_real_time_counts_and_exact_stamps(ros_processes, ros_executor):
     """At real_time_factor 1, over 300 blocks of each channel (3 s of simulation): first_index is contiguous, and
-    every stamp is t0 + first_index / rate exactly with one t0 for all channels, a whole millisecond of today's
-    wall clock. How closely the blocks keep to real time is a speed figure: benchmarks/bench_simulator_node.py."""
+    every stamp is t0 + first_index / rate exactly with one t0 for all channels, a whole millisecond of the
+    current wall clock. How closely the blocks keep to real time is a speed figure:
+    benchmarks/bench_simulator_node.py."""
     import time
 
     import rclpy
@@ -205,8 +206,8 @@ def test_real_time_counts_and_exact_stamps(ros_processes, ros_executor):
 
 
 @pytest.mark.running
-# At 4x too (see above): at factor 0 this test's own subscriber, under load, fell more than the publishers' history
-# behind after the resume (first_index 165200 then 200000: a loss by the DDS contract, not a gap in the rig).
+# At 4x too (see above): at factor 0 this test's own subscriber, under load, can fall more than the publishers'
+# history behind after the resume (a loss by the DDS contract, not a gap in the rig).
 @pytest.mark.parametrize("fast_rig", ["4.0"], indirect=True)
 def test_pause_resume_reset_and_perturb(fast_rig, ros_executor):
     """Pause freezes the stream (no new blocks), resume continues it without a gap in first_index; perturb and

@@ -274,7 +274,8 @@ def test_settings_are_declared_and_checked():
 def test_the_first_message_goes_whatever_its_stamp_then_the_window_holds():
     """A replay of a real-time recording: its stamps are wall-clock epoch times (1.8e18 ns), far beyond a joined
     consumer's zero plus the window. Nothing published yet, so nothing can be waited for: the first message goes,
-    then the consumer holds the run at its report plus the window (before the fix the replay held for ever)."""
+    then the consumer holds the run at its report plus the window (holding the first message too would hold the
+    replay for ever)."""
     epoch = 1_795_525_000 * S
     pacer = Pacer(0.0, lockstep("daq", window=0.05), clock=FakeClock())
     ends = [epoch + 10 * MS * (i + 1) for i in range(10)]

@@ -279,8 +279,8 @@ def test_the_sink_offers_the_range_and_carries_requests_both_ways(recording):
 
 def test_the_sink_is_not_called_while_it_restarts(recording):
     """Offering a range restarts the SDK's server (stop, then a new one), on the relay's watcher thread, while the
-    executor's timer broadcasts the time: the SDK refused a call made during the stop ("Already mutably borrowed"),
-    which killed the bridge in a CI run. Hypothesis: broadcasts from another thread through restarts raise nothing,
+    executor's timer broadcasts the time: the SDK refuses a call made during the stop ("Already mutably borrowed"),
+    which would kill the bridge. Hypothesis: broadcasts from another thread through restarts raise nothing,
     and reach the server again after them."""
     import threading
 

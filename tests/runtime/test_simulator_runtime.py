@@ -17,9 +17,9 @@ Hypotheses:
 * run identity: start (or the first resume of a run started paused) and each reset publish a session with a
   new run id, its reason and sequence, the stamp of its first sample, the seed, the configuration's hash;
 * diagnostics: the lateness, overruns, counts per topic and lockstep states are what the clocks make them;
-* every message is CDR that rimd_sim.io.cdr reads, and that rclpy reads as exactly the message the node built
-  field by field before it published bytes (only the alignment padding differs: zeros now, where rclpy leaves
-  whatever the buffer held).
+* every message is CDR that rimd_sim.io.cdr reads, and that rclpy reads as exactly the message built field by
+  field from the same data with rclpy's message classes (only the alignment padding differs: the runtime writes
+  zeros, where rclpy leaves whatever the buffer held).
 """
 
 from __future__ import annotations
@@ -468,10 +468,10 @@ def test_an_integration_error_stops_the_loop_and_says_why():
 
 # ---- the bytes --------------------------------------------------------------------------------------------------
 
-def test_every_message_is_what_the_node_built_field_by_field_before():
-    """The runtime's bytes against rclpy's serialization of the messages the node used to fill field by field
-    (that code, kept here): rclpy reads them as equal messages, and the bytes are equal but for the alignment
-    padding, which rclpy leaves as the buffer held it and the runtime zeroes."""
+def test_every_message_is_what_rclpy_builds_field_by_field():
+    """The runtime's bytes against rclpy's serialization of the same messages filled field by field with rclpy's
+    message classes (the reference builder below): rclpy reads them as equal messages, and the bytes are equal but
+    for the alignment padding, which rclpy leaves as the buffer held it and the runtime zeroes."""
     serialization = pytest.importorskip("rclpy.serialization")
     msgs = pytest.importorskip("rimd_msgs.msg")
     from rosgraph_msgs.msg import Clock
@@ -489,7 +489,7 @@ def test_every_message_is_what_the_node_built_field_by_field_before():
     rt.set_parameters([("channels.impact_force.frame_id", "force_frame")])   # the node's config at once
     rt.reset()
     rig.run(7)
-    expected = []   # (key, message) as the node built them
+    expected = []   # (key, message) as rclpy's message classes build them
     for number, block in enumerate(blocks):
         config = before if number < 30 else rt.config
         for name in ("cart_displacement", "rimd_displacement", "rimd_acceleration", "impact_force"):

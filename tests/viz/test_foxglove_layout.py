@@ -1,6 +1,6 @@
 """The Foxglove layout config/foxglove/rig_layout.json (docs/foxglove.md), checked without Foxglove.
 
-The layout was not opened in Foxglove here (docs/foxglove.md says why). What is checked instead: the file
+The test does not open the layout in Foxglove (docs/foxglove.md says why). What it checks instead: the file
 follows the layout format that Foxglove's and Lichtblick's "Import layout from file" read (``configById``,
 ``globalVariables``, ``userNodes``, ``playbackConfig``, a mosaic tree in ``layout``; the panel configs of
 Lichtblick 1.10's ``Plot``, ``CallService``, ``RawMessages`` and ``Parameters`` panels), as a JSON schema

@@ -11,7 +11,7 @@ in submission order, so the result does not depend on where or in which order th
   Dask distributed cluster through ``distributed.Client(address).get_executor()``, a
   ``concurrent.futures.Executor`` whose futures are the cluster's. Dask resubmits the tasks of a worker that
   dies. Each worker needs this package importable (``pip install`` of the repository, or its ``env.sh``) and
-  the same dependency versions (see docs/analyses.md, "Running maps on a Dask cluster").
+  the same dependency versions (see docs/analyses.md, "Maps at scale").
 
 An unreachable scheduler is refused within ``CONNECT_TIMEOUT_S`` (+ the wait for a first worker) with the
 address and the reason (:class:`SchedulerError`).

@@ -1,8 +1,8 @@
-"""The instruments' Butterworth sections without ``scipy.signal``, whose import costs a starting node half a second.
+"""The instruments' Butterworth sections without ``scipy.signal``, whose import would slow every node's start.
 
-A node's start waits for its imports; ``scipy.signal`` alone took 0.55 s of the simulator node's 1.0 s
-(docs/benchmarks.md, "Latency"), for the two filters of the instrument chain (:mod:`.sensors`): a 2nd-order
-low-pass and a 1st-order high-pass. Both are designed here as ``scipy.signal.butter(N, cutoff, btype, fs=fs,
+A node's start waits for its imports, and importing ``scipy.signal`` is a large share of the simulator node's
+start (docs/benchmarks.md, "Latency"), only for the two filters of the instrument chain (:mod:`.sensors`): a
+2nd-order low-pass and a 1st-order high-pass. Both are designed here as ``scipy.signal.butter(N, cutoff, btype, fs=fs,
 output="sos")`` designs them, step by step with the same numpy operations in the same order (the analog
 prototype's poles, the frequency pre-warped for the bilinear transform, the transform, and the pairing of poles
 and zeros into one section), so that the coefficients are the same floating-point numbers, signs of zeros

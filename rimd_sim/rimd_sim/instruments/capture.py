@@ -82,9 +82,9 @@ class TriggeredCapture:
                 slow_acc: np.ndarray, slow_force: np.ndarray) -> list[CaptureRecord]:
         """Take the next stretch (samples ``first ..`` at the capture rate); return the captures completed.
 
-        ``acc`` is the acceleration in contact only (NaN outside: evaluating it at 1 MHz all the time was the
-        capture's main cost); outside contact, where it is smooth, the captured acceleration is interpolated
-        linearly between the noise-free samples of the acceleration channel (``slow_acc`` from index
+        ``acc`` is the acceleration in contact only (NaN outside, because evaluating it at 1 MHz all the time
+        would be the capture's main cost); outside contact, where it is smooth, the captured acceleration is
+        interpolated linearly between the noise-free samples of the acceleration channel (``slow_acc`` from index
         ``slow_first`` at ``slow_rate``) that lie outside contact (``slow_force`` zero).
         """
         thr = self.config.threshold

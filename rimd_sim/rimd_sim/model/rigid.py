@@ -153,8 +153,8 @@ def truth(mode, s, t, p, fs, xc, vc, ac):
     """``(x, v, a, delta, force)`` of the truth block: the hammer (inertial) and the contact.
 
     Written out in one function, sin and cos of theta once (the terms of :func:`theta_accel` and
-    :func:`penetration`, in their order of operations): numba's inlining of those functions here cost 80 % more
-    per truth sample.
+    :func:`penetration`, in their order of operations), because numba's inlining of those functions here makes each
+    truth sample markedly dearer.
     """
     th = s[0]
     om = s[1]

@@ -66,8 +66,8 @@ MAX_SI_MAGNITUDE = 1e9
 #: Largest motor ramp rate (Hz/s), of ``motor.ramp_rate`` and of a ``set_motor_frequency`` request.
 MAX_RAMP_RATE = 1e4
 
-# Upper bounds (here and below) far beyond any instrument or rig refuse the absurd (1e300), which was accepted
-# and, for some parameters, stopped or hung the running rig's integrator; each lower bound that is not 0 says why.
+# Upper bounds (here and below) far beyond any instrument or rig refuse absurd values (1e300), which for some
+# parameters would stop or hang the running rig's integrator; each lower bound that is not 0 says why.
 
 
 #: The contact laws a configuration may name, in the order of their codes in the compiled kernel; the laws
@@ -83,14 +83,14 @@ class ContactParams:
     """
 
     model: str = param("spring_dashpot", "contact law (paper Eq. 1)", choices=CONTACT_MODELS)
-    # k = 1e300 or c = 1e300 stopped the rig at its first contact (step size underflow, non-finite state); the
-    # bounds are well inside what the integrator was checked to handle (k = 1e14, c = 1e7 at the defaults).
+    # k = 1e300 or c = 1e300 stops the rig at its first contact (step size underflow, non-finite state); the
+    # bounds lie well inside what the integrator handles (k = 1e14, c = 1e7 at the defaults).
     stiffness: float = param(5.5e6, "contact stiffness k (N/m^n for the Hertz-type laws)", unit="N/m", gt=0,
                              le=1e12)
     damping: float = param(1.2e3, "contact damping c (N s/m^(n+1) for Hunt-Crossley)", unit="N s/m", ge=0, le=1e6)
     exponent: float = param(1.5, "exponent n of the Hertz-type laws", ge=1, le=3)
     restitution: float = param(0.8, "restitution e of the Lankarani-Nikravesh law", gt=0, le=1)
-    # >= 1e-6 m/s: the floor divides the contact damping, and below ~1e-12 the integrator stalled or hung.
+    # >= 1e-6 m/s: the floor divides the contact damping, and below ~1e-12 the integrator stalls or hangs.
     min_impact_velocity: float = param(1e-3, "floor of the Lankarani-Nikravesh impact velocity", unit="m/s",
                                        ge=1e-6, le=10)
 
@@ -136,7 +136,7 @@ class RigParams:
 
     gap: float = param(0.0, "gap between hammer at rest and force sensor", unit="m", ge=0, le=0.05,
                        relation="< l/2, half the pendulum length")
-    # At least 1 g: a lighter hammer (1e-9 kg) made the contact so stiff that the integrator hung.
+    # At least 1 g: a lighter hammer (1e-9 kg) makes the contact so stiff that the integrator hangs.
     mass: float = param(0.15, "hammer mass m", unit="kg", ge=1e-3, le=1000)
     amplitude: float = param(1.044e-3, "cart displacement amplitude A0", unit="m", ge=0, le=0.05)
     natural_frequency: float = param(1.763, "pendulum natural frequency without impact (sets l = g / (2 pi f)^2)",
@@ -226,7 +226,7 @@ class IntegratorParams:
 
     rtol: float = param(1e-7, "relative tolerance of the local error", ge=1e-13, le=1e-3)
     atol: float = param(1e-9, "absolute tolerance (rad for theta, rad/s for theta_dot)", gt=0, le=1e-3)
-    # >= 1 us: 1e-7 s already took 17 s of CPU per simulated second, smaller values hang the rig.
+    # >= 1 us: a smaller cap makes each simulated second cost many seconds of CPU, and far smaller ones hang the rig.
     max_step: float = param(1e-2, "largest integration step", unit="s", ge=1e-6, le=0.05)
     event_tolerance: float = param(1e-12, "tolerance of the switch-time root finding on the dense output",
                                    unit="s", gt=0, le=1e-6)

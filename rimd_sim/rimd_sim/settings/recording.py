@@ -64,7 +64,7 @@ class RecorderSettings:
                                           "<prefix>_<UTC timestamp>_<n>.mcap, plus a rosbag2 metadata.yaml",
                             rule="a non-empty path", check=lambda v: bool(v.strip()), breaks=("", "   "),
                             read_only=True)
-    # A prefix is part of a file name in output_dir: '../x' wrote outside it.
+    # A prefix is part of a file name in output_dir: '../x' would write outside it.
     prefix: str = param("rimd", "file name prefix", rule="a file name prefix: no '/', '\\' or NUL",
                         check=lambda v: not any(c in v for c in "/\\\0"), breaks=("../escaped", "a/b", "nul\0"),
                         read_only=True)

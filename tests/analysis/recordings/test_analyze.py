@@ -38,8 +38,8 @@ def test_missing_recording_is_refused_in_one_line(tmp_path):
 
 def test_a_recording_of_several_runs_is_refused_naming_each_run_and_its_file(tmp_path):
     """A directory recorded into twice holds two runs that each count their samples from 0: mixed, the first
-    run's channels would be kept and both runs' impacts counted (a newcomer saw 690 blocks "late" and 26
-    impacts "not covered"). The reader refuses it, naming each run and its file; each file alone is analysed,
+    run's channels would be kept and both runs' impacts counted (hundreds of blocks read as "late" and impacts
+    as "not covered"). The reader refuses it, naming each run and its file; each file alone is analysed,
     and a reset within a run (its samples go on counting) is no second run."""
     import contextlib
     import io

@@ -521,7 +521,7 @@ def uncertainty(fit: JointFit, result: JointResult, local: dict[str, Estimate], 
     residuals). A simulated rig integrates at its tolerance; its impacts then differ from the exact model's by a
     few micrometres, which the data cannot tell from a parameter's shift. Every one of them uses the Jacobian at the
     solution taken from both sides (:meth:`JointFit.two_sided_jacobian`): a residual that jumps within the step is
-    not read as a slope that pins a parameter (docs/identification.md, "Why the intervals missed").
+    not read as a slope that pins a parameter (docs/identification.md, "Judging the result").
     """
     runs = fit.run(result.x)
     r = fit.residuals(result.x, runs)

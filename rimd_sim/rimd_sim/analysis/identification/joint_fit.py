@@ -94,7 +94,7 @@ PULSE_MODEL_FLOOR = 1e-3
 #: and the large columns of ``f_n``, A0 and the shot's state no longer cancel along the valley the data allow) and
 #: one impact's onset fit switched branch within it (a jump read as a slope of 10^5); the covariance then pinned
 #: A0, ``f_n`` and the mass far tighter than the data do, and the fit stopped (``xtol``) on the valley's side
-#: (docs/identification.md, "Uncertainty and verdict").
+#: (docs/identification.md, "Judging the result").
 FD_STEP = 1e-6
 #: Huber's threshold for the impacts' residuals (in their standard errors).
 HUBER = 3.0

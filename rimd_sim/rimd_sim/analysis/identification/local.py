@@ -431,7 +431,7 @@ def local_contact(force: rec.Channel, detected: dict[str, np.ndarray], keep: np.
     on_se, sc_se, _ = onset_scale_errors(shape, samples, onsets, scales, max(rec.force_noise(force), 1e-4))
     # Grazing impacts (a quarter of the typical impact velocity or less) leave the joint fit: the hammer's free
     # acceleration is then a large part of its motion during the contact, and the pulse model's linear free
-    # acceleration is no longer the motion's (their scales err by ~1-3 % where the others agree within 0.1 %).
+    # acceleration no longer describes the motion (their scales err ten times more than the others').
     typical = float(np.nanmedian(v0)) if np.isfinite(v0).any() else math.nan
     strong = ~(v0 < GRAZING * typical)
     keep_idx = np.flatnonzero(strong)

@@ -46,7 +46,7 @@ __all__ = ["PulseFit", "PulseSamples", "SpringDashpotPulse", "fit_onsets", "fit_
            "pulse_residuals", "pulse_of", "pulse_peaks"]
 
 # The trapezoidal rule: np.trapezoid (NumPy 2); on NumPy 1.26 (the apt NumPy under Ubuntu 24.04's ROS 2 Jazzy,
-# docs/ros-install.md) the same computation under its former name, np.trapz.
+# docs/ros-install.md) the same computation is named np.trapz.
 if hasattr(np, "trapezoid"):
     _trapezoid = np.trapezoid
 else:  # pragma: no cover - NumPy 1.26
@@ -105,9 +105,9 @@ def _release(sigma: float, w0: float, eps: float | np.ndarray, sigma_free: float
     Without free acceleration, the closed form (module doc). With it, Newton's method from the closed form, kept
     where it converged to a fall through 0 with the force positive before it; elsewhere (the free acceleration a
     large part of the motion: a grazing impact) the first sign change on :data:`RELEASE_GRID`, bisected. Either way
-    the first root, which moves continuously with the parameters (Newton's iterate alone did not: it could stop
-    where the force is far from 0, or land on a later root, and the joint fit's misfit jumped between two nearby
-    parameter sets). No fall through 0 within :data:`RELEASE_HORIZON` times the closed form: that horizon (the
+    the first root, which moves continuously with the parameters. Newton's iterate alone does not: it can stop
+    where the force is far from 0, or land on a later root, and the joint fit's misfit would then jump between two
+    nearby parameter sets. No fall through 0 within :data:`RELEASE_HORIZON` times the closed form: that horizon (the
     contact outlasts any recorded window).
     """
     sc = sigma - sigma_free

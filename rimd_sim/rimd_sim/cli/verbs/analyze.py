@@ -40,8 +40,8 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def __getattr__(name: str):  # noqa: ANN202 - names this module held before the analysis became a library, for old callers
-    """``analyze`` and ``print_report`` moved to :mod:`rimd_sim.analysis.recordings.report` (imported on first use)."""
+def __getattr__(name: str):  # noqa: ANN202 - names callers import from this module
+    """``analyze`` and ``print_report`` of :mod:`rimd_sim.analysis.recordings.report` (imported on first use)."""
     if name == "analyze":
         from rimd_sim.analysis.recordings.report import analyze
 

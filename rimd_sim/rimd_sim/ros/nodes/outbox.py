@@ -2,11 +2,11 @@
 
 In the composed rig (:mod:`rimd_sim.ros.nodes.composed`) one interpreter runs the simulator, the recorder and the
 Rerun bridge, so every thread's Python work shares one GIL. A DDS write of an already serialized message costs
-about 40 µs per matched reader in another process (Fast DDS publishes synchronously: the sample goes to the
-reader's transport in the caller's thread), and rclpy's ``Publisher.publish`` of bytes holds the GIL all that time
-(its ``publish_raw`` does not release it). With an external reader of the five block topics, a rig in lockstep at
-25× real time spent a third of its pacing thread's time there (py-spy, docs/benchmarks.md, "Lockstep"), on the
-path that decides how fast the rig runs, while the machine's second core idled.
+tens of microseconds per matched reader in another process (Fast DDS publishes synchronously: the sample goes to
+the reader's transport in the caller's thread), and rclpy's ``Publisher.publish`` of bytes holds the GIL all that
+time (its ``publish_raw`` does not release it). With an external reader of the five block topics, a rig in
+lockstep far faster than real time would spend a large share of its pacing thread's time there, on the path that
+decides how fast the rig runs, while the machine's other core idles (docs/benchmarks.md, "Lockstep").
 
 :class:`Outbox` takes those writes. A message is written at once on the caller's thread, by rclpy's ``publish``, when
 nothing is waiting to be written (a rig at real time: one block every 10 ms, no thread hand-over). When the pacing
@@ -17,15 +17,14 @@ the call (:func:`gil_free_writer`); where that is not possible (no ``librcl`` to
 publisher's address) it uses rclpy's ``publish`` too. The messages of all topics keep one order: a batch waits
 behind the ones before it, and a message is written on the caller's thread only when none is waiting.
 
-Measured with an external lockstep reader of the five block topics (``bench_lockstep.py``, three rounds
-alternately): 27.5x real time against 23.9x writing on the pacing thread (26.1x with the thread but rclpy's
-``publish``); without an external reader, the same speed either way.
+``bench_lockstep.py`` compares the speeds with and without the thread, with and without an external lockstep
+reader (docs/benchmarks.md, "Lockstep").
 
 The thread writes everything waiting for it in one call (:func:`write_many`): a compiled loop (numba, ``nogil``)
 calls rcl's function for each message, so the GIL is released and taken back once per call instead of once per
 message. Taken back while another thread runs Python, the GIL costs up to the interpreter's switch interval
-(5 ms): one call per message, the thread wrote a message per 83 µs of wall time for 14 µs of CPU in a rig at 20x
-real time, and fell behind an external reader.
+(5 ms): with one call per message, the thread would spend most of its wall time waiting for the GIL and fall
+behind an external reader of a rig far faster than real time.
 """
 
 from __future__ import annotations
@@ -53,9 +52,9 @@ THREAD_BATCH = 12
 BACK_TO_BACK_S = 0.003
 #: At most this many batches (passes of the pacing loop, up to 10 blocks each) wait for the thread; the next flush
 #: waits for room. Without a bound a rig running free (open loop) faster than the external readers' writes would
-#: queue its blocks without end; with it, it runs at the writes' speed, as when it wrote them itself. In lockstep a
-#: pass is often one block: 4 batches held the rig with an external reader to 25.2x, 32 let it run at 28.3x
-#: (bench_lockstep.run, 2 rounds alternately).
+#: queue its blocks without end; with it, it runs at the writes' speed, as if it wrote them itself. In lockstep a
+#: pass is often one block, so a bound of a few batches would hold back a rig with an external reader
+#: (docs/benchmarks.md, "Lockstep", compares bounds).
 MAX_WAITING = 64
 
 
@@ -204,8 +203,8 @@ def write_many(items: Sequence[tuple[GilFreeWriter, bytes]]) -> None:
     """Write every message, in order, each on its writer's publisher, releasing the GIL once for all of them.
 
     A thread that takes the GIL back after each write waits, while another thread runs Python, up to the
-    interpreter's switch interval (5 ms): with the pacing thread busy, the outbox's thread wrote about 12,000
-    messages a second one call each. Here one compiled loop (numba, ``nogil``) calls rcl's
+    interpreter's switch interval (5 ms), so with the pacing thread busy, one call per message caps the outbox's
+    thread at a fraction of the rate a fast rig needs. Here one compiled loop (numba, ``nogil``) calls rcl's
     ``rcl_publish_serialized_message`` for each message, on the bytes joined into one buffer. Raises
     :class:`PublishFailed` for the first write that fails (the ones before it are written, none after it). Where
     the loop cannot be compiled, one call per message.

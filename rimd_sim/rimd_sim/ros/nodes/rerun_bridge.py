@@ -71,8 +71,8 @@ class RerunBridgeNode(PollingNode):
         self.mapper: RigMapper | None = None
         self.foxglove: Any = None
         # The block topics arrive serialized and are read in place (rimd_sim.io.cdr.read_block: the
-        # samples as NumPy views, no message objects): a third of the bridge's time went to rclpy's
-        # deserialisation. They are taken by a timer, every message waiting at once (nodes.polling.
+        # samples as NumPy views, no message objects), because rclpy's deserialisation would take a large share
+        # of the bridge's time. They are taken by a timer, every message waiting at once (nodes.polling.
         # PolledSubscriptions): one wake-up per period instead of one dispatch per message.
         # With Foxglove on, the same raw messages go to it too (one subscription per topic); the impact events
         # then arrive raw as well and are deserialised for Rerun only.
