@@ -156,6 +156,7 @@ def test_run_tests_fails_when_no_test_is_collected(repo_root, tmp_path):
          "-k", "this_selects_no_test_at_all", "--timeout", "120",
          str(repo_root / "tests" / "test_setup_scripts.py")],
         capture_output=True, text=True, timeout=180, stdin=subprocess.DEVNULL,
+        env={**os.environ, "RIMD_TEST_WORKERS": "0"},   # one process: the exit status is the same with workers
     )
     assert result.returncode == 1, result.stdout + result.stderr
     assert "pytest collected no test (exit status 5)" in result.stderr

@@ -23,8 +23,8 @@ import time
 
 #: The groups of steps: (group, [step names]) in the order they start (``--all``: two at a time).
 GROUPS = {"rig": ("rigid model and instruments", "the composed rig's DDS batch writer"),
-          "two-mass": ("two-mass model and instruments", "two-mass ensemble"),
-          "maps": ("rigid ensemble",)}
+          "two-mass": ("two-mass model and instruments", "two-mass ensemble", "two-mass shooting"),
+          "maps": ("rigid ensemble", "rigid shooting")}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,8 +36,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _step(name: str) -> None:
+    import numpy as np
+
     from rimd_sim.analysis.dynamics.peterka import peterka
     from rimd_sim.instruments.rig_simulator import RigSimulator
+    from rimd_sim.model.rig_model import model_for
+    from rimd_sim.model.shooting import flow_points
     from rimd_sim.ros.nodes.outbox import compile_batch_writer
     from rimd_sim.settings.config import SimConfig, find_config_file, load_config
 
@@ -50,6 +54,10 @@ def _step(name: str) -> None:
         RigSimulator(running, strobe=True).advance(0.2)
     elif name.endswith("ensemble"):
         peterka(config, [0.0], [3.75], transient_cycles=2, measure_cycles=6, workers=1)
+    elif name.endswith("shooting"):   # the stroboscopic map of continuation and steady orbits
+        model = model_for(config)
+        start = np.zeros((1, 2 + model.physics.N_MODES))
+        flow_points(model.name, model.params(config)[None, :], np.array([3.75]), start, 1)
     else:
         compile_batch_writer()
 
