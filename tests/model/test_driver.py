@@ -70,8 +70,8 @@ def probe(src: Path, cache: Path, *models: str) -> dict:
 @pytest.mark.process
 def test_two_models_loaded_from_the_cache_keep_their_own_code(tmp_path):
     """Compiled in two processes (each caches its model's functions), then both loaded from the cache into a third:
-    each model computes what it computed when compiled. (The two models' functions need compiled symbols of their
-    own names: with shared names, the two-mass model would run the rigid model's code without an error.) The third
+    each model computes what it computed when compiled. (Before the fix, the functions of the two models shared
+    their compiled symbols' names, and the two-mass model ran the rigid model's code without an error.) The third
     process compiles nothing."""
     rigid_alone = probe(SRC, tmp_path, "rigid")["rigid"]
     two_alone = probe(SRC, tmp_path, "two_mass")["two_mass"]
@@ -104,14 +104,56 @@ def test_an_edit_of_the_physics_is_not_served_from_the_cache(tmp_path):
 
 
 def test_the_drivers_cache_key_holds_the_kernels_own_source():
-    """The driver's namespace, whose name is its compiled code's cache key, is named after the digest of
-    ``kernel.py`` too, not only of the physics: a cached caller in another file (the ensemble loop) holds the
-    driver's compiled code, numba checks only that caller's file, so with the physics alone in the key an edit of
-    ``kernel.py`` would be served stale through it. Every model's driver."""
+    """The driver's namespace, whose name is its compiled code's cache key, is named after the digest of every
+    module of the kernel too (``kernel.py``, ``integration.py``, ``layout.py``, ...), not only of the physics: a
+    cached caller in another file (the ensemble loop) holds the driver's compiled code, numba checks only that
+    caller's file, so with the physics alone in the key an edit of the kernel would be served stale through it.
+    Every model's driver."""
+    from rimd_sim.model import integration, layout
+
+    assert {kernel, integration, layout} <= set(kernel.DRIVER_MODULES)
     for name, spec in MODELS.items():
-        key = kernel.source_key(kernel, spec.physics, *spec.sources)
+        key = kernel.source_key(*kernel.DRIVER_MODULES, spec.physics, *spec.sources)
         assert spec.driver.__name__ == f"{kernel.__name__}.driver_{name}_{key}", name
         assert key != kernel.source_key(spec.physics, *spec.sources)
+
+
+#: Calls a module-level compiled function of the kernel that compiles in constants of another module (``motor_freq``
+#: reads the float state's layout from ``layout.py``) and prints numba's cache statistics.
+LAYOUT_PROBE = textwrap.dedent("""
+    import json
+    import numpy as np
+    from rimd_sim.model import kernel as k
+    fs = np.zeros(k.N_FSTATE)
+    fs[k.F_MW0] = 3.75
+    k.motor_freq(fs, 1.0)
+    stats = k.motor_freq.stats
+    print(json.dumps({"hits": sum(stats.cache_hits.values()), "misses": sum(stats.cache_misses.values())}))
+""")
+
+
+@pytest.mark.process
+@pytest.mark.skipif(not kernel.JIT, reason="RIMD_NO_JIT=1: nothing is compiled")
+def test_an_edit_of_another_kernel_module_is_not_served_from_the_cache(tmp_path):
+    """The kernel's module-level functions are cached under the digest of all the kernel's modules, as numba checks
+    a cached function against its own file only: after an edit of ``layout.py`` alone, ``motor_freq`` (in
+    ``motor.py``, reading the layout's indices) is recompiled, not loaded from the cache."""
+    copy = tmp_path / "src"
+    shutil.copytree(SRC / "rimd_sim", copy / "rimd_sim", ignore=shutil.ignore_patterns("__pycache__"))
+    env = {**os.environ, "PYTHONPATH": str(copy), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("RIMD_NO_JIT", None)
+
+    def run() -> dict:
+        proc = subprocess.run([sys.executable, "-c", LAYOUT_PROBE], capture_output=True, text=True, timeout=240,
+                              env=env, check=False)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return json.loads(proc.stdout)
+
+    assert run() == {"hits": 0, "misses": 1}
+    assert run() == {"hits": 1, "misses": 0}
+    layout = copy / "rimd_sim" / "model" / "layout.py"
+    layout.write_text(layout.read_text() + "# an edit\n")
+    assert run() == {"hits": 0, "misses": 1}
 
 
 #: The compiled functions that create arrays (their workspace): the only ones compiled with numba's reference counting.

@@ -1,4 +1,4 @@
-"""Contact laws of the paper's Eq. 1, in a registry keyed by name.
+"""Contact laws of the paper's Eq. 1, in a registry keyed by name, written once for the kernel and for Python.
 
 Each law gives the compressive force ``F(delta, delta_dot)`` (N, > 0 pushes the hammer out of the stop)
 while the hammer is in contact with the force sensor. ``delta = l sin(theta) - gap`` is the penetration
@@ -6,8 +6,9 @@ while the hammer is in contact with the force sensor. ``delta = l sin(theta) - g
 laws: contact starts when ``delta`` crosses 0 upwards, and ends when the law's force crosses 0 downwards
 (which, with a dashpot, can happen while ``delta`` is still positive) or ``delta`` returns to 0.
 
-The integrator evaluates the laws inside a compiled kernel by their integer ``code``; the Python
-callables here are the reference used by tests and documentation.
+The formulas are written once, in the compiled :func:`law_force`, which selects a law by its integer ``code``
+(``p[P_LAW]``) and is inlined into the models' physics. :data:`CONTACT_LAWS` and :func:`contact_force` call the
+same function from Python, with a parameter vector holding the law's code and parameters.
 
 =================== ====== =========================================================================
 name                code   force
@@ -24,17 +25,60 @@ For ``delta < 0`` (used only while the root finder brackets a switch) ``delta^n`
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
+from rimd_sim.model.jit import kernel_jit
+from rimd_sim.model.layout import N_PARAM, P_C, P_E, P_K, P_LAW, P_N
 from rimd_sim.settings.config import CONTACT_MODELS
 
-__all__ = ["CONTACT_LAWS", "ContactLaw", "contact_force"]
+__all__ = ["CONTACT_LAWS", "ContactLaw", "contact_force", "law_force"]
 
 
-def _spow(x: float, n: float) -> float:
-    return math.copysign(abs(x) ** n, x)
+@kernel_jit(inline=True)
+def spow(x, n):
+    """Signed power ``sign(x) |x|^n``."""
+    if x >= 0.0:
+        return x**n
+    return -((-x) ** n)
+
+
+@kernel_jit(inline=True)
+def law_force(delta, ddelta, p, vimp):
+    """Force of the law ``p[P_LAW]`` with the parameters of ``p``, unclipped (may be negative near a switch).
+
+    The one definition of the formulas of the table above, with ``k = p[P_K]``, ``c = p[P_C]``, ``n = p[P_N]``,
+    ``e = p[P_E]``; ``vimp`` is the impact velocity of the open contact (m/s, > 0), read by the
+    Lankarani-Nikravesh law. The laws share one function, inlined into every call of the models' physics,
+    because every further inlined function adds to the compile time of each caller.
+    """
+    code = int(p[P_LAW])
+    if code == 0:
+        return p[P_K] * delta + p[P_C] * ddelta
+    dn = spow(delta, p[P_N])
+    if code == 1:
+        return p[P_K] * dn
+    if code == 2:
+        return dn * (p[P_K] + p[P_C] * ddelta)
+    e = p[P_E]
+    return p[P_K] * dn * (1.0 + 0.75 * (1.0 - e * e) * ddelta / vimp)
+
+
+def _law(code: int) -> Callable[[float, float, float, float, float, float, float], float]:
+    """The law ``code`` as a Python function ``force(delta, delta_dot, k, c, n, e, v_impact)`` of :func:`law_force`."""
+
+    def force(delta: float, delta_dot: float, k: float, c: float, n: float, e: float, v_impact: float) -> float:
+        p = np.zeros(N_PARAM)
+        p[P_LAW] = code
+        p[P_K] = k
+        p[P_C] = c
+        p[P_N] = n
+        p[P_E] = e
+        return float(law_force(float(delta), float(delta_dot), p, float(v_impact)))
+
+    return force
 
 
 @dataclass(frozen=True)
@@ -43,10 +87,10 @@ class ContactLaw:
 
     Attributes:
         name: Registry key.
-        code: Integer used by the compiled kernel.
+        code: Integer by which the compiled driver selects the law (``p[P_LAW]``).
         formula: The law in words.
         uses: Parameter names (``contact.*``) the law reads.
-        force: Reference implementation ``force(delta, delta_dot, k, c, n, e, v_impact)``.
+        force: ``force(delta, delta_dot, k, c, n, e, v_impact)``: :func:`law_force`, the function the driver runs.
     """
 
     name: str
@@ -59,23 +103,12 @@ class ContactLaw:
 CONTACT_LAWS: dict[str, ContactLaw] = {
     law.name: law
     for law in (
-        ContactLaw(
-            "spring_dashpot", 0, "k*delta + c*delta_dot", ("stiffness", "damping"),
-            lambda d, dd, k, c, n, e, v: k * d + c * dd,
-        ),
-        ContactLaw(
-            "hertz", 1, "k*delta^n", ("stiffness", "exponent"),
-            lambda d, dd, k, c, n, e, v: k * _spow(d, n),
-        ),
-        ContactLaw(
-            "hunt_crossley", 2, "k*delta^n + c*delta^n*delta_dot", ("stiffness", "damping", "exponent"),
-            lambda d, dd, k, c, n, e, v: _spow(d, n) * (k + c * dd),
-        ),
-        ContactLaw(
-            "lankarani_nikravesh", 3, "k*delta^n*(1 + 3(1-e^2)/4 * delta_dot/v_impact)",
-            ("stiffness", "exponent", "restitution", "min_impact_velocity"),
-            lambda d, dd, k, c, n, e, v: k * _spow(d, n) * (1.0 + 0.75 * (1.0 - e * e) * dd / v),
-        ),
+        ContactLaw("spring_dashpot", 0, "k*delta + c*delta_dot", ("stiffness", "damping"), _law(0)),
+        ContactLaw("hertz", 1, "k*delta^n", ("stiffness", "exponent"), _law(1)),
+        ContactLaw("hunt_crossley", 2, "k*delta^n + c*delta^n*delta_dot", ("stiffness", "damping", "exponent"),
+                   _law(2)),
+        ContactLaw("lankarani_nikravesh", 3, "k*delta^n*(1 + 3(1-e^2)/4 * delta_dot/v_impact)",
+                   ("stiffness", "exponent", "restitution", "min_impact_velocity"), _law(3)),
     )
 }
 
