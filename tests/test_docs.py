@@ -94,6 +94,15 @@ def test_readme_is_at_most_150_lines():
     assert len(lines) <= 150, f"README.md has {len(lines)} lines: move the detail to a page of docs/"
 
 
+def test_the_readme_and_the_docs_stay_short():
+    """The README is a five-minute read (at most 800 words) and the docs an afternoon's (at most 30,000 words in
+    README.md and docs/*.md, generated tables included), counted as ``wc -w`` counts."""
+    words = {page.relative_to(ROOT).as_posix(): len(page.read_text().split()) for page in [README, *PAGES]}
+    assert words["README.md"] <= 800, f"README.md has {words['README.md']} words"
+    assert sum(words.values()) <= 30_000, f"the docs have {sum(words.values())} words: " + ", ".join(
+        f"{name} {n}" for name, n in sorted(words.items(), key=lambda item: -item[1])[:5])
+
+
 def test_readme_first_screen_shows_the_picture_and_the_two_commands():
     first_screen = "\n".join(README.read_text().splitlines()[:30])
     assert "](docs/rerun_blueprint.png)" in first_screen and (ROOT / "docs" / "rerun_blueprint.png").is_file()
