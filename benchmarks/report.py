@@ -128,7 +128,8 @@ BENCHES = (
     Bench("suite", None, default=False, commands=(
         Timed("setup", "`make test-fast`", ("make", "test-fast")),
         Timed("setup", "`make test`", ("make", "test"), target="<= 300"),
-    ), note="make test-fast and make test"),
+        Timed("setup", "`make test-dist` (wheels built)", ("make", "test-dist")),
+    ), note="make test-fast, make test and make test-dist"),
 )
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import concurrent.futures
 import contextlib
 import fcntl
 import hashlib
@@ -668,6 +669,28 @@ def build_sim_wheel(dist: Path, build_dir: Path, python: Path) -> Path:
 
 
 # ---- main ----------------------------------------------------------------------------------------------------
+def build_all(pythons: list[str], dist: Path, build_dir: Path) -> list[Path]:
+    """The rimd_msgs wheel of each Python, then the rimd_sim wheel; the Pythons side by side.
+
+    Each Python has its own build venv and build tree. Side by side, one Python's CMake build overlaps another's
+    build venv install, which mostly waits on the registry. The rimd_sim wheel follows the first Python's, with
+    its venv.
+    """
+    def first() -> list[Path]:
+        wheel = build_msgs_wheel(pythons[0], dist, build_dir)
+        return [wheel, build_sim_wheel(dist, build_dir, build_venv(pythons[0], build_dir) / "bin" / "python")]
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=len(pythons)) as pool:
+        runs = [pool.submit(first)] + [pool.submit(build_msgs_wheel, version, dist, build_dir)
+                                       for version in pythons[1:]]
+        concurrent.futures.wait(runs)
+    wheels: list[Path] = []
+    for run in runs:
+        result = run.result()   # the first failure, as raised (BuildError names its step)
+        wheels.extend(result if isinstance(result, list) else [result])
+    return [*wheels[:1], *wheels[2:], *wheels[1:2]]   # the msgs wheels in the order of pythons, then rimd_sim
+
+
 def main(argv: list[str] | None = None) -> int:
     """Build the wheels; print what was built; exit 1 naming the failed step."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -684,8 +707,7 @@ def main(argv: list[str] | None = None) -> int:
             if shutil.which(tool) is None:
                 raise BuildError(f"{tool} not found on PATH (apt-get install cmake binutils)")
         with exclusive(build_dir / "build.lock"):
-            wheels = [build_msgs_wheel(version, dist, build_dir) for version in pythons]
-            wheels.append(build_sim_wheel(dist, build_dir, build_venv(pythons[0], build_dir) / "bin" / "python"))
+            wheels = build_all(pythons, dist, build_dir)
     except BuildError as error:
         print(f"make dist: failed: {error}", file=sys.stderr)
         return 1

@@ -5,9 +5,10 @@ Usage: ``scripts/test_dist.py [--python 3.11] [--python 3.12] [--keep]`` (defaul
 runs ``make dist`` first.
 
 First the wheels' contents and metadata are checked (layout as the registry's ROS wheels, no RPATH, RECORD
-hashes, the requirements). Then, for each Python, in a fresh venv in a temporary directory (outside the
-repository) and from a temporary working directory, with a clean environment (no PYTHONPATH, AMENT_PREFIX_PATH,
-VIRTUAL_ENV, LD_LIBRARY_PATH or anything else of env.sh; only the venv's ``bin`` in front of PATH):
+hashes, the requirements). Then, for each Python (the Pythons side by side), in a fresh venv in a temporary
+directory (outside the repository) and from a temporary working directory, with a clean environment (no PYTHONPATH,
+AMENT_PREFIX_PATH, VIRTUAL_ENV, LD_LIBRARY_PATH or anything else of env.sh; only the venv's ``bin`` in front of
+PATH):
 
 1. ``pip install`` of that Python's rimd_msgs wheel and ``rimd_sim[testing]`` (the rest from the registry);
 2. ``rimd warmup`` (numba compiles the physics into the fresh venv's cache; the rig's 3 s would not cover it);
@@ -28,6 +29,7 @@ step (its output is in ``.dist-build/test-dist/<python>/<step>.log``). Every ste
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import fcntl
 import hashlib
 import importlib.util
@@ -424,7 +426,8 @@ def run_steps(report: Report, wheels: dict[str, Path], version: str, keep: bool)
             os.close(lease)
         output = runner.run("recording", [str(venv / "bin" / "python"), "-c", RECORDING_CHECK,
                                           str(work / "recording"), *CHANNEL_TOPICS], env=env, cwd=work)
-        print("  " + output.strip().replace("\n", "\n  "))
+        for line in output.strip().splitlines():
+            log(f"Python {python}:   {line}")
         recipe_lab = work / "lab-ci"
         shutil.copytree(LAB, recipe_lab, ignore=shutil.ignore_patterns("__pycache__", ".pytest_cache"))
         recipe_env = dict(env, RIMD_WHEELS=str(DIST), RIMD_VENV=str(venv), PYTHON=str(interpreter),
@@ -455,9 +458,18 @@ def main(argv: list[str] | None = None) -> int:
         wheels = check_wheels(pythons, version)
         log(f"the wheels' contents: ok in {time.monotonic() - check_started:.1f} s "
             f"({', '.join(p.name for p in wheels.values())})")
-        for python in pythons:
-            reports.append(Report(python))
-            run_steps(reports[-1], wheels, version, args.keep)
+        reports = [Report(python) for python in pythons]
+        # The Pythons side by side: much of a venv's set-up waits on the registry and on the disk, and a rig runs
+        # at real time, so two at once take less wall time than one after the other even on two cores.
+        with concurrent.futures.ThreadPoolExecutor(max_workers=len(reports)) as pool:
+            runs = [pool.submit(run_steps, report, wheels, version, args.keep) for report in reports]
+            errors = [run.exception() for run in runs]
+        failed = [error for error in errors if error is not None]
+        for error in failed:
+            if not isinstance(error, StepFailed):
+                raise error
+        if failed:
+            raise failed[0] if len(failed) == 1 else StepFailed("\n".join(str(error) for error in failed))
     except (StepFailed, build_dist.BuildError) as error:
         print(f"make test-dist: FAILED: {error}", file=sys.stderr)
         _print_times(reports)
