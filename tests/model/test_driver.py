@@ -83,6 +83,41 @@ def test_two_models_loaded_from_the_cache_keep_their_own_code(tmp_path):
     assert two_alone["peak"] != rigid_alone["peak"]
 
 
+#: Builds the two-mass driver and reports whether its fused step was loaded before any caller ran, then runs the
+#: model for 0.2 s (which compiles it into the cache when the cache is empty).
+STEP_FIRST = textwrap.dedent("""
+    import json
+    from rimd_sim.model.rig_model import MODELS, RigModel
+    from rimd_sim.settings.config import find_config_file, load_config
+    step = MODELS["two_mass"].driver.rk_step
+    before = {"overloads": len(step.overloads), "hits": sum(step.stats.cache_hits.values())}
+    RigModel(load_config(find_config_file("structural.yaml")), channels=False, truth=False).advance(0.2)
+    print(json.dumps(before))
+""")
+
+
+@pytest.mark.process
+def test_the_fused_step_is_loaded_before_its_callers_so_a_warm_process_runs_the_cold_ones_code():
+    """Hypothesis: with the step in the cache, building a driver loads it before anything that calls it.
+
+    Each caller holds its own copy of the step, and LLVM optimises that copy again inside the caller. With FMA
+    contraction, the copy may fuse other pairs of operations than the step's own code does. A process runs the
+    first copy it loads. A cold process compiles the step before its callers and so runs the step's own code; a
+    warm one must load it first to run the same code, and so give the same trajectory to the last bit. The first
+    process fills the cache if it is empty; the second builds the driver on the filled cache.
+    """
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    env.pop("RIMD_NO_JIT", None)
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, "-c", STEP_FIRST], capture_output=True, text=True, timeout=240,
+                              env=env, check=False)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+    before = json.loads(proc.stdout)
+    # every specialisation the cache holds (the loops of the analyses call the step with other array types), each
+    # loaded, none compiled
+    assert before["overloads"] >= 1 and before["hits"] == before["overloads"], before
+
+
 @pytest.mark.process
 def test_an_edit_of_the_physics_is_not_served_from_the_cache(tmp_path):
     """The cache key holds the digest of the physics sources: after an edit of the rigid model's physics (the

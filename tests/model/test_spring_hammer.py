@@ -28,7 +28,7 @@ CONFIG = ROOT / "config"
 REFERENCE = {
     'model.paper': 'e1f0789457969179324a6d9acb98d7d058751876fef791c2d0a7907a1eb36c80',
     'model.rimd': '800833b9f812b7c22d90cbee789e3d18add7c1bc7e24b07f222485569ebbaea9',
-    'model.structural': 'fecae79ac8df5343f30a6fd812d6fd4b587140d01826324a0f38727ded3bad43',
+    'model.structural': 'fd2e2ef1f6ed0587cad209eea139a03bc43eead640f0e7bb009a71f8b79c8c9c',
     'simulator.rimd': '60091acb58413bdd77422190ee151ec1601fbc27776a102f476063b5530eae83',
     'sweep.rimd': 'b96d8838569c6f0b3c23e68556ad83715842ce9663bf1324571c2c629d455970',
     'peterka.paper': '1638536971fd36b80493fe6f11b7baf3283069be69513d7268be1134bde569fe',

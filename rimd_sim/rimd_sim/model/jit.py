@@ -149,6 +149,31 @@ def kernel_jit(*, inline: bool = False):
     return jit_for(f"kernel_{KERNEL_KEY}", inline=inline)
 
 
+def load_cached(dispatcher) -> int:
+    """Load every specialisation of ``dispatcher`` that numba's disk cache holds for this process; return the count.
+
+    The fused step must be in the process before anything that calls it. numba links a callee's code into each
+    caller (a weak, ``linkonce_odr`` copy, which LLVM optimises again in the caller's module), and the process runs
+    the first copy it loads. Compiling a caller compiles the callee first, so a process that compiles runs the
+    callee's own code; a process that loaded only the caller from the cache would run the caller's copy. With FMA
+    contraction the two copies can round differently (they fuse different pairs), so a cold process and a warm one
+    would give trajectories that differ in their last bits. Loaded first, the callee's own code is the one every
+    caller runs, cold or warm. An empty cache loads nothing, and the first call compiles in that order anyway.
+    """
+    cache = getattr(dispatcher, "_cache", None)
+    index = getattr(getattr(cache, "_cache_file", None), "_load_index", None)
+    if cache is None or index is None:   # RIMD_NO_JIT, or a numba whose cache is laid out otherwise
+        return 0
+    codegen = dispatcher.targetctx.codegen()
+    loaded = 0
+    for key in index():
+        signature = key[0]
+        if key == cache._index_key(signature, codegen) and signature not in dispatcher.overloads:
+            dispatcher.compile(signature)
+            loaded += 1
+    return loaded
+
+
 def namespace(name: str, doc: str) -> Any:
     """A module registered in ``sys.modules`` (so numba's cache key pickles it by its name).
 
