@@ -8,12 +8,11 @@ cd "$ROOT" || exit 1
 # shellcheck disable=SC1091
 source "$ROOT/env.sh" || { echo "run_tests: could not source env.sh; run 'make setup' first" >&2; exit 1; }
 # No path given: pytest runs its testpaths (pyproject.toml: tests), i.e. `pytest tests`.
-# In parallel (pytest-xdist; RIMD_TEST_WORKERS=N sets the workers, 0 runs serially): a test file stays on one
-# worker (its module fixtures are made once), and the ROS tests never hear each other (each leases its own domain).
-# Two workers per core, at most 8: many tests wait on a rig running at real time or on a process starting, and a
-# second worker per core fills those waits (docs/development.md, "Tests").
-CORES="$(nproc 2>/dev/null || echo 2)"
-WORKERS="${RIMD_TEST_WORKERS:-$(( CORES * 2 > 8 ? 8 : CORES * 2 ))}"
+# In parallel on every core (pytest-xdist; RIMD_TEST_WORKERS=N sets the workers, 0 runs serially): a test file
+# stays on one worker (its module fixtures are made once), and the ROS tests never hear each other (each leases its
+# own domain). Two workers per core finish sooner on an idle machine but starve the rigs the tests start on a
+# loaded one (docs/development.md, "Tests").
+WORKERS="${RIMD_TEST_WORKERS:-auto}"
 if [ "$WORKERS" = "0" ]; then
     python -m pytest "$@"
 else
