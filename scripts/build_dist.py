@@ -676,19 +676,17 @@ def build_all(pythons: list[str], dist: Path, build_dir: Path) -> list[Path]:
     build venv install, which mostly waits on the registry. The rimd_sim wheel follows the first Python's, with
     its venv.
     """
-    def first() -> list[Path]:
+    def first() -> tuple[Path, Path]:
         wheel = build_msgs_wheel(pythons[0], dist, build_dir)
-        return [wheel, build_sim_wheel(dist, build_dir, build_venv(pythons[0], build_dir) / "bin" / "python")]
+        return wheel, build_sim_wheel(dist, build_dir, build_venv(pythons[0], build_dir) / "bin" / "python")
 
     with concurrent.futures.ThreadPoolExecutor(max_workers=len(pythons)) as pool:
-        runs = [pool.submit(first)] + [pool.submit(build_msgs_wheel, version, dist, build_dir)
-                                       for version in pythons[1:]]
-        concurrent.futures.wait(runs)
-    wheels: list[Path] = []
-    for run in runs:
-        result = run.result()   # the first failure, as raised (BuildError names its step)
-        wheels.extend(result if isinstance(result, list) else [result])
-    return [*wheels[:1], *wheels[2:], *wheels[1:2]]   # the msgs wheels in the order of pythons, then rimd_sim
+        head = pool.submit(first)
+        rest = [pool.submit(build_msgs_wheel, version, dist, build_dir) for version in pythons[1:]]
+        concurrent.futures.wait([head, *rest])  # type: ignore[arg-type]  # futures of two result types
+    # .result() raises the first failure as it was raised (BuildError names its step)
+    first_msgs, sim = head.result()
+    return [first_msgs, *(run.result() for run in rest), sim]
 
 
 def main(argv: list[str] | None = None) -> int:
