@@ -176,6 +176,21 @@ def test_a_restarted_consumer_joins_where_the_run_stands():
     assert isinstance(pacer.next(blocks(50)), Go)
 
 
+def test_a_second_copy_of_a_join_is_no_news_and_no_warning():
+    """A transient local join comes on both of the publisher's subscriptions: the copy is taken silently."""
+    pacer = Pacer(0.0, lockstep("daq"), clock=FakeClock())
+    pacer.lockstep.progress("daq", 0, instance="first")
+    for end in blocks(0, 5):
+        pacer.published(end)
+    assert pacer.lockstep.progress("daq", 0, instance="second").joined   # taken nothing yet: done through 0
+    copy = pacer.lockstep.progress("daq", 0, instance="second")
+    assert copy.accepted and not copy.joined and copy.log == "" and copy.reason == ""
+    assert pacer.lockstep.consumers["daq"].done_ns == 50 * MS
+    # A report that goes back from where it joined is still refused with its reason.
+    back = pacer.lockstep.progress("daq", 10 * MS, instance="second")
+    assert not back.accepted and back.reason == "back"
+
+
 def test_a_consumer_that_leaves_cleanly_is_no_longer_waited_for_until_it_reports_again():
     clock = FakeClock()
     pacer = Pacer(0.0, lockstep("daq", "recorder", timeout=1e9), clock=clock)

@@ -29,6 +29,38 @@ def test_nothing_is_reported_before_the_join_and_the_join_names_every_topic_at_z
     assert ledger.reports == 1
 
 
+def test_a_heartbeat_before_the_first_message_repeats_the_join_and_does_not_hold_the_run():
+    """A consumer joins a rig that has run on (paused, or after dropping it) and its first block is late.
+
+    Its heartbeat repeats the join: the publisher reads no news (not "done through 0 with everything", which
+    would hold the run at 0 for it), and the next block still goes.
+    """
+    from harness.clock import FakeClock
+    from rimd_sim.runtime.pacing import Go, Pacer
+    from rimd_sim.settings.lockstep import LockstepSettings
+
+    ms = 1_000_000
+    pacer = Pacer(0.0, LockstepSettings(enabled=True, consumers=("daq",), window=0.05), clock=FakeClock())
+    pacer.lockstep.progress("daq", 0, instance="before", topics={"/a": 0})
+    for end in range(10, 9_870, 10):
+        pacer.published(end * ms, "/a")
+    ledger = ProgressLedger(min_interval=0.0)
+    ledger.join()
+
+    def send(report: tuple[int, dict[str, int]]):
+        overall, done = report
+        return pacer.lockstep.progress("daq", overall, instance="after", topics=done or None)
+
+    assert send(ledger.take_report(["/a"])).joined
+    heartbeat = ledger.take_report()
+    assert heartbeat == (0, {"/a": 0})
+    verdict = send(heartbeat)
+    assert verdict.accepted and verdict.log == ""
+    assert isinstance(pacer.next([9_870 * ms]), Go)
+    ledger.done(9_860 * ms, "/a")                    # its first message: from now on it reports what it took
+    assert ledger.take_report() == (0, {"/a": 9_860 * ms})
+
+
 def test_progress_only_moves_forward_per_topic_and_overall():
     ledger = ProgressLedger(min_interval=0.0)
     ledger.join()

@@ -48,6 +48,8 @@ READY_REPORT_S = 5.0
 SERVICE_TIMEOUT_S = 30.0
 #: Lines of a node's log that an error message shows.
 LOG_TAIL_LINES = 20
+#: Callbacks :meth:`RigHandle.simulated` lets the client run (none waits) before it reads the latest /clock.
+SPINS_PER_READ = 20
 #: Default wall time (s) :meth:`RigHandle.run` gives the program.
 RUN_TIMEOUT_S = 180.0
 #: Default wall time (s) the ground truth waits for the recording to hold the window asked for.
@@ -189,8 +191,10 @@ class RigHandle:
             def on_clock(msg: Clock) -> None:
                 self._clock_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
 
+            # Depth 1: only the latest time matters, so a test that reads it after a while gets where the rig is,
+            # not the oldest of a backlog.
             self._client.node.create_subscription(Clock, "/clock", on_clock,
-                                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+                                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
         return self._client
 
     def _ros(self) -> Any:
@@ -337,8 +341,15 @@ class RigHandle:
             node.destroy_subscription(sub)
 
     def simulated(self) -> float:
-        """The rig's simulation time as last heard on its /clock (s; -1e-9 before any)."""
-        self.client().executor.spin_once(timeout_sec=0.0)
+        """The rig's simulation time as last heard on its /clock (s; -1e-9 before any).
+
+        Takes what has arrived (a few callbacks of this process's client, without waiting), so that the latest
+        /clock is read even when other subscriptions of the test have messages waiting. After ``pause`` the rig's
+        own answer is exact: its message gives the simulation time it froze at.
+        """
+        executor = self.client().executor
+        for _ in range(SPINS_PER_READ):
+            executor.spin_once(timeout_sec=0.0)
         return self._clock_ns / 1e9
 
     def wait_until_simulated(self, seconds: float, timeout: float = 120.0) -> None:

@@ -55,6 +55,7 @@ class ProgressLedger:
         #: the last report took it (what that report says: ``ConsumerProgress.commands``).
         self.commands = 0
         self.reported_commands = 0
+        self._join_topics: list[str] = []   # what the last join named
 
     def done(self, ns: int, topic: str | None) -> bool:
         """The consumer finished a message stamped ``ns`` of ``topic`` (None: of everything it takes).
@@ -83,19 +84,27 @@ class ProgressLedger:
             self.joins += 1
             self.done_ns.clear()
             self.overall = None
+            self._join_topics = []
             return True
 
     def take_report(self, topics: list[str] | None = None) -> tuple[int, dict[str, int]] | None:
         """What the next report says, marked as sent: ``(overall ns, done ns per topic)``; None before the join.
 
         ``topics``: the join report, every topic named done through zero (nothing taken yet), so that the publisher
-        waits until it has matched the consumer's readers of them.
+        waits until it has matched the consumer's readers of them. Until the consumer has finished a message, a
+        report (a heartbeat) repeats the join's: an empty one would say "done through 0 with everything", and a
+        publisher that had run on before the first block came (a paused rig, a rig that dropped this consumer)
+        would hold its run at 0 for it.
         Call it with :attr:`lock` *not* held.
         """
         with self.lock:
             if not self.joined:
                 return None
-            done = dict.fromkeys(topics, 0) if topics is not None else dict(self.done_ns)
+            if topics is not None:
+                self._join_topics = list(topics)
+            nothing_yet = not self.done_ns and self.overall is None
+            done = (dict.fromkeys(self._join_topics, 0) if topics is not None or nothing_yet
+                    else dict(self.done_ns))
             self.reported_commands = self.commands
             self.dirty = False
             self.last_sent = time.monotonic()
