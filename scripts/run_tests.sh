@@ -9,14 +9,15 @@ cd "$ROOT" || exit 1
 source "$ROOT/env.sh" || { echo "run_tests: could not source env.sh; run 'make setup' first" >&2; exit 1; }
 # No path given: pytest runs its testpaths (pyproject.toml: tests), i.e. `pytest tests`.
 # In parallel on every core (pytest-xdist; RIMD_TEST_WORKERS=N sets the workers, 0 runs serially): a test file
-# stays on one worker (its module fixtures are made once), and the ROS tests never hear each other (each leases its
-# own domain). Two workers per core finish sooner on an idle machine but starve the rigs the tests start on a
+# stays on one worker (its module fixtures are made once), the files handed out heaviest first in the order
+# tests/conftest.py sorts them (not xdist's by count of tests), and the ROS tests never hear each other (each leases
+# its own domain). Two workers per core finish sooner on an idle machine but starve the rigs the tests start on a
 # loaded one (docs/development.md, "Tests").
 WORKERS="${RIMD_TEST_WORKERS:-auto}"
 if [ "$WORKERS" = "0" ]; then
     python -m pytest "$@"
 else
-    python -m pytest -n "$WORKERS" --dist loadfile "$@"
+    python -m pytest -n "$WORKERS" --dist loadfile --no-loadscope-reorder "$@"
 fi
 rc=$?
 if [ "$rc" -eq 5 ]; then

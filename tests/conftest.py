@@ -73,10 +73,22 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """A ROS test starts processes (DDS participants, nodes): it is a ``process`` test too."""
+    """A ROS test starts processes (DDS participants, nodes): it is a ``process`` test too.
+
+    The files run heaviest first: those holding a ``slow`` test, then a ``ros`` one, then a ``process`` one, then
+    the rest, each group in collection order and each file's tests in theirs. The workers take whole files in this
+    order (scripts/run_tests.sh: ``--dist loadfile --no-loadscope-reorder``), so that the many quick in-process
+    files fill the end of the run instead of one worker finishing a rig test alone (longest jobs first).
+    """
+    del config
+    weight: dict[str, int] = {}
     for item in items:
         if item.get_closest_marker("ros") is not None and item.get_closest_marker("process") is None:
             item.add_marker(pytest.mark.process)
+        module = item.nodeid.split("::", 1)[0]
+        mark = next((k for k, name in enumerate(("slow", "ros", "process")) if item.get_closest_marker(name)), 3)
+        weight[module] = min(weight.get(module, 3), mark)
+    items.sort(key=lambda item: weight[item.nodeid.split("::", 1)[0]])   # stable: the order within a group stays
 
 
 @pytest.fixture(autouse=True)

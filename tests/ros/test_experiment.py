@@ -31,7 +31,9 @@ def _rimd(ros_processes, rig, *args: str, name: str):
 
 
 #: Stamp (s) of the first step.
-START = 10.0
+START = 4.0
+#: The same for the kicked sweep at 2.4 mm, whose kick stamp (60 s) was measured on the core with this schedule.
+KICKED_START = 10.0
 
 
 def _rig(rimd_rig, gap: float, f0: float, *, experiment_records: bool):
@@ -96,6 +98,8 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, rimd_ri
     _resume_when_scheduled(experiment, rig)
     assert experiment.wait(120) == 0, experiment.tail()
     assert "step 4/4" in experiment.output()   # progress shown
+    end = START + len(freqs) * dwell   # the recorder's stop_at: the end of the last step
+    assert f"the recording ends at t = {end:.9f} s" in experiment.output(), experiment.output()[-2000:]
     # Its recorder left the lockstep cleanly when it stopped: the rig goes on without waiting for it.
     assert f"consumer '{RECORDER_NODE}' left at" in rig.log(), rig.log()[-2000:]
 
@@ -143,6 +147,16 @@ def test_experiment_then_analyze_agrees_with_the_up_sweep(ros_processes, rimd_ri
     assert [s["effective_stamp_ns"] for s in schedule] == starts and starts[0] == round(START * 1e9)
     assert {b - a for a, b in zip(starts, starts[1:], strict=False)} == {round(dwell * 1e9)}
     _assert_recording_is_the_core_run(out / "recording", rig.config, freqs, ramp, starts)
+    # Cut at the end of the last step, not where the recorder stopped: every sampled channel's last sample one
+    # period short of it at most, no event or motor state after it; the analysis ends the last step there.
+    from rimd_sim.analysis.recordings import recorded as rec
+
+    data = rec.load(out / "recording")
+    assert data.origin_ns == 0   # in lockstep from sample 0: recording times are simulation times
+    for topic, channel in data.channels.items():
+        assert end - 1.0 / channel.rate <= channel.time[-1] < end, (topic, channel.time[-1])
+    assert data.events["time"][-1] < end and data.motor["time"][-1] < end
+    assert float(rows[-1]["end_s"]) == end
 
     # A setpoint above motor.max_frequency: one clear line naming it, exit 1, the rig keeps running.
     refused = _rimd(ros_processes, rig, "experiment", "--no-record", "--frequencies", "50", "--dwell", "1",
@@ -191,7 +205,7 @@ def test_gap_2_4mm_up_sweep_stays_off_band_b_until_perturbed(ros_processes, rimd
     client.node.create_subscription(ImpactEvent, "/rig/impact/events", events.append, 10_000)
     experiment = _rimd(ros_processes, rig, "experiment", "--no-record", "--frequencies", "2.5", "3.0", "4.0",
                        "5.25", "--dwell", "6", "--settle", "2", "--ramp-rate", "2", "--out", str(out), "--start",
-                       str(START), name="experiment")
+                       str(KICKED_START), name="experiment")
     experiment.wait_for_output(r"steps scheduled from t = ", timeout=90)
     # A kick at an exact stamp, at 5.25 Hz, asked before the rig moves: the whole run is deterministic (from rest,
     # every command names its stamp). Measured with the core, a kick of +0.1 m/s lands on band B from t = 56, 60

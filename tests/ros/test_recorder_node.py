@@ -29,9 +29,9 @@ def _check_contiguous_from_zero(blocks: list[bytes]) -> int:
     return expected
 
 
-def test_records_10_s_of_the_rig_completely(ros_processes, ros_executor, tmp_path):
+def test_records_5_s_of_the_rig_completely(ros_processes, ros_executor, tmp_path):
     out = tmp_path / "rec"
-    recorder, _, collector = record_rig(ros_processes, ros_executor, out, 10.0)
+    recorder, _, collector = record_rig(ros_processes, ros_executor, out, 5.0)
     recorder.send_signal(signal.SIGINT)
     assert recorder.wait(30) == 0
     assert "no loss" in recorder.output() and "LOSS" not in recorder.output()
@@ -46,10 +46,10 @@ def test_records_10_s_of_the_rig_completely(ros_processes, ros_executor, tmp_pat
         samples = _check_contiguous_from_zero(by_topic[topic])
         assert samples > 0
         assert by_topic[topic] == collector.messages[topic], topic
-    assert len(by_topic["/rig/truth"]) >= 950   # 10 s at 100 blocks/s
+    assert len(by_topic["/rig/truth"]) >= 475   # 5 s at 100 blocks/s
     for topic in ("/rig/motor/state", "/rig/impact/events"):
         assert by_topic[topic] == collector.messages[topic], topic
-    assert len(by_topic["/rig/impact/events"]) >= 30   # one impact per cycle at 3.75 Hz
+    assert len(by_topic["/rig/impact/events"]) >= 10   # one impact per cycle at 3.75 Hz, from about 2 s
 
     # Every message decodes, with both independent readers, to the values published.
     decoded = {(topic, data): msg for topic, data, _, msg in recorded}

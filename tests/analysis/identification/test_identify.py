@@ -24,7 +24,6 @@ import contextlib
 import csv
 import io
 import math
-import shutil
 from pathlib import Path
 
 import pytest
@@ -97,9 +96,8 @@ def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd
     recording = record_through_rig(rimd_rig, tmp_path / "rig", SECOND_RIG,
                                    Schedule(freqs, dwell=6.0, kicks=[(kick_at, -0.03)]))
     out = tmp_path / "ident"
-    rimd = shutil.which("rimd")
-    run = ros_processes.start([rimd, "identify", str(recording), "--out", str(out), "--settle", "2"], name="identify")
-    assert run.wait(240) == 0, run.tail()
+    status, stdout, stderr = _identify_in_process(recording, out, "--settle", "2")
+    assert status == 0, stdout[-2000:] + stderr[-2000:]
     report = read_json(out / "identification.json")
     lines = _check_identified(report, SECOND_RIG)
     print("\n".join(lines), report["verdict"]["line"], sep="\n")
