@@ -304,7 +304,7 @@ def test_set_reaches_the_model_and_every_analysis_verb_takes_it(tmp_path):
         out = tmp_path / f_n
         assert cli.main(["sweep", "--gap-mm", "20", "--f-min", "1.5", "--f-max", "2.1", "--f-step", "0.1",
                          "--set", f"natural_frequency={f_n}", "--set", "amplitude=1e-4",
-                         "--set", "damping_ratio=0.05", "--out", str(out)]) == 0
+                         "--set", "damping_ratio=0.05", "--workers", "1", "--out", str(out)]) == 0
         rows = list(csv.DictReader(open(out / "sweep.csv")))
         outs[f_n] = {float(r["frequency_hz"]): float(r["frequency_ratio"]) for r in rows}
     assert outs["1.6"][1.6] == pytest.approx(1.0) and outs["2.0"][2.0] == pytest.approx(1.0)

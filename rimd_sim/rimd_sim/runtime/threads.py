@@ -12,7 +12,6 @@ only.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import sys
 import threading
 from collections.abc import Callable
@@ -39,10 +38,15 @@ OS_NAMES = {
 
 @cache
 def _prctl() -> Callable[..., int] | None:
+    """The C library's ``prctl``, or None where there is none.
+
+    Found among the process's own symbols (``dlopen(NULL)``; the C library's are part of them), not through
+    ``ctypes.util.find_library``, which runs ``ldconfig -p`` in a child process: a fork from the thread starting.
+    """
     if not sys.platform.startswith("linux"):
         return None
     try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True).prctl
+        return ctypes.CDLL(None, use_errno=True).prctl
     except (OSError, AttributeError):
         return None
 
