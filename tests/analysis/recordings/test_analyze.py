@@ -268,6 +268,33 @@ def test_fault_and_gap_windows_are_left_out_said_and_drawn_on_every_time_plot(fa
     assert abs(row["impacts_per_cycle_events"] - 1.0) <= 1.0 / (seen + 3) + 0.01, row
 
 
+@pytest.mark.process
+def test_no_plot_writes_the_same_tables_and_summary_without_figures_or_matplotlib(faulted, tmp_path):
+    import json
+    import sys
+
+    from harness.outputs import read_json
+
+    path, out, summary, _ = faulted
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    shutil.copy(out / "impacts.png", bare / "impacts.png")   # an earlier run's figure: not this run's
+    script = ("import sys; from rimd_sim.cli import main; status = main(sys.argv[1:]); "
+              "print('matplotlib' in sys.modules); sys.exit(status)")
+    done = subprocess.run([sys.executable, "-c", script, "analyze", str(path), "--out", str(bare), "--no-plot"],
+                          capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "False", "--no-plot loaded matplotlib"
+    assert not list(bare.glob("*.png"))
+    for table in sorted(out.glob("*.csv")):
+        assert (bare / table.name).read_bytes() == table.read_bytes(), table.name
+    plain = read_json(bare / "summary.json")
+    assert plain["figures"] == [] and plain["figure_windows"] == {}
+    same = ("figures", "figure_windows", "wall_seconds")
+    assert json.dumps({k: v for k, v in plain.items() if k not in same}, sort_keys=True) == json.dumps(
+        {k: v for k, v in summary.items() if k not in same}, sort_keys=True)
+
+
 def test_spread_per_step_pulse_zoom_and_acceleration_spectrum(faulted):
     import csv
 

@@ -43,14 +43,16 @@ class ReportError(AnalysisError):
 
 
 def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float = rec.DEFAULT_THRESHOLD,
-            peak: str = "onset-fit", log: Callable[[str], None] | None = None) -> dict:
+            peak: str = "onset-fit", log: Callable[[str], None] | None = None, figures: bool = True) -> dict:
     """Analyse ``recording`` into ``out``; return the summary (also written as ``summary.json``).
+
+    ``figures=False`` writes the tables and the summary only (no plotting library is loaded); the figures of an
+    earlier run into ``out`` are removed either way.
 
     Raises:
         rimd_sim.io.reader.RecordingError: Not a recording at all.
         ReportError: The recording holds none of the topics analysed.
     """
-    from rimd_sim.analysis import plots
     from rimd_sim.analysis.outputs import write_csv, write_summary
 
     start = time.perf_counter()
@@ -68,6 +70,8 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
         raise ReportError(f"{recording} holds none of the rig topics analysed ({', '.join(wanted)}); found: {found}"
                           + (f" (the recording is damaged: {damage})" if damage else ""))
     out.mkdir(parents=True, exist_ok=True)
+    for name in FIGURES:   # "figures" in the summary lists this run's only
+        (out / name).unlink(missing_ok=True)
     pulse = rec.pulse_model(data.recording.metadata) if peak == "onset-fit" else None
     if peak == "onset-fit":
         log("peaks: fitted spring-dashpot pulse at contact onset" if pulse is not None else
@@ -98,32 +102,12 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
     write_csv(out / "excluded_windows.csv", [w.as_dict() for w in reading.windows])
 
     caption, f_n = _recorded_design(data.recording.metadata)
-    poincare_rows = _phase_planes(data, steps, out / "phase_planes.png", caption)
+    panels, poincare_rows = _phase_planes(data, steps)
     write_csv(out / "poincare.csv", poincare_rows)
-    plots.plot_recorded_peaks(reading.rows, out / "peak_force_vs_frequency.png",
-                              f"steady peak force per step ({recording.name})", caption=caption,
-                              natural_frequency_hz=f_n)
-    drawn = plots.plot_recorded_impacts(events["time"], events["peak_force"], detected["peak_time"],
-                                        detected["peak_force"], steps, out / "impacts.png",
-                                        "impacts over time (steady windows grey, left-out windows coloured)",
-                                        reading.windows, caption=caption)
-    channels = {label: data.channels[t] for label, t in (("cart (m)", rec.CART_X), ("RIMD (m)", rec.RIMD_X),
-                                                          ("acceleration (m/s^2)", rec.ACC), ("force (N)", rec.FORCE))
-                if t in data.channels}
-    drawn_channels = plots.plot_recorded_channels(channels, reading.windows, out / "channels.png",
-                                                  "recorded channels (envelope), left-out windows shaded",
-                                                  caption=caption) \
-        if channels else 0
     zoom = pulse_zoom(reading)
-    if zoom is not None:
-        plots.plot_pulse_zoom(zoom, out / "pulse_zoom.png",
-                              f"a typical impact at {zoom['onset']:.4f} s (peak {zoom['peak']:.1f} N)",
-                              caption=caption)
     spectra = acceleration_spectra(reading)
+    drawn = _figures(reading, recording, out, panels, zoom, spectra, caption, f_n) if figures else {}
     if spectra:
-        plots.plot_acceleration_spectrum(spectra, out / "acceleration_spectrum.png",
-                                         "hammer acceleration, steady window of each step (Welch)",
-                                         caption=caption)
         write_csv(out / "spectrum.csv", [{"step": sp["step"], "motor_hz": sp["motor_hz"], "frequency_hz": f,
                                           "psd_m2_s4_hz": p}
                                          for sp in spectra for f, p in zip(sp["frequency"], sp["psd"], strict=True)])
@@ -148,7 +132,7 @@ def analyze(recording: Path, out: Path, *, settle: float = 2.0, threshold: float
         "excluded_windows": [w.as_dict() for w in reading.windows],
         "poincare_points": len(poincare_rows),
         "figures": sorted(p.name for p in out.glob("*.png")),
-        "figure_windows": {"impacts.png": drawn, "channels.png": drawn_channels},
+        "figure_windows": drawn,
         "pulse_zoom": None if zoom is None else {k: zoom[k] for k in ("onset", "peak", "step", "captured")},
         "spectra": [{"step": sp["step"], "motor_hz": sp["motor_hz"], "seconds": sp["seconds"]} for sp in spectra],
         "faults": reading.faults,
@@ -194,15 +178,51 @@ def _recorded_design(metadata: dict[str, dict[str, str]]) -> tuple[str, float | 
     return "recorded rig: " + describe_parameters(params), f_n if f_n and f_n > 0 else None
 
 
-def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path, caption: str = "") -> list[dict]:
-    """Phase planes and Poincare maps over each step's steady window (figure at ``path``); the Poincare rows."""
+def _figures(reading: Reading, recording: Path, out: Path, panels: list[dict] | None, zoom: dict | None,
+             spectra: list[dict], caption: str, f_n: float | None) -> dict[str, int]:
+    """Write :data:`FIGURES` (those the recording gives); the left-out windows drawn per time plot."""
     from rimd_sim.analysis import plots
 
+    data, detected, events, steps = reading.data, reading.detected, reading.data.events, reading.steps
+    if panels is not None:
+        plots.plot_recorded_phase_planes(panels, out / "phase_planes.png",
+                                         "phase planes (RIMD relative to cart) and Poincare points, steady windows",
+                                         caption=caption)
+    plots.plot_recorded_peaks(reading.rows, out / "peak_force_vs_frequency.png",
+                              f"steady peak force per step ({recording.name})", caption=caption,
+                              natural_frequency_hz=f_n)
+    drawn = plots.plot_recorded_impacts(events["time"], events["peak_force"], detected["peak_time"],
+                                        detected["peak_force"], steps, out / "impacts.png",
+                                        "impacts over time (steady windows grey, left-out windows coloured)",
+                                        reading.windows, caption=caption)
+    channels = {label: data.channels[t] for label, t in (("cart (m)", rec.CART_X), ("RIMD (m)", rec.RIMD_X),
+                                                          ("acceleration (m/s^2)", rec.ACC), ("force (N)", rec.FORCE))
+                if t in data.channels}
+    drawn_channels = plots.plot_recorded_channels(channels, reading.windows, out / "channels.png",
+                                                  "recorded channels (envelope), left-out windows shaded",
+                                                  caption=caption) \
+        if channels else 0
+    if zoom is not None:
+        plots.plot_pulse_zoom(zoom, out / "pulse_zoom.png",
+                              f"a typical impact at {zoom['onset']:.4f} s (peak {zoom['peak']:.1f} N)",
+                              caption=caption)
+    if spectra:
+        plots.plot_acceleration_spectrum(spectra, out / "acceleration_spectrum.png",
+                                         "hammer acceleration, steady window of each step (Welch)",
+                                         caption=caption)
+    return {"impacts.png": drawn, "channels.png": drawn_channels}
+
+
+def _phase_planes(data: rec.RecordedData, steps: list[rec.Step]) -> tuple[list[dict] | None, list[dict]]:
+    """Phase planes and Poincare points over each step's steady window: the figure's panels, the Poincare rows.
+
+    The panels are None when a laser is missing (no phase plane to draw).
+    """
     panels: list[dict] = []
     poincare_rows: list[dict] = []
     rimd, cart = data.channels.get(rec.RIMD_X), data.channels.get(rec.CART_X)
     if rimd is None or cart is None:
-        return poincare_rows
+        return None, poincare_rows
     t, x, v = rec.phase_plane(rimd, cart)
     strobe = rec.poincare_points(t, x, v, rec.poincare_times(data.motor))
     windows: list[tuple[rec.Step | None, float, float]] = [(s, s.steady_from, s.end) for s in steps
@@ -221,10 +241,7 @@ def _phase_planes(data: rec.RecordedData, steps: list[rec.Step], path: Path, cap
         for tp, xp, vp in strobe[psel]:
             poincare_rows.append({"step": step.number if step else 0, "frequency_hz": step.setpoint if step else None,
                                   "time_s": tp, "x_rel_m": xp, "velocity_m_s": vp})
-    plots.plot_recorded_phase_planes(panels, path,
-                                     "phase planes (RIMD relative to cart) and Poincare points, steady windows",
-                                     caption=caption)
-    return poincare_rows
+    return panels, poincare_rows
 
 
 def pulse_zoom(reading: Reading, before: float = 0.5e-3, after: float = 1.5e-3) -> dict | None:

@@ -1,8 +1,8 @@
 """``rimd analyze REC --out DIR``: analyse a recording alone (the library: :mod:`rimd_sim.analysis.recordings.report`).
 
 Writes into DIR the impact tables, the step table (``steps.csv``), the left-out windows, the Poincare points, the
-acceleration spectrum, the figures and ``summary.json``. A damaged recording is analysed as far as it is
-readable and the loss is reported; a file that is not a recording is refused in one line (exit 1).
+acceleration spectrum, the figures (not with ``--no-plot``) and ``summary.json``. A damaged recording is analysed
+as far as it is readable and the loss is reported; a file that is not a recording is refused in one line (exit 1).
 """
 
 from __future__ import annotations
@@ -27,12 +27,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="peak of each sampled impact: 'onset-fit' fits the spring-dashpot contact pulse "
                              "(when the recording's rig parameters give that law) and reads its peak; 'sample' "
                              "takes the largest sample (the paper's raw reading). Default onset-fit")
+    parser.add_argument("--no-plot", action="store_true",
+                        help="tables and summary.json only: no figure, no plotting library (an earlier run's "
+                             "figures in --out are removed)")
 
 
 def main(args: argparse.Namespace) -> int:
     """Parse, analyse, print the report."""
     from rimd_sim.analysis.recordings.report import analyze, format_report
     summary = analyze(args.recording, args.out, settle=args.settle, threshold=args.threshold, peak=args.peak,
+                      figures=not args.no_plot,
                       log=lambda text: print(f"rimd analyze: {text}", file=sys.stderr, flush=True))
     for line in format_report(summary):
         print(line)
