@@ -17,7 +17,7 @@ DIST_PYTHONS ?= 3.11 3.12
 
 help:
 	@echo "make run        set up, build and run the rig (rimd rig)"
-	@echo "make test       set up, build and run the whole test suite (pytest tests, on every core; SKIP_SLOW=1: not the slow tier)"
+	@echo "make test       set up, build and run the whole test suite (pytest tests, in parallel; SKIP_SLOW=1: not the slow tier)"
 	@echo "make test-fast  the tests that start no process (core, recording, analyses, config): under a minute"
 	@echo "make setup      only create/refresh the venv ($(VENV)) and build ros_ws"
 	@echo "make lint       ruff check, lint-imports (the layer contracts) and mypy (the package's types)"

@@ -128,8 +128,8 @@ BENCHES = (
     Bench("suite", None, default=False, commands=(
         Timed("setup", "`make test-fast`", ("make", "test-fast")),
         Timed("setup", "`make test`", ("make", "test"), target="<= 300"),
-        Timed("setup", "the same, `RIMD_TEST_WORKERS=4` (two per core)",
-              ("env", "RIMD_TEST_WORKERS=4", "make", "test")),
+        Timed("setup", "the same, `RIMD_TEST_WORKERS=2` (one per core)",
+              ("env", "RIMD_TEST_WORKERS=2", "make", "test")),
         Timed("setup", "`make test-dist` (wheels built)", ("make", "test-dist")),
     ), note="make test-fast, make test and make test-dist"),
 )

@@ -8,12 +8,15 @@ cd "$ROOT" || exit 1
 # shellcheck disable=SC1091
 source "$ROOT/env.sh" || { echo "run_tests: could not source env.sh; run 'make setup' first" >&2; exit 1; }
 # No path given: pytest runs its testpaths (pyproject.toml: tests), i.e. `pytest tests`.
-# In parallel on every core (pytest-xdist; RIMD_TEST_WORKERS=N sets the workers, 0 runs serially): a test file
-# stays on one worker (its module fixtures are made once), the files handed out heaviest first in the order
-# tests/conftest.py sorts them (not xdist's by count of tests), and the ROS tests never hear each other (each leases
-# its own domain). Two workers per core finish sooner on an idle machine but starve the rigs the tests start on a
-# loaded one (docs/development.md, "Tests").
-WORKERS="${RIMD_TEST_WORKERS:-auto}"
+# In parallel (pytest-xdist): one worker per free core plus one, as scripts/test_workers.py reads the machine
+# now (RIMD_TEST_WORKERS=N sets the workers, 0 runs serially). A test file stays on one worker (its module
+# fixtures are made once), the files handed out heaviest first in the order tests/conftest.py sorts them (not
+# xdist's by count of tests), and the ROS tests never hear each other (each leases its own domain).
+# Bytecode is cached (the __pycache__ directories are ignored by git) even where the environment sets
+# PYTHONDONTWRITEBYTECODE: without it each worker compiles and assertion-rewrites every test module again, and each
+# node, CLI and pytest process the tests start compiles the package's modules again.
+unset PYTHONDONTWRITEBYTECODE
+WORKERS="${RIMD_TEST_WORKERS:-$(python "$ROOT/scripts/test_workers.py")}"
 if [ "$WORKERS" = "0" ]; then
     python -m pytest "$@"
 else

@@ -162,6 +162,20 @@ def test_run_tests_fails_when_no_test_is_collected(repo_root, tmp_path):
     assert "pytest collected no test (exit status 5)" in result.stderr
 
 
+def test_the_runner_starts_one_worker_per_free_core_plus_one(repo_root):
+    spec = importlib.util.spec_from_file_location("test_workers", repo_root / "scripts" / "test_workers.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    # 2 cores: idle 3; one kept busy (scripts/test_under_load.sh) 2; both busy still 2; a rounding at half a core
+    assert [module.workers(2, b) for b in (0.0, 0.3, 0.8, 1.2, 2.0, 3.5)] == [3, 3, 2, 2, 2, 2]
+    assert module.workers(8, 0.0) == 9 and module.workers(1, 0.0) == 2
+    # the machine's own reading: a fraction of its cores, and a count the runner can pass to pytest -n
+    busy = module.busy_cores(0.05)
+    assert 0.0 <= busy <= (os.cpu_count() or 1) + 1e-9
+    cores = len(os.sched_getaffinity(0))
+    assert 2 <= module.workers(cores, busy) <= cores + 1
+
+
 @pytest.mark.process
 def test_env_sh_works_in_a_strict_script_and_keeps_its_options(repo_root):
     # colcon's setup.sh reads the unset COLCON_TRACE: under `set -u` the caller would exit silently.
