@@ -391,7 +391,7 @@ def test_analyze_reports_the_faults_seen_in_the_recording_and_the_captures(fault
     clock drift from the impacts on two channels, and the captures against the 20 kHz channel's peaks."""
     from rimd_sim.cli.verbs.analyze import analyze, print_report
 
-    summary = analyze(fault_runs["recording"], fault_runs["recording"].parent / "analysis")
+    summary = analyze(fault_runs["recording"], fault_runs["recording"].parent / "analysis", figures=False)
     report = summary["faults"]
     starts = [f for f in report["faults"] if f["event"] == "start"]
     assert [f["kind"] for f in starts] == [k for k, *_ in sc.SEQUENCE]

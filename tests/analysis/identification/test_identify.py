@@ -124,7 +124,7 @@ def test_a_second_rig_recorded_through_the_rig_is_identified(ros_processes, rimd
     from rimd_sim import cli
 
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        assert cli.main(["analyze", str(recording), "--out", str(tmp_path / "an"), "--settle", "2"]) == 0
+        assert cli.main(["analyze", str(recording), "--out", str(tmp_path / "an"), "--settle", "2", "--no-plot"]) == 0
     steps = {int(r["step"]): r for r in csv.DictReader(open(tmp_path / "an" / "steps.csv"))}
     assert report["validation"], report["validation"]
     poorly = {p["parameter"] for p in report["verdict"]["poorly_determined"]}
