@@ -13,7 +13,7 @@ of docs/benchmarks.md are rewritten between their markers, one pair per componen
 (not scripts/gen_docs.py's ``GENERATED`` markers, which that script owns). A table keeps the rows of benchmarks
 that did not run, and the rows of a benchmark that ran are replaced by what it recorded, where its first row was.
 The ``machine`` section says once on what machine and on which date the tables were measured: a full run rewrites
-it, a run of a few benchmarks (``--only``) adds a line per benchmark run.
+it, a run of a few benchmarks (``--only``) adds each to the line of the machine it ran on (benchmark, date, load).
 
 The machine must be idle, since the figures are absolute: with a load average above 0.5 the report refuses to
 start unless ``--force`` (then the figures are marked as taken under that load). Before each benchmark it waits up
@@ -313,17 +313,42 @@ def _load_note(run: Run) -> str:
         f"{name} ({load:.2f})" for name, load in high.items()) + ": those figures are not an idle machine's")
 
 
+#: A line of the machine section naming the ``--only`` runs made on one machine: each run's benchmark, date and load.
+ONLY_LINE = re.compile(r"^- `--only` runs on (?P<machine>.+?): "
+                       r"(?P<entries>`[^`]+` \S+ \([^)]*\)(?:, `[^`]+` \S+ \([^)]*\))*)\.$")
+ONLY_ENTRY = re.compile(r"`(?P<name>[^`]+)` \S+ \([^)]*\)")
+
+
+def _only_entry(name: str, date: str, load: float | None) -> str:
+    """One ``--only`` run in the machine section: its benchmark, date and load average at its start."""
+    if load is None:
+        return f"`{name}` {date} (load not recorded)"
+    return f"`{name}` {date} (load {load:.2f}{'' if load <= IDLE_LOAD else ', not idle'})"
+
+
 def machine_section(old: str, run: Run) -> str:
-    """The machine section's lines after ``run``: rewritten by a full run, one line more per ``--only`` entry."""
+    """The machine section's lines after ``run``.
+
+    A full run rewrites them. An ``--only`` run's benchmarks join the line of the machine they ran on (one line per
+    machine), replacing their earlier entries on any machine.
+    """
     if run.full:
         return f"- Machine: {run.machine}.\n- All tables: {run.date}, {_load_note(run)}.\n"
-    kept = [line for line in old.splitlines()
-            if line.strip() and not any(line.startswith(f"- `--only {name}`") for name in run.entries)]
-    where = "" if f"- Machine: {run.machine}." in kept else f" on {run.machine}"
-    for name in run.entries:
-        loads = {name: run.loads[name]} if name in run.loads else {}
-        note = _load_note(Run(run.date, run.machine, [name], False, loads))
-        kept.append(f"- `--only {name}`: {run.date}{where}, {note}.")
+    kept: list[str] = []
+    machines: dict[str, list[str]] = {}
+    for line in old.splitlines():
+        if not line.strip() or any(line.startswith(f"- `--only {name}`") for name in run.entries):
+            continue
+        found = ONLY_LINE.match(line)
+        if found is None:
+            kept.append(line)
+            continue
+        entries = [m.group(0) for m in ONLY_ENTRY.finditer(found["entries"]) if m["name"] not in run.entries]
+        if entries:
+            machines.setdefault(found["machine"], []).extend(entries)
+    here = "the machine above" if f"- Machine: {run.machine}." in kept else run.machine
+    machines.setdefault(here, []).extend(_only_entry(name, run.date, run.loads.get(name)) for name in run.entries)
+    kept.extend(f"- `--only` runs on {where}: {', '.join(entries)}." for where, entries in machines.items())
     return "\n".join(kept) + "\n"
 
 

@@ -138,13 +138,21 @@ def test_a_full_run_rewrites_the_machine_section_and_a_partial_run_adds_its_line
     ]
     partial = report.Run(LATER, "AMD EPYC, 2 cores, 24 GiB", ["latency"], False, {"latency": 0.1})
     once = report.update_document(text, [], set(), partial)
-    assert _section(once, "machine")[2:] == [
-        f"- `--only latency`: {LATER}, load average 0.10 at its start."]
-    elsewhere = report.Run(LATEST, "another CPU", ["latency"], False, {"latency": 0.9})
+    assert _section(once, "machine")[2:] == [f"- `--only` runs on the machine above: `latency` {LATER} (load 0.10)."]
+    elsewhere = report.Run(LATEST, "another CPU, 2 cores", ["latency"], False, {"latency": 0.9})
     twice = report.update_document(once, [], set(), elsewhere)
     assert _section(twice, "machine")[:2] == _section(text, "machine")
     assert _section(twice, "machine")[2:] == [
-        f"- `--only latency`: {LATEST} on another CPU, load average 0.90 at its start: not an idle machine's figures."]
+        f"- `--only` runs on another CPU, 2 cores: `latency` {LATEST} (load 0.90, not idle)."]
+    # Runs on one machine share its line; a benchmark run again leaves its earlier entry wherever it was.
+    more = report.Run(LATEST, "AMD EPYC, 2 cores, 24 GiB", ["core", "rig"], False, {"core": 0.2, "rig": 0.3})
+    thrice = report.update_document(twice, [], set(), more)
+    again = report.Run(LATEST, "another CPU, 2 cores", ["core"], False, {"core": 0.1})
+    four = report.update_document(thrice, [], set(), again)
+    assert _section(four, "machine")[2:] == [
+        f"- `--only` runs on another CPU, 2 cores: `latency` {LATEST} (load 0.90, not idle), `core` {LATEST} "
+        "(load 0.10).",
+        f"- `--only` runs on the machine above: `rig` {LATEST} (load 0.30)."]
 
 
 def test_a_component_without_a_section_is_appended_under_its_heading(capsys):
