@@ -28,8 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(when the recording's rig parameters give that law) and reads its peak; 'sample' "
                              "takes the largest sample (the paper's raw reading). Default onset-fit")
     parser.add_argument("--no-plot", action="store_true",
-                        help="tables and summary.json only: no figure, no plotting library (an earlier run's "
-                             "figures in --out are removed)")
+                        help="tables and summary.json only, no figure (an earlier run's figures in --out are "
+                             "removed)")
 
 
 def main(args: argparse.Namespace) -> int:
