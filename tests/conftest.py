@@ -72,7 +72,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     collector.keep_what_exists()
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """A ROS test starts processes (DDS participants, nodes): it is a ``process`` test too.
 
     The files run heaviest first: those holding a ``slow`` test, then a ``ros`` one, then a ``process`` one, then
@@ -80,7 +80,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     order (scripts/run_tests.sh: ``--dist loadfile --no-loadscope-reorder``), so that the many quick in-process
     files fill the end of the run instead of one worker finishing a rig test alone (longest jobs first).
     """
-    del config
     weight: dict[str, int] = {}
     for item in items:
         if item.get_closest_marker("ros") is not None and item.get_closest_marker("process") is None:
