@@ -40,7 +40,10 @@ than ``2 (1 + Omega / omega_n)`` times that drift (a drift in ``v`` is an amplit
 large in ``u``). The
 running maximum is read per call and restored after it, so the valid domain's largest ``|theta|`` is unchanged.
 No floor of cycles: a motion that starts on its attractor (a continuation) stops after ``2 h + n`` cycles (9 for a
-period 1). Trajectories that never converge run to the cap, as with ``window``.
+period 1). Trajectories that never converge run to the cap, as with ``window``; there, a window classified as
+period ``n`` whose repetition at a divisor ``m`` of ``n`` shrinks geometrically to within the tolerance
+(:func:`_limit_period`: a period-``m`` orbit near its period doubling, approached slowly with alternating points)
+is classified as the period-``m`` orbit it converges to.
 
 ``window``, the confirmation window: after each cycle, once at least ``min_cycles`` cycles have run, the trajectory
 stops when, for some period ``n <= max_period`` (12),
@@ -252,6 +255,49 @@ def _classify_window(u, v, counts, lo, hi, max_period, tol):
     if total == 0:
         return 0, 0, KIND_PERIODIC
     return 0, total, KIND_CHAOTIC
+
+
+@_jit
+def _limit_period(u, v, counts, hi, n, measure, tol):
+    """The period a motion classified as period ``n`` at its cap converges to: a divisor ``m`` of ``n``, or ``n``.
+
+    Near a period doubling a period-``m`` orbit's multiplier is close to -1: its points alternate about it and
+    approach it slowly, so that a window of ``measure`` cycles repeats within ``tol`` at period ``2 m`` while
+    still far from repeating at ``m``. For the smallest proper divisor ``m`` of ``n`` whose impact counts repeat
+    over the three blocks of ``b = min(measure, (hi - m) // 3)`` cycles before cycle ``hi``, the largest
+    repetition ``hypot(u_i - u_{i-m}, v_i - v_{i-m})`` of each block, ``E1 > E2 > E3``, is extrapolated as a
+    geometric sequence (Aitken's delta-squared: ``E3 - (E3 - E2)^2 / (E3 - 2 E2 + E1)``); when that limit is at
+    most ``tol`` the motion converges to the period-``m`` orbit, and ``m`` is returned. A period-``n`` orbit's
+    repetition at ``m`` tends to its nonzero distance instead, and a chaotic one's does not shrink block after block.
+    """
+    for m in range(1, n):
+        if n % m != 0:
+            continue
+        b = min(measure, (hi - m) // 3)
+        if b < max(4, 2 * n):
+            return n
+        lo = hi - 3 * b
+        e1 = 0.0
+        e2 = 0.0
+        e3 = 0.0
+        ok = True
+        for i in range(lo, hi):
+            if counts[i] != counts[i - m]:
+                ok = False
+                break
+            e = math.hypot(u[i] - u[i - m], v[i] - v[i - m])
+            if i < lo + b:
+                e1 = max(e1, e)
+            elif i < lo + 2 * b:
+                e2 = max(e2, e)
+            else:
+                e3 = max(e3, e)
+        if not ok or not e1 > e2 > e3:
+            continue
+        curve = e3 - 2.0 * e2 + e1
+        if curve > 0.0 and e3 - (e3 - e2) ** 2 / curve <= tol:
+            return m
+    return n
 
 
 @_jit
@@ -523,6 +569,13 @@ def _loop(name: str) -> types.ModuleType:
                 # The fixed-length window of RigModel-based runs (transient cap - measure cycles, then measure
                 # cycles): points and impacts of cycles cap - measure + 1 .. cap.
                 period, imp, kind = _classify_window(u, v, counts, cap - measure + 1, cap + 1, max_period, tol)
+                if early and contraction and kind == KIND_PERIODIC and period > 1:
+                    m = _limit_period(u, v, counts, cap + 1, period, measure, tol)
+                    if m != period:
+                        imp = 0
+                        for i in range(cap + 1 - m, cap + 1):
+                            imp += counts[i]
+                        period = m
                 w_peak = _window_out(u, v, peaks, cap - measure + 1, cap + 1, pts)
                 return (period, imp, kind, c_done, th_s[cap], om_s[cap], ist[k.I_NSTEP], fs[k.F_THMAX], peak,
                         _rate(counts, cap - measure + 1, cap + 1), status, w_peak,
