@@ -114,6 +114,8 @@ BENCHES = (
     Bench("recorder", "bench_recorder.py"),
     Bench("replay", "bench_replay.py"),
     Bench("rerun", "bench_rerun.py"),
+    Bench("browser", "bench_browser.py", default=False,
+          note="needs Debian's chromium and tesseract-ocr, and playwright"),
     Bench("foxglove", "bench_foxglove.py", ("--seconds", "30", "--warmup", "5")),
     Bench("maps", "bench_maps.py", ("--sections", "3,6", "--skip-big", "--skip-dask", "--workers", "2")),
     Bench("wall", "bench_wall.py", ("--large", "--only", "peterka,map,basins,bifurcation,continue")),

@@ -127,3 +127,31 @@ def test_impacts_sent_in_batches_are_what_logging_each_gives(tmp_path):
         for name, column in want[entity].columns.items():
             assert got[entity].columns[name].to_pylist() == column.to_pylist(), (entity, name)
     assert got[IMPACT_LOG].texts() == [impact_text(ev) for ev in events]
+
+
+def _block(first: int, count: int, rate: float = 1000.0) -> SimpleNamespace:
+    sec, nanosec = divmod((2 * first * 1_000_000_000 + int(rate)) // (2 * int(rate)), 1_000_000_000)
+    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
+                           first_index=first, sample_rate=rate, samples=np.arange(count, dtype=float) + first)
+
+
+def test_the_timed_flush_sends_each_channel_at_most_once_per_interval(tmp_path):
+    # flush_due (the bridge's timer, every batch_interval) sends a channel's pending blocks only when its last
+    # send is at least min_interval old: with an interval of an hour, one send; with 0, every call sends. The
+    # full flush sends whatever is pending.
+    from rimd_sim.viz.rerun_map import CHANNELS
+
+    channel = CHANNELS[0]
+    for interval, sends in ((3600.0, [10, 10, 10, 30]), (0.0, [10, 20, 30, 30])):
+        rec = rr.RecordingStream("due")
+        rec.save(str(tmp_path / f"due{interval}.rrd"))
+        mapper = RigMapper(rec, batch=1000, min_interval=interval)
+        seen = []
+        for k in range(3):
+            mapper.log_block(channel, _block(10 * k, 10))
+            mapper.flush_due()
+            seen.append(mapper.stats.points.get(channel.name, 0))
+        mapper.flush()
+        seen.append(mapper.stats.points.get(channel.name, 0))
+        assert seen == sends, interval
+        rec.disconnect()

@@ -54,13 +54,12 @@ class BridgeSettings:
                                            "rate, every sample (rimd rig --rerun-full-rate). The recording keeps "
                                            "every sample either way", unit="s", ge=0.0001, le=10,
                                     zero="full rate: every sample", read_only=True)
-    batch_blocks: int = param(10, "blocks of a channel sent per send_columns call (1 = one call per block; more = "
+    batch_blocks: int = param(50, "blocks of a channel sent per send_columns call (1 = one call per block; more = "
                                   "less CPU, up to that many block periods of latency)", ge=1, le=1000,
                               read_only=True)
-    batch_interval: float = param(0.1, "shortest wall time between two sends of a channel: faster than real time "
-                                       "(lockstep, a fast replay) a send carries more blocks instead of coming "
-                                       "more often (0 = every batch_blocks blocks)", unit="s", ge=0, le=10,
-                                  read_only=True)
+    batch_interval: float = param(0.5, "shortest wall time between two sends of a channel, and the period of the "
+                                       "flush of what is pending (0 = every batch_blocks blocks)", unit="s", ge=0,
+                                  le=10, read_only=True)
     reliable: bool = param(True, "reliable subscriptions (false: best effort, matches best-effort channels)",
                            read_only=True)
     status_period: float = param(10.0, "time between status lines (0 = none)", unit="s", ge=0, le=3600,

@@ -380,6 +380,21 @@ class RigMapper:
                         columns=rr.Scalars.columns(scalars=values), recording=self.rec)
         self.stats.points[channel.name] = self.stats.points.get(channel.name, 0) + int(times.size)
 
+    def flush_due(self) -> None:
+        """Send the pending blocks of each channel, and the truth, last sent at least ``min_interval`` ago.
+
+        What a timer calls every ``min_interval``: a paused or slow stream leaves nothing pending for longer, and a
+        stream at speed still gets one send per channel and interval (the viewer ingests each send as a message
+        of its own, so their number, not their size, is what a browser's viewer keeps up with). A display interval
+        still open stays carried (:meth:`flush` sends it).
+        """
+        for channel in CHANNELS:
+            if channel.name in self._blocks and self._due(channel.name):
+                self._send_channel(channel)
+        if self._truth and self._due(TRUTH_TOPIC):
+            self._send_truth()
+        self._send_impacts()
+
     def flush(self) -> None:
         """Send everything pending (blocks, truth and impacts of an unfinished batch, a display interval carried)."""
         for channel in CHANNELS:

@@ -42,6 +42,8 @@ NODE_NAME = "rimd_rerun"
 #: the traffic (:class:`~rimd_sim.ros.nodes.polling.PollPeriod`), from POLL_PERIOD_S (fast) to POLL_LONGEST_S (slow).
 POLL_PERIOD_S = 0.01
 POLL_LONGEST_S = 0.05
+#: Period of the full flush (s) when ``batch_interval`` is 0; otherwise the flush follows ``batch_interval``.
+FLUSH_PERIOD_S = 0.25
 SAMPLE_BLOCK, RIG_STATE = "rimd_msgs/msg/SampleBlock", "rimd_msgs/msg/RigState"
 DEFAULT_NAMESPACE = "rig"
 
@@ -135,8 +137,12 @@ class RerunBridgeNode(PollingNode):
             self._progress.add_subscription(sub)
         if feed is not None:   # in the composed rig the poll's last progress goes at its end, not on a timer
             self._polled.after = self._progress.flush
-        if self.mapper is not None:
-            self.create_timer(0.25, self.mapper.flush)  # a paused rig leaves no batch pending for long
+        if self.mapper is not None:   # a paused rig leaves no batch pending for long
+            period = float(p["batch_interval"])
+            if period > 0:
+                self.create_timer(period, self.mapper.flush_due)
+            else:
+                self.create_timer(FLUSH_PERIOD_S, self.mapper.flush)
         if p["status_period"] > 0:
             self.create_timer(float(p["status_period"]), self._report)
         if self.stream is not None:
