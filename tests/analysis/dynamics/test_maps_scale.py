@@ -413,8 +413,8 @@ def test_a_motion_converging_near_a_period_doubling_is_classified_by_its_limit_a
 @given(q=st.floats(0.3, 0.995), amplitude=st.floats(2e-3, 1.0), distance=st.floats(0.0, 1.0),
        phase=st.integers(0, 5))
 def test_the_limit_of_a_period_doubled_window_is_its_geometric_extrapolation(q, amplitude, distance, phase):
-    """``_limit_period`` on stroboscopic points ``u_i = x_i + (-1)^i (distance / 2 + amplitude q^i)`` (impacts every
-    cycle): the repetition at period 1 shrinks geometrically towards ``distance``, that of period 2 is 0. It
+    """``_limit_period`` on stroboscopic points ``u_i = x + (-1)^i (distance / 2 + amplitude q^(i / 10))`` (an impact
+    every cycle): the repetition at period 1 shrinks geometrically towards ``distance``, that at period 2 is 0. It
     returns 1 (the motion converges to a period-1 orbit) exactly when ``distance`` is within the tolerance,
     2 otherwise; a repetition that grows instead is left at period 2."""
     from rimd_sim.model.ensemble import _limit_period
