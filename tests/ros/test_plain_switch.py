@@ -34,7 +34,7 @@ def test_the_switch_reads_a_comma_list_all_or_nothing_and_refuses_a_name_that_is
     monkeypatch.setenv(PLAIN_ENV, "outbox,gil")
     with pytest.raises(InputError, match=r"RIMD_PLAIN='outbox,gil' refused: gil is not a piece; give a "
                                          r"comma-separated list of outbox, polling, executor, collector, threads, "
-                                         r"or all"):
+                                         r"heap, or all"):
         plain("outbox")
 
 

@@ -33,6 +33,7 @@ OS_NAMES = {
     "rimd-recorder": "the recorder's writer: the MCAP file",
     "rimd-replay": "the replay's pacing loop",
     "rimd-foxglove": "the Foxglove sink's watch of the replay",
+    "rimd-heap": "a node process's return of the C heap's free pages, once a minute",
 }
 
 

@@ -11,7 +11,7 @@ import importlib
 import os
 
 from rimd_sim.ros.nodes.registry import NODES, by_name
-from rimd_sim.runtime import collector
+from rimd_sim.runtime import collector, heap
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,4 +37,5 @@ def main(args: argparse.Namespace) -> int:
     module, _, function = node.target.partition(":")
     run = getattr(importlib.import_module(module), function)
     collector.for_node()   # the process is the node's from here on: a node's collector, as its executable sets
+    heap.start()           # and its heap's free pages returned, as there
     return int(run([node.executable, *args.ros_args]) or 0)

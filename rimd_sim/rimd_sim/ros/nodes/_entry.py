@@ -5,7 +5,7 @@ their heavy imports are loaded: a node stopped while it is still starting exits 
 runs; and it sets the cycle collector of the imports to come as a command's (young collections 14 times rarer).
 Each function (``simulator``, ``recorder``, ...: the registry's names) then imports its node's module, freezes what
 the imports built and gives the node CPython's young threshold back (:func:`rimd_sim.runtime.collector.for_node`),
-and runs its ``main``.
+starts the return of the heap's free pages (:func:`rimd_sim.runtime.heap.start`) and runs its ``main``.
 
 ``python -m rimd_sim.ros.nodes._entry NAME [--ros-args ...]`` does the same for a child process (``rimd rig``,
 ``rimd experiment``).
@@ -22,7 +22,7 @@ from pathlib import Path
 from rimd_sim.errors import InputError
 from rimd_sim.ros.nodes._stop import install_stop_handlers
 from rimd_sim.ros.nodes.registry import NODES, NodeEntry
-from rimd_sim.runtime import collector
+from rimd_sim.runtime import collector, heap
 
 install_stop_handlers()
 try:
@@ -47,6 +47,7 @@ def _entry(node: NodeEntry) -> Callable[[], int]:
     def run() -> int:
         main = load(node.target)
         collector.for_node()
+        heap.start()
         return int(main() or 0)
 
     run.__name__ = run.__qualname__ = node.name
