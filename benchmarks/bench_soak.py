@@ -21,8 +21,8 @@ Figures printed (and written as JSON with --json; MB = 10^6 bytes, ms = 10^-3 s)
     growth in MB per hour: the least-squares slope (numpy.polyfit) of RSS over the samples after the first
     minute (runs of less than two minutes: over their second half, said in the printout; so short a fit is
     noise, not a verdict). The memory goal is judged for every process of the rig. The Rerun server keeps the
-    viewer's data up to the bridge's memory_limit (1 GiB in config/rimd.yaml), so it grows until it gets there
-    by design; it is judged all the same, with that note;
+    data a viewer that connects later receives, up to the bridge's server_memory_limit (config/rimd.yaml), so it
+    grows until that is full, by design; it is judged all the same, with that note;
   * loss, from the recording, every message read: each block topic (SampleBlock / RigState) must start at
     first_index 0 and be contiguous (each block's first_index = the previous one's + its sample count):
     messages, samples, holes, lost samples, and the simulated time where it ends (all topics end at the same
@@ -187,7 +187,8 @@ def rig_processes(rig_pid: int) -> dict[str, int]:
     """The rig's processes by report name: the parent, the nodes (by their command line) and their children.
 
     The Rerun bridge's sink serve_web runs a Rerun server (``rerun --serve-web``) as a child process: it holds
-    the data sent to the viewer, up to the bridge's ``memory_limit`` (1 GiB in config/rimd.yaml).
+    the data a viewer that connects later receives, up to the bridge's ``server_memory_limit``
+    (config/rimd.yaml).
     """
     found = {PARENT: rig_pid}
     for pid in descendants(rig_pid):
@@ -580,7 +581,8 @@ def rerun_memory_limit() -> str:
     from rimd_sim.settings.config import find_config_file, read_ros_parameters
 
     try:
-        return str(read_ros_parameters(find_config_file("rimd.yaml"), node="rimd_rerun").get("memory_limit", "?"))
+        section = read_ros_parameters(find_config_file("rimd.yaml"), node="rimd_rerun")
+        return str(section.get("server_memory_limit", "?"))
     except Exception:  # only a note in the report
         return "?"
 
@@ -692,8 +694,8 @@ def goals(result: dict) -> dict:
     expected = node_processes(result["run"].get("separate", False))
     for name in dict.fromkeys([*expected, *rig_names(procs)]):   # every node process, found or not, and the rest
         growth = procs.get(name, {}).get("growth_mb_per_h")
-        note = (f"; it holds the web viewer's data up to the bridge's memory_limit ({rerun_memory_limit()}), "
-                "so it grows until then by design" if name == RERUN_SERVER else "")
+        note = (f"; it holds the data for viewers that connect later up to the bridge's server_memory_limit "
+                f"({rerun_memory_limit()}), so it grows until then by design" if name == RERUN_SERVER else "")
         out[f"memory {name}"] = {
             "goal": f"memory growth <= {GOAL_GROWTH_MB_PER_H:g} MB/h, {name}",
             "met": growth is not None and growth <= GOAL_GROWTH_MB_PER_H,
@@ -727,8 +729,11 @@ def record_figures(result: dict) -> None:
         record("soak", f"{name}: memory growth", growth, "MB/h", f"<= {GOAL_GROWTH_MB_PER_H:g}")
     sim = result["recording"]["simulator"]
     record("soak", "simulator pacing p99, worst 10 s window", sim.get("p99_max_ms"), "ms", f"<= {GOAL_P99_MS:g}")
-    if (server := result["processes"].get(RERUN_SERVER, {}).get("rss_end_mb")) is not None:
-        record("soak", "Rerun server's memory at the end", server, "MB")
+    server = result["processes"].get(RERUN_SERVER, {})
+    if server.get("rss_end_mb") is not None:
+        record("soak", "Rerun server: memory growth", server.get("growth_mb_per_h"), "MB/h",
+               f"<= {GOAL_GROWTH_MB_PER_H:g}")
+        record("soak", "Rerun server's memory at the end", server["rss_end_mb"], "MB")
 
 
 def main() -> None:

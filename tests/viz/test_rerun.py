@@ -16,6 +16,7 @@ Hypotheses:
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import signal
@@ -31,6 +32,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from harness.rig_mcap import write_rig_mcap
 from harness.ros import spin_until
 from rimd_msgs.msg import ImpactEvent, SampleBlock
+from rimd_sim.settings.config import read_ros_parameters
 from rimd_sim.viz.rerun_map import CHANNELS, sample_times_ns, stamp_ns
 from rimd_sim.viz.rrd_data import load_rrd
 
@@ -377,6 +379,14 @@ def test_web_sink_serves_on_loopback_with_usage_reporting_off(ros_processes, tmp
                                    r"(\d+)/proxy)", timeout=30)
     with urllib.request.urlopen(f"http://127.0.0.1:{match.group(2)}/", timeout=10) as response:
         assert response.status == 200
+    # The server keeps the config's history for viewers that connect later, not the viewer's memory limit.
+    section = read_ros_parameters(repo_root / "config" / "rimd.yaml", node="rimd_rerun")
+    assert section["server_memory_limit"] != section["memory_limit"]
+    servers = [pid for pid in os.listdir("/proc") if pid.isdigit()
+               and f"--port\0{match.group(3)}\0" in _cmdline(pid)]
+    assert len(servers) == 1, servers
+    argv = _cmdline(servers[0]).split("\0")
+    assert argv[argv.index("--server-memory-limit") + 1] == section["server_memory_limit"], argv
     listening = subprocess.run(["ss", "-ltnH"], capture_output=True, text=True).stdout
     for port in (match.group(2), match.group(3)):
         addresses = {line.split()[3] for line in listening.splitlines() if line.split()[3].endswith(f":{port}")}
@@ -428,3 +438,40 @@ def test_a_batch_of_blocks_gets_the_times_each_block_would_get_alone():
                    [(0, 2000.0, 20), (40, 2000.0, 20)],   # a hole (a dropped block)
                    [(0, 2000.0, 20), (20, 1000.0, 10)]):  # another rate
         assert np.array_equal(_block_times(blocks), alone(blocks)), blocks
+
+
+@pytest.mark.process
+@pytest.mark.timeout(120)
+def test_a_memory_limit_is_refused_exactly_when_the_rerun_server_would_refuse_it():
+    """The bridge checks ``memory_limit`` and ``server_memory_limit`` before it starts a viewer or server, where
+    Rerun would refuse a bad one out of sight: its verdict is the server's own, on the forms users write."""
+    from rimd_sim.viz.sinks import BAD_MEMORY_LIMITS, memory_limit_problem
+
+    values = ("16MiB", "1GiB", "500MB", "1.5GiB", "12kB", "100B", "64 MiB", "10%", "0", "unlimited",
+              *BAD_MEMORY_LIMITS, "1GB ", "2.5%", "16mb", "1.5B")
+    for value in values:
+        server = subprocess.Popen([_rerun_cli(), "--serve-web", "--bind", "127.0.0.1", "--port", "0",
+                                   "--web-viewer-port", "0", f"--server-memory-limit={value}"],
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                  text=True, start_new_session=True)
+        try:
+            # The server says it listens once it has read its limit, or exits saying the limit is bad.
+            said = ""
+            for line in server.stderr:
+                said += line
+                if "Listening for gRPC connections" in line or "Bad --server-memory-limit" in line:
+                    break
+        finally:
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait(30)
+        assert ("Listening for gRPC connections" in said) != ("Bad --server-memory-limit" in said), (value, said)
+        accepted = "Listening for gRPC connections" in said
+        assert (memory_limit_problem(value) is True) == accepted, (value, said)
+
+
+def _cmdline(pid: str) -> str:
+    """A process's command line, arguments separated by NUL ("" when it is gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_text(errors="replace")
+    except OSError:
+        return ""

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from rimd_sim.settings.params import Param, param, parameters
 from rimd_sim.viz.foxglove_sink import DEFAULT_HOST, DEFAULT_PORT
-from rimd_sim.viz.sinks import SINKS
+from rimd_sim.viz.sinks import BAD_MEMORY_LIMITS, MEMORY_LIMIT_RULE, SERVER_HISTORY, SINKS, memory_limit_problem
 
 __all__ = ["PARAMETERS", "BridgeSettings"]
 
@@ -38,8 +38,13 @@ class BridgeSettings:
                            ge=0, le=65535, read_only=True)
     web_port: int = param(0, "sink serve_web: HTTP port of the web viewer on 127.0.0.1 (0 = a free port)", ge=0,
                           le=65535, read_only=True)
-    memory_limit: str = param("1GiB", "sinks spawn/serve_web: memory limit of the viewer/server (oldest data "
-                                      "dropped)", read_only=True)
+    memory_limit: str = param("1GiB", "sink spawn: the viewer's memory limit (oldest data dropped)",
+                              rule=MEMORY_LIMIT_RULE, check=memory_limit_problem, breaks=BAD_MEMORY_LIMITS,
+                              read_only=True)
+    server_memory_limit: str = param(SERVER_HISTORY, "sink serve_web: data kept for a viewer opened later "
+                                                     "(oldest dropped; 0 = none)",
+                                     rule=MEMORY_LIMIT_RULE, check=memory_limit_problem, breaks=BAD_MEMORY_LIMITS,
+                                     read_only=True)
     analytics: bool = param(False, "let Rerun report usage per the user's Rerun configuration (default: off)",
                             read_only=True)
     natural_frequency: float = param(1.82, "the phase plane's velocity axis is v_rel / (2 pi f)", unit="Hz",

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -30,11 +31,25 @@ from typing import Any
 from rimd_sim.dependencies import installed, missing_extra
 from rimd_sim.errors import UnavailableError
 
-__all__ = ["SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment", "require_rerun",
-           "spec_from_parameters"]
+__all__ = ["MEMORY_LIMIT_RULE", "SINKS", "RerunStream", "SinkError", "SinkSpec", "analytics_off_environment",
+           "memory_limit_problem", "require_rerun", "spec_from_parameters"]
 
 SINKS = ("save", "spawn", "connect", "serve_web")
 APPLICATION_ID = "rimd_rig"
+
+#: What the serve_web sink's server keeps for a viewer that connects or reloads later: about half a minute of the
+#: display stream, the series' styles (static) and the layout. The live view shows seconds; the recording keeps
+#: everything. The server's memory levels off once the history is full, the sooner the smaller it is
+#: (docs/benchmarks.md, "Soak").
+SERVER_HISTORY = "4MiB"
+
+#: A memory limit as Rerun's ``--memory-limit`` and ``--server-memory-limit`` read it (re_memory's MemoryLimit):
+#: ``0``, a size in bytes with a decimal (kB, MB, GB, TB) or binary (KiB, MiB, GiB, TiB) unit or a plain ``B``,
+#: a percentage of the machine's memory, or no limit.
+_MEMORY_LIMIT = re.compile(r"0|unlimited|none|max|∞|(?P<size>\d+(\.\d+)?)(kB|MB|GB|TB|KiB|MiB|GiB|TiB)|\d+B"
+                           r"|(?P<percent>\d+(\.\d+)?)%")
+#: That rule in words.
+MEMORY_LIMIT_RULE = "a Rerun memory limit (64MiB, 1GiB, 10% of the machine's, 0, unlimited)"
 
 
 class SinkError(UnavailableError):
@@ -51,6 +66,24 @@ def require_rerun(feature: str = "the Rerun bridge", alternative: str = "or run 
         raise SinkError(missing_extra("rerun", feature, alternative))
 
 
+def memory_limit_problem(value: str) -> bool | str:
+    """A parameter ``check``: True when Rerun reads ``value`` as a memory limit, else False or what is wrong.
+
+    The rule is :data:`MEMORY_LIMIT_RULE`. Checked before a viewer or server starts: Rerun would refuse the value
+    only in the process it starts, out of sight.
+    """
+    match = _MEMORY_LIMIT.fullmatch(value.replace(" ", ""))
+    if match is None:
+        return False
+    if match["percent"] is not None and float(match["percent"]) > 100:
+        return "a percentage of the machine's memory is at most 100%"
+    return True
+
+
+#: Values that :func:`memory_limit_problem` refuses (for the generated bad-input tests).
+BAD_MEMORY_LIMITS = ("", "1G", "64 mib", "-1MiB", "150%", "lots")
+
+
 @dataclass(frozen=True)
 class SinkSpec:
     """Which sink and its settings.
@@ -61,7 +94,9 @@ class SinkSpec:
         url: ``connect``: gRPC URL of a viewer or server (``rerun+http://HOST:PORT/proxy``).
         grpc_port: ``spawn``/``serve_web``: gRPC port of the viewer or server started (0 = a free one).
         web_port: ``serve_web``: HTTP port of the web viewer (0 = a free one).
-        memory_limit: Memory limit of the viewer or server started (Rerun drops the oldest data beyond it).
+        memory_limit: ``spawn``: memory limit of the viewer started (it drops the oldest data beyond it).
+        server_memory_limit: ``serve_web``: what the server keeps for a viewer that connects later (Rerun's
+            ``--server-memory-limit``: beyond it the oldest data goes; the blueprint stays).
         analytics: Leave Rerun's usage reporting to the user's configuration (default: off).
     """
 
@@ -71,6 +106,7 @@ class SinkSpec:
     grpc_port: int = 0
     web_port: int = 0
     memory_limit: str = "1GiB"
+    server_memory_limit: str = SERVER_HISTORY
     analytics: bool = False
 
     def validate(self) -> None:
@@ -96,6 +132,11 @@ class SinkSpec:
         for name in ("grpc_port", "web_port"):
             if not 0 <= getattr(self, name) <= 65535:
                 raise SinkError(f"{name} {getattr(self, name)} is not a port number (0..65535)")
+        for name in ("memory_limit", "server_memory_limit"):
+            problem = memory_limit_problem(getattr(self, name))
+            if problem is not True:
+                raise SinkError(f"{name} {getattr(self, name)!r} is not a memory limit: must be "
+                                f"{problem or MEMORY_LIMIT_RULE}")
 
 
 def spec_from_parameters(params: Mapping[str, Any]) -> SinkSpec:
@@ -112,6 +153,7 @@ def spec_from_parameters(params: Mapping[str, Any]) -> SinkSpec:
                         url=str(params.get("url", SinkSpec.url)), grpc_port=int(params.get("grpc_port", 0)),
                         web_port=int(params.get("web_port", 0)),
                         memory_limit=str(params.get("memory_limit", SinkSpec.memory_limit)),
+                        server_memory_limit=str(params.get("server_memory_limit", SinkSpec.server_memory_limit)),
                         analytics=bool(params.get("analytics", False)))
     except (TypeError, ValueError) as exc:
         raise SinkError(f"bad rimd_rerun parameter: {exc}") from None
@@ -245,7 +287,7 @@ class RerunStream:
                 grpc_port = spec.grpc_port or _free_port()
                 web_port = spec.web_port or _free_port()
                 cmd = [_rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
-                       "--web-viewer-port", str(web_port), "--server-memory-limit", spec.memory_limit]
+                       "--web-viewer-port", str(web_port), "--server-memory-limit", spec.server_memory_limit]
                 # Its own process group, so that a Ctrl-C to ours does not stop it before the last flush;
                 # close() stops that group.
                 self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,

@@ -49,11 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"{DEFAULT_EXTRA_STARTS} (the no-impact forced response; more: points spread over "
                              f"the region of rimd basins); 0: the three-start map")
     parser.add_argument("--rest-cycles", type=count("--rest-cycles", 1, MAX_REST_CYCLES), default=None,
-                        help="cap of the start from rest, which gives each cell its class: a trajectory from rest "
-                             "still unsettled at the cap of the others runs on until it settles or reaches this "
-                             "many cycles (default: 640, or --transient-cycles + --measure-cycles if larger, which "
-                             "agrees with a run ten times as long in 99.5 percent of the cells; 1920 classifies as "
-                             "a run of 1920 cycles from rest does)")
+                        help="cap of the start from rest, which gives each cell its class: unsettled at the "
+                             "others' cap, it runs on to this many cycles (default: 640, or --transient-cycles + "
+                             "--measure-cycles if larger; its agreement with longer runs: docs/benchmarks.md)")
     add_accept_invalid_argument(parser)
     parser.add_argument("--compare-fixed", action="store_true",
                         help="also compute the map at fixed length (the caps: the start from rest's and the "
