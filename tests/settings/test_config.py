@@ -174,6 +174,19 @@ def test_yaml_errors_name_the_file_line_and_column(tmp_path):
         load_config(path)
 
 
+def test_a_key_given_twice_is_refused_where_it_is_given_again(tmp_path):
+    """YAML forbids it, and PyYAML and ROS's parser would take the second value in silence: a config that sets
+    ``gap`` twice is refused at the second, naming the first; the same key in two mappings is no repetition."""
+    path = tmp_path / "rig.yaml"
+    path.write_text("/**/rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n    mass: 0.1\n    gap: 0.002\n"
+                    "/**/rimd_recorder:\n  ros__parameters:\n    output_dir: out\n")
+    with pytest.raises(ConfigError, match=rf"config file is not valid YAML: {path}:5:5: key 'gap' given twice "
+                                          r"\(first on line 3\)"):
+        load_config(path)
+    path.write_text(path.read_text().replace("    gap: 0.002\n", ""))
+    assert load_config(path).rig.gap == 0.001   # ros__parameters in both sections: each mapping's keys apart
+
+
 def test_a_relative_config_is_found_from_anywhere(tmp_path, monkeypatch):
     """`rimd rig --config config/paper_model.yaml` typed outside the repository finds the shipped preset; a file
     found nowhere is refused saying where it was looked for."""

@@ -54,9 +54,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--measure-cycles if larger; its agreement with longer runs: docs/benchmarks.md)")
     add_accept_invalid_argument(parser)
     parser.add_argument("--compare-fixed", action="store_true",
-                        help="also compute the map at fixed length (the caps: the start from rest's and the "
-                             "others') and list the differing cells in summary.json, each with the class of a 10x "
-                             "longer run")
+                        help="also compute the map at fixed length (both caps) and list the differing cells in "
+                             "summary.json, each with a 10x longer run's class")
 
 
 def main(args: argparse.Namespace) -> int:
