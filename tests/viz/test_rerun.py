@@ -379,6 +379,9 @@ def test_web_sink_serves_on_loopback_with_usage_reporting_off(ros_processes, tmp
                                    r"(\d+)/proxy)", timeout=30)
     with urllib.request.urlopen(f"http://127.0.0.1:{match.group(2)}/", timeout=10) as response:
         assert response.status == 200
+    # A node process returns its heap's free pages from a thread of its own (rimd_sim.runtime.heap).
+    threads = [Path(task, "comm").read_text().strip() for task in Path(f"/proc/{bridge.pid}/task").iterdir()]
+    assert "rimd-heap" in threads, threads
     # The server keeps the config's history for viewers that connect later, not the viewer's memory limit.
     section = read_ros_parameters(repo_root / "config" / "rimd.yaml", node="rimd_rerun")
     assert section["server_memory_limit"] != section["memory_limit"]
