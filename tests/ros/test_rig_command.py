@@ -92,6 +92,19 @@ def test_rig_refuses_a_bad_rerun_section(ros_processes, tmp_path, repo_root):
     assert "unknown sink 'hologram'" in rig.output() and "running" not in rig.output()
 
 
+def test_a_node_refuses_a_parameter_file_that_gives_a_key_twice(ros_processes, tmp_path):
+    """Hypothesis: ROS takes a parameter file whose mapping gives a key twice and applies the last value without a
+    word, so a node started with ``--params-file`` (``ros2 run``, ``rimd node``, a launch file) would run on a value
+    its reader may not see. The node refuses the file, naming both lines."""
+    twice = tmp_path / "twice.yaml"
+    twice.write_text("/**/rimd_simulator:\n  ros__parameters:\n    gap: 0.001\n    gap: 0.002\n")
+    node = ros_processes.start_node("rimd_simulator", "--ros-args", "--params-file", str(twice))
+    assert node.wait(60) == 2, node.tail()
+    assert (f"parameter file is not valid YAML: {twice}:4:5: key 'gap' given twice (first on line 3)"
+            in node.output()), node.tail()
+    assert "Traceback" not in node.output()
+
+
 def test_a_section_ros_would_not_apply_is_refused_and_a_wildcard_one_is_applied(ros_processes, tmp_path):
     """Hypothesis: ROS applies a parameter-file section only to the node whose fully qualified name it matches,
     and says nothing otherwise; a plain ``rimd_simulator:`` key is ``/rimd_simulator``, not the simulator in

@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import Any, ClassVar, cast
 
 import rclpy
-import yaml
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
@@ -56,6 +55,7 @@ from rimd_sim.ros.nodes.registry import READY_DIR_ENV
 from rimd_sim.runtime.plain import plain
 from rimd_sim.settings.config import misapplied_section, misapplied_section_message
 from rimd_sim.settings.params import Param
+from rimd_sim.settings.yaml_file import read_yaml
 
 __all__ = ["EXECUTOR_ENV", "READY_DIR_ENV", "RimdNode", "declare", "descriptor", "executor_kind", "log_at",
            "make_executor", "refuse_unnamed", "run_node", "spin_until_stopped"]
@@ -204,17 +204,19 @@ def spin_until_stopped(executor: Executor, stop: StopRequest, done: Callable[[],
 
 
 def params_file_problem(node: Node, args: Sequence[str]) -> str | None:
-    """Why a ``--params-file`` of ``args`` has a section meant for ``node`` that ROS does not apply to it, or None.
+    """Why a ``--params-file`` of ``args`` misleads ``node``, or None.
 
-    ROS says nothing then and the node would run with its defaults: it refuses to start instead
-    (:func:`rimd_sim.settings.config.misapplied_section`).
+    Two mistakes ROS says nothing about, so that the node would run on values other than the file seems to give:
+    a section meant for ``node`` that ROS does not apply to it (the node would keep its defaults,
+    :func:`rimd_sim.settings.config.misapplied_section`), and a key given twice in one mapping (ROS takes the last
+    one, :func:`rimd_sim.settings.yaml_file.read_yaml`). The node refuses to start instead.
     """
     fqn, base = node.get_fully_qualified_name(), node.get_name()
     for path in [args[i + 1] for i, arg in enumerate(args[:-1]) if arg == "--params-file"]:
         try:
-            doc = yaml.safe_load(Path(path).read_text())
-        except (OSError, yaml.YAMLError):
-            continue   # rcl read it (or refused it) when the node was made
+            doc = read_yaml(path, what="parameter file")
+        except InputError as exc:   # rcl has read the file: what is left is a key given twice
+            return str(exc)
         key = misapplied_section(doc, base, fqn)
         if key is not None:
             return misapplied_section_message(path, key, base, fqn)
