@@ -470,6 +470,14 @@ def test_a_memory_limit_is_refused_exactly_when_the_rerun_server_would_refuse_it
         assert ("Listening for gRPC connections" in said) != ("Bad --server-memory-limit" in said), (value, said)
         accepted = "Listening for gRPC connections" in said
         assert (memory_limit_problem(value) is True) == accepted, (value, said)
+    # The bridge's refusal names the parameter, the value and what is wrong with it.
+    from rimd_sim.viz.sinks import SinkError, SinkSpec
+
+    for value, why in (("1G", "must be a Rerun memory limit (64MiB"), ("150%", "at most 100%")):
+        with pytest.raises(SinkError) as refused:
+            SinkSpec("serve_web", server_memory_limit=value).validate()
+        assert str(refused.value).startswith(f"server_memory_limit '{value}' is not a memory limit: "), refused.value
+        assert why in str(refused.value) and "must be a percentage" not in str(refused.value), refused.value
 
 
 def _cmdline(pid: str) -> str:

@@ -135,8 +135,8 @@ class SinkSpec:
         for name in ("memory_limit", "server_memory_limit"):
             problem = memory_limit_problem(getattr(self, name))
             if problem is not True:
-                raise SinkError(f"{name} {getattr(self, name)!r} is not a memory limit: must be "
-                                f"{problem or MEMORY_LIMIT_RULE}")
+                raise SinkError(f"{name} {getattr(self, name)!r} is not a memory limit: "
+                                + (problem if isinstance(problem, str) else f"must be {MEMORY_LIMIT_RULE}"))
 
 
 def spec_from_parameters(params: Mapping[str, Any]) -> SinkSpec:

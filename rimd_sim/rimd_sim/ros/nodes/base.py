@@ -215,7 +215,7 @@ def params_file_problem(node: Node, args: Sequence[str]) -> str | None:
     for path in [args[i + 1] for i, arg in enumerate(args[:-1]) if arg == "--params-file"]:
         try:
             doc = read_yaml(path, what="parameter file")
-        except InputError as exc:   # rcl has read the file: what is left is a key given twice
+        except InputError as exc:   # rcl took the file: a key given twice, or the file gone since
             return str(exc)
         key = misapplied_section(doc, base, fqn)
         if key is not None:
