@@ -345,7 +345,7 @@ class RigSimulator:
         readings = {}
         for name in CHANNEL_NAMES:
             first = parts[0].channels[name][0]
-            raw = np.concatenate([p.channels[name][1] for p in parts])
+            raw = _joined([p.channels[name][1] for p in parts])
             rate = rates[name]
             x, clipped = self._instruments[name].measure_mask(self._faults.pre(name, first, raw))
             x, clipped = self._faults.post(name, first, x, clipped)
@@ -368,7 +368,7 @@ class RigSimulator:
             cap_rate = Fraction(repr(self._capture.config.sample_rate))
         truth_all = None
         if parts[0].truth is not None:
-            truth_all = (parts[0].truth[0], np.concatenate([_truth(p)[1] for p in parts], axis=1))
+            truth_all = (parts[0].truth[0], _joined([_truth(p)[1] for p in parts], axis=1))
             truth_cuts = _split_index(truth_all[0], truth_all[1].shape[1],
                                       _cuts(ratios, truth_rate))
         impacts = self._reported(sorted([i for p in parts for i in p.impacts] + extra, key=lambda i: i.index))
@@ -413,6 +413,11 @@ class RigSimulator:
             out.append(imp._replace(index=imp.index - self._resting) if self._resting else imp)
         del self._placed[:-1]   # only the last placement can still start a contact
         return out
+
+
+def _joined(arrays: list[np.ndarray], axis: int = 0) -> np.ndarray:
+    """The model's arrays of a pass end to end: the only one itself (the model made it for this pass alone)."""
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays, axis=axis)
 
 
 def _truth(part: ModelOutput) -> tuple[int, np.ndarray]:

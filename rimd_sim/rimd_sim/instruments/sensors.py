@@ -24,7 +24,9 @@ from rimd_sim.settings.config import CHANNEL_NAMES, ChannelConfig
 __all__ = ["Instrument", "Reading"]
 
 
-@njit(cache=True, nogil=True)
+# The compiled functions here keep the GIL: a call takes microseconds on the simulator's pacing thread, and a
+# release there would hand the GIL to another thread of the node that the pacing thread must then wait for.
+@njit(cache=True)
 def _sos_filter(sos, x, zi):  # pragma: no cover - compiled
     """In-place cascade of biquads (direct form II transposed), state ``zi`` carried between calls.
 
@@ -42,6 +44,43 @@ def _sos_filter(sos, x, zi):  # pragma: no cover - compiled
             x[i] = yi
         zi[s, 0] = z0
         zi[s, 1] = z1
+
+
+@njit(cache=True, _nrt=False)  # type: ignore[call-overload]  # _nrt: numba's option (model/jit.py)
+def _read(values, x, sos, zi, noise, noise_std, resolution, range_min, range_max, clipped):  # pragma: no cover
+    """The chain of the module docstring on one stretch, in one compiled call: the readings of ``values`` in ``x``.
+
+    ``sos`` with no rows: no filter; ``noise`` empty: no noise (else one standard normal per sample, scaled by
+    ``noise_std``); ``resolution`` 0: no quantisation. ``clipped`` receives the mask of the samples clipped at a
+    range end; returns how many there are. Each step is the numpy expression it replaces, operation for operation
+    (no fused multiply-add), so the readings are bit for bit those of the numpy chain.
+    """
+    n = values.shape[0]
+    for i in range(n):
+        x[i] = values[i]
+    if sos.shape[0]:
+        _sos_filter(sos, x, zi)
+    if noise.shape[0]:
+        for i in range(n):
+            x[i] += noise_std * noise[i]
+    count = 0
+    for i in range(n):
+        v = x[i]
+        if resolution > 0.0:
+            v = np.rint(v / resolution) * resolution
+        out = v < range_min or v > range_max
+        clipped[i] = out
+        if out:
+            count += 1
+            v = min(max(v, range_min), range_max)
+        x[i] = v
+    return count
+
+
+#: The filter of a channel without one: no section (``_read`` skips it).
+_NO_SOS = np.zeros((0, 6))
+_NO_ZI = np.zeros((0, 2))
+_NO_NOISE = np.zeros(0)
 
 
 class Reading:
@@ -121,16 +160,14 @@ class Instrument:
 
     def _measure(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         ch = self._channel
-        x = np.array(values, dtype=np.float64)
-        if self._sos is not None and x.size:
-            _sos_filter(self._sos, x, self._zi)
-        if self._noise and ch.noise_std > 0.0 and x.size:
-            x += ch.noise_std * self._rng.standard_normal(x.size)
-        if ch.resolution > 0.0:
-            np.round(x / ch.resolution, out=x)
-            x *= ch.resolution
-        clipped = (x < ch.range_min) | (x > ch.range_max)
-        if not clipped.any():
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        n = values.size
+        x = np.empty(n)
+        clipped = np.empty(n, dtype=np.bool_)
+        if not n:
             return x, None
-        np.clip(x, ch.range_min, ch.range_max, out=x)
-        return x, clipped
+        noise = (self._rng.standard_normal(n) if self._noise and ch.noise_std > 0.0 else _NO_NOISE)
+        sos, zi = (self._sos, self._zi) if self._sos is not None else (_NO_SOS, _NO_ZI)
+        if _read(values, x, sos, zi, noise, ch.noise_std, ch.resolution, ch.range_min, ch.range_max, clipped):
+            return x, clipped
+        return x, None

@@ -445,9 +445,11 @@ class RigModel:
         t_start = self._time
         self._seg_prev = (self._fs[k.F_MT0:k.F_MWSET + 1].copy(), int(self._is[k.I_CYC]))
         t_num, t_den = t_stop.as_integer_ratio()
-        stops = np.array([samples_before_ratio(t_num, t_den, *r) for r in self._rate_ratios], dtype=np.int64)
+        stop_list = [samples_before_ratio(t_num, t_den, *r) for r in self._rate_ratios]
+        stops = np.array(stop_list, dtype=np.int64)
         first = self._ch_next.copy()
-        ch_out = np.empty((len(self._rates), int((stops - first).max()) if len(self._rates) else 0))
+        ch_out = np.empty((len(stop_list), max((s - f for s, f in zip(stop_list, first.tolist(), strict=True)),
+                                               default=0)))
         if self._want_truth:
             tr_stop = np.array([samples_before_ratio(t_num, t_den, *self._truth_ratio)], dtype=np.int64)
         else:
@@ -456,9 +458,12 @@ class RigModel:
         tr_out = np.empty((k.N_TRUTH, int(tr_stop[0]) - tr_first))
         impacts: list[Impact] = []
         strobe: list[StroboPoint] = []
-        cycles = float(t_stop - t_start) * max(self._fs[k.F_MW0], self._fs[k.F_MWSET])
         imp_out = np.empty((64, k.N_RECORD))
-        st_out = np.empty((int(min(cycles, 1e5)) + 8 if self._want_strobe else 0, k.N_STROBE + self._physics.n_modes))
+        if self._want_strobe:
+            cycles = float(t_stop - t_start) * max(self._fs[k.F_MW0], self._fs[k.F_MWSET])
+            st_out = np.empty((int(min(cycles, 1e5)) + 8, k.N_STROBE + self._physics.n_modes))
+        else:
+            st_out = np.empty((0, k.N_STROBE + self._physics.n_modes))
         tr_base = np.array([tr_first], dtype=np.int64)
         self._fs[k.F_THMAX] = abs(self._yb[0])
         while True:
@@ -468,10 +473,13 @@ class RigModel:
                                           float(t_stop), self._ch_rate, self._ch_qty, self._ch_next, stops, first,
                                           ch_out, float(self._truth_rate), self._tr_next, tr_stop, tr_base, tr_out,
                                           imp_out, st_out)
-            impacts.extend(Impact(*_record(row)) for row in imp_out[: self._is[k.I_IMPOUT]])
-            strobe.extend(StroboPoint(float(r[k.S_T]), float(r[k.S_THETA]), float(r[k.S_OMEGA]), int(r[k.S_CYCLE]),
-                                      tuple(r[k.S_MODES:].tolist()))
-                          for r in st_out[: self._is[k.I_STROUT]])
+            n_imp, n_st = int(self._is[k.I_IMPOUT]), int(self._is[k.I_STROUT])
+            if n_imp:
+                impacts.extend(Impact(*_record(row)) for row in imp_out[:n_imp])
+            if n_st:
+                strobe.extend(StroboPoint(float(r[k.S_T]), float(r[k.S_THETA]), float(r[k.S_OMEGA]),
+                                          int(r[k.S_CYCLE]), tuple(r[k.S_MODES:].tolist()))
+                              for r in st_out[:n_st])
             if status == k.ST_OK:
                 break
             if status == k.ST_IMPACTS_FULL:

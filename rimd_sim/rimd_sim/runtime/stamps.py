@@ -13,8 +13,15 @@ __all__ = ["block_end_stamps", "sample_stamp_ns", "show_stamp", "stamp_ns", "sta
 
 
 def stamp_ns(t0_ns: int, t: Fraction) -> int:
-    """ROS time in integer nanoseconds of simulation time ``t`` (exact, rounded to the nearest ns)."""
-    return t0_ns + round(t * 1_000_000_000)
+    """ROS time in integer nanoseconds of simulation time ``t`` (exact, rounded to the nearest ns, half to even).
+
+    In integers, as ``round(t * 1_000_000_000)`` rounds a Fraction, without the Fractions it would build.
+    """
+    num, den = t.as_integer_ratio()
+    q, r = divmod(num * 1_000_000_000, den)
+    if 2 * r > den or (2 * r == den and q & 1):
+        q += 1
+    return t0_ns + q
 
 
 def block_end_stamps(t0_ns: int, first: int, count: int, rate: Fraction) -> list[int]:
