@@ -29,8 +29,8 @@ Printed for each layout (and written as JSON with --json):
 
 With ``--rerun both``, each layout runs twice, its Rerun bridge sending the display stream (the default, as ``make
 run``: each channel's min and max sample per 5 ms, docs/rerun.md) and then every sample (``rimd rig
---rerun-full-rate``), and the whole rig's CPU of the two is printed side by side; ``--rerun full`` measures full
-rate only.
+--rerun-full-rate``), and the whole rig's CPU of the two is printed side by side (the display stream's figures are
+the ones recorded for report.py); ``--rerun full`` measures full rate only.
 
 With ``--compare DIR`` (another checkout, set up: a worktree of an older commit), the rig of --only's layout
 (default composed) of this tree and of DIR's package run alternately (ABBA...), --rounds times each, in one run, and the
@@ -328,6 +328,7 @@ def main() -> None:
         for layout, by_stream in streams.items():
             display, full = (rig_total(by_stream[s]["processes"])[0] for s in ("display", "full"))
             print(f"  {layout:<9} {display:.1f} % against {full:.1f} % of one core ({display - full:+.1f} points)")
+        record_figures({layout: by_stream["display"] for layout, by_stream in streams.items()})   # make run's
         soak.write_json(streams, args.json)
         return
     results = {layout: measure(layout, args, block_rate, stream=args.rerun) for layout in layouts}
