@@ -4,8 +4,8 @@ A node allocates and frees at the rig's pace for as long as it runs: numpy array
 a second, the Rerun SDK's Arrow buffers, DDS samples. glibc's ``malloc`` keeps what is freed inside its arenas
 mapped, and across hours the pages the process has touched creep up although nothing is kept: the resident size
 of the composed rig grew by megabytes an hour that ``malloc_trim(0)`` gives straight back (docs/benchmarks.md,
-"Soak"). ``malloc_trim(0)`` returns every whole free page of every arena (``madvise``); it takes about a
-millisecond here and holds each arena's lock only while it walks that arena.
+"Soak"). ``malloc_trim(0)`` returns every whole free page of every arena (``madvise``), holding each arena's lock
+only while it walks that arena: once a minute, it is nothing beside the rig's work.
 
 :func:`start` runs it every :data:`PERIOD_S` on a thread of its own (``rimd-heap``) in a node process (the node
 executables, ``rimd node``). Where the C library has no ``malloc_trim`` (not glibc), nothing runs. With
@@ -16,13 +16,13 @@ own behaviour.
 from __future__ import annotations
 
 import ctypes
-import sys
 import threading
 from collections.abc import Callable
 from functools import cache
+from typing import Any
 
 from rimd_sim.runtime.plain import plain
-from rimd_sim.runtime.threads import named_thread
+from rimd_sim.runtime.threads import libc_function, named_thread
 
 __all__ = ["OS_NAME", "PERIOD_S", "return_free_pages", "start"]
 
@@ -34,12 +34,9 @@ OS_NAME = "rimd-heap"
 
 @cache
 def _malloc_trim() -> Callable[[int], int] | None:
-    """The C library's ``malloc_trim`` (glibc's), found among the process's own symbols, or None without one."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        trim = ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError):
+    """The C library's ``malloc_trim`` (glibc's), its argument typed, or None without one."""
+    trim: Any = libc_function("malloc_trim")   # a ctypes function: its argument and result types are set here
+    if trim is None:
         return None
     trim.argtypes = [ctypes.c_size_t]
     trim.restype = ctypes.c_int

@@ -19,7 +19,7 @@ from functools import cache
 
 from rimd_sim.runtime.plain import plain
 
-__all__ = ["OS_NAMES", "named_thread", "set_os_name"]
+__all__ = ["OS_NAMES", "libc_function", "named_thread", "set_os_name"]
 
 #: The kernel's longest thread name in bytes (``TASK_COMM_LEN`` 16, with its terminating zero).
 MAX_OS_NAME = 15
@@ -38,8 +38,8 @@ OS_NAMES = {
 
 
 @cache
-def _prctl() -> Callable[..., int] | None:
-    """The C library's ``prctl``, or None where there is none.
+def libc_function(name: str) -> Callable[..., int] | None:
+    """The Linux C library's function ``name``, or None where there is no such function (or no Linux).
 
     Found among the process's own symbols (``dlopen(NULL)``; the C library's are part of them), not through
     ``ctypes.util.find_library``, which runs ``ldconfig -p`` in a child process: a fork from the thread starting.
@@ -47,14 +47,14 @@ def _prctl() -> Callable[..., int] | None:
     if not sys.platform.startswith("linux"):
         return None
     try:
-        return ctypes.CDLL(None, use_errno=True).prctl
+        return getattr(ctypes.CDLL(None, use_errno=True), name)
     except (OSError, AttributeError):
         return None
 
 
 def set_os_name(name: str) -> bool:
     """Name the calling thread for the kernel (its first 15 bytes, UTF-8); False where the system has no way."""
-    prctl = _prctl()
+    prctl = libc_function("prctl")
     if prctl is None:
         return False
     raw = name.encode("utf-8", errors="replace")[:MAX_OS_NAME]
