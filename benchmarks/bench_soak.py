@@ -22,7 +22,8 @@ Figures printed (and written as JSON with --json; MB = 10^6 bytes, ms = 10^-3 s)
     minute (runs of less than two minutes: over their second half, said in the printout; so short a fit is
     noise, not a verdict). The memory goal is judged for every process of the rig. The Rerun server keeps the
     data a viewer that connects later receives, up to the bridge's server_memory_limit (config/rimd.yaml), so it
-    grows until that is full, by design; it is judged all the same, with that note;
+    grows until that is full, by design; it is judged all the same, with that note. Beside it, the slope over
+    the run's second half (the steady state, once such a history is full), not judged;
   * loss, from the recording, every message read: each block topic (SampleBlock / RigState) must start at
     first_index 0 and be contiguous (each block's first_index = the previous one's + its sample count):
     messages, samples, holes, lost samples, and the simulated time where it ends (all topics end at the same
@@ -262,6 +263,12 @@ def _self_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def _slope(s: Series, picks: list[int]) -> float:
+    """The least-squares slope of RSS over the samples ``picks``, in MB per hour."""
+    t_h = np.array([s.t[i] for i in picks]) / 3600.0
+    return float(np.polyfit(t_h, np.array([s.rss[i] for i in picks]), 1)[0])
+
+
 def process_figures(s: Series) -> dict:
     """CPU and memory figures of one process's samples."""
     out: dict = {"pid": s.pid, "samples": len(s.t)}
@@ -280,9 +287,11 @@ def process_figures(s: Series) -> dict:
         after = [i for i, t in enumerate(s.t) if t - s.t[0] >= span / 2]
         out["fit"] = f"second half of a short run ({span / 2:.0f} s on)"
     if len(after) >= 2:
-        t_h = np.array([s.t[i] for i in after]) / 3600.0
-        out["growth_mb_per_h"] = float(np.polyfit(t_h, np.array([s.rss[i] for i in after]), 1)[0])
+        out["growth_mb_per_h"] = _slope(s, after)
         out["fit_window_s"] = [s.t[after[0]], s.t[after[-1]]]
+    half = [i for i, t in enumerate(s.t) if t - s.t[0] >= span / 2]
+    if len(half) >= 2:
+        out["growth_second_half_mb_per_h"] = _slope(s, half)
     out["rss_series"] = [[round(t, 1), round(r, 3)] for t, r in zip(s.t, s.rss, strict=True)]
     return out
 
@@ -605,9 +614,10 @@ def report(result: dict) -> None:
           f"ROS_DOMAIN_ID {run['domain_id']} on localhost; rig exit status {run['rig_exit_status']}")
 
     print(f"\nprocesses: CPU in % of one core (mean over the run; worst {run['period']:g} s period); RSS in MB "
-          f"(10^6 bytes); growth = least-squares slope of RSS in MB per hour")
+          f"(10^6 bytes); growth = least-squares slope of RSS in MB per hour (judged), and over the run's "
+          f"second half")
     print(f"  {'process':<20} {'pid':>7} {'CPU mean':>9} {'worst':>7} {'RSS start':>10} {'end':>8} {'peak':>8} "
-          f"{'growth MB/h':>12}  fit over")
+          f"{'growth MB/h':>12} {'2nd half':>9}  fit over")
     rig = rig_names(procs)
     for name in [*rig, BENCH]:
         p = procs[name]
@@ -616,7 +626,8 @@ def report(result: dict) -> None:
             continue
         print(f"  {name:<20} {p['pid']:>7} {_f(p['cpu_percent']):>8}% {_f(p['cpu_percent_worst_period']):>6}% "
               f"{_f(p['rss_start_mb']):>10} {_f(p['rss_end_mb']):>8} {_f(p['rss_peak_mb']):>8} "
-              f"{_f(p.get('growth_mb_per_h'), '+.1f'):>12}  {p.get('fit', '') if name != BENCH else ''}")
+              f"{_f(p.get('growth_mb_per_h'), '+.1f'):>12} {_f(p.get('growth_second_half_mb_per_h'), '+.1f'):>9}"
+              f"  {p.get('fit', '') if name != BENCH else ''}")
         if name == rig[-1]:
             known = [procs[n] for n in rig if procs[n].get("cpu_percent") is not None]
             print(f"  {'all rig processes':<20} {'':>7} {_f(sum(q['cpu_percent'] for q in known)):>8}% {'':>7} "
@@ -694,8 +705,10 @@ def goals(result: dict) -> dict:
     expected = node_processes(result["run"].get("separate", False))
     for name in dict.fromkeys([*expected, *rig_names(procs)]):   # every node process, found or not, and the rest
         growth = procs.get(name, {}).get("growth_mb_per_h")
+        steady = procs.get(name, {}).get("growth_second_half_mb_per_h")
         note = (f"; it holds the data for viewers that connect later up to the bridge's server_memory_limit "
-                f"({rerun_memory_limit()}), so it grows until then by design" if name == RERUN_SERVER else "")
+                f"({rerun_memory_limit()}), so it grows until then by design; over the run's second half "
+                f"{_f(steady, '+.1f')} MB/h" if name == RERUN_SERVER else "")
         out[f"memory {name}"] = {
             "goal": f"memory growth <= {GOAL_GROWTH_MB_PER_H:g} MB/h, {name}",
             "met": growth is not None and growth <= GOAL_GROWTH_MB_PER_H,
@@ -733,6 +746,8 @@ def record_figures(result: dict) -> None:
     if server.get("rss_end_mb") is not None:
         record("soak", "Rerun server: memory growth", server.get("growth_mb_per_h"), "MB/h",
                f"<= {GOAL_GROWTH_MB_PER_H:g}")
+        record("soak", "the same, second half",
+               server.get("growth_second_half_mb_per_h"), "MB/h")
         record("soak", "Rerun server's memory at the end", server["rss_end_mb"], "MB")
 
 
