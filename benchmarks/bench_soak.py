@@ -280,16 +280,16 @@ def process_figures(s: Series) -> dict:
                for t0, t1, c0, c1 in zip(s.t, s.t[1:], s.cpu, s.cpu[1:], strict=False) if t1 > t0]
     out["cpu_percent_worst_period"] = max(windows) if windows else None
     out["rss_start_mb"], out["rss_end_mb"], out["rss_peak_mb"] = s.rss[0], s.rss[-1], max(s.rss)
+    half = [i for i, t in enumerate(s.t) if t - s.t[0] >= span / 2]
     after = [i for i, t in enumerate(s.t) if t - s.t[0] >= WARMUP_S]
     if len(after) >= 3 and s.t[after[-1]] - s.t[after[0]] >= WARMUP_S:
         out["fit"] = f"samples after the first {WARMUP_S:.0f} s"
     else:   # a short run: fit its second half
-        after = [i for i, t in enumerate(s.t) if t - s.t[0] >= span / 2]
+        after = half
         out["fit"] = f"second half of a short run ({span / 2:.0f} s on)"
     if len(after) >= 2:
         out["growth_mb_per_h"] = _slope(s, after)
         out["fit_window_s"] = [s.t[after[0]], s.t[after[-1]]]
-    half = [i for i, t in enumerate(s.t) if t - s.t[0] >= span / 2]
     if len(half) >= 2:
         out["growth_second_half_mb_per_h"] = _slope(s, half)
     out["rss_series"] = [[round(t, 1), round(r, 3)] for t, r in zip(s.t, s.rss, strict=True)]
