@@ -1,4 +1,5 @@
-"""A node process returns the C heap's free pages (:mod:`rimd_sim.runtime.heap`): the effect, the thread, the switch."""
+"""A node process keeps its C heap flat (:mod:`rimd_sim.runtime.heap`): the mmap threshold, the free pages returned,
+the thread, the switch."""
 
 from __future__ import annotations
 
@@ -24,6 +25,41 @@ del blocks
 before = rss_mb()
 print(before, rss_mb() if return_free_pages() else before)
 """
+
+
+LARGE_BUFFER = """
+import ctypes, sys
+from rimd_sim.runtime.heap import fix_mmap_threshold
+
+class MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype = MallInfo2
+if sys.argv[1] == "fixed":
+    assert fix_mmap_threshold()
+bytearray(1 << 20)                          # a 1 MiB buffer, mapped and freed: glibc raises its threshold past it
+mapped = libc.mallinfo2().hblks
+chunk = bytearray(512 * 1024)             # a recorder chunk's size
+print(libc.mallinfo2().hblks - mapped)
+"""
+
+
+@pytest.mark.process
+@pytest.mark.parametrize(("mode", "mappings"), [("default", 0), ("fixed", 1)])
+def test_with_the_threshold_fixed_a_large_buffer_gets_a_mapping_of_its_own(mode, mappings):
+    """By default a freed 1 MiB buffer sends the next 512 KiB one into the arena; fixed, it is mapped whole."""
+    result = subprocess.run([sys.executable, "-c", LARGE_BUFFER, mode], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert int(result.stdout) == mappings
+
+
+def test_a_threshold_glibc_refuses_is_refused():
+    with pytest.raises(ValueError, match="mmap threshold 0 refused"):
+        heap.fix_mmap_threshold(0)
 
 
 @pytest.mark.process

@@ -21,8 +21,9 @@ behaviour). Each process reads it where it chooses the piece, as it starts; ``ri
   while a process imports, its imports frozen). Plain: CPython's defaults. Read by the collector's functions.
 * ``threads``: the rig's threads named for the kernel (:mod:`rimd_sim.runtime.threads`). Plain: named for
   Python only. Read by :func:`rimd_sim.runtime.threads.named_thread`.
-* ``heap``: a node process gives the C heap's free pages back once a minute (:mod:`rimd_sim.runtime.heap`).
-  Plain: the allocator keeps them. Read by :func:`rimd_sim.runtime.heap.start`.
+* ``heap``: a node process fixes glibc's mmap threshold and gives the C heap's free pages back once a minute
+  (:mod:`rimd_sim.runtime.heap`). Plain: the allocator's defaults, which keep them. Read by
+  :func:`rimd_sim.runtime.heap.start`.
 
 A name that is not a piece is refused (:class:`~rimd_sim.errors.InputError`, naming the valid ones): a node
 prints it and exits 2 before it starts, ``rimd`` exits 2.
