@@ -40,9 +40,9 @@ libc = ctypes.CDLL(None)
 libc.mallinfo2.restype = MallInfo2
 if sys.argv[1] == "fixed":
     assert fix_mmap_threshold()
-bytearray(1 << 20)                          # a 1 MiB buffer, mapped and freed: glibc raises its threshold past it
+bytearray(1 << 20)              # a 1 MiB buffer, mapped and freed: glibc raises its threshold past it
 mapped = libc.mallinfo2().hblks
-chunk = bytearray(512 * 1024)             # a recorder chunk's size
+chunk = bytearray(512 * 1024)   # a smaller one, as the recorder's next chunk
 print(libc.mallinfo2().hblks - mapped)
 """
 

@@ -64,6 +64,17 @@ def return_free_pages() -> bool:
     return trim is not None and trim(0) == 1
 
 
+@cache
+def _mallopt() -> Callable[[int, int], int] | None:
+    """The C library's ``mallopt`` (glibc's), its arguments typed, or None without one."""
+    mallopt: Any = libc_function("mallopt")   # a ctypes function: its argument and result types are set here
+    if mallopt is None:
+        return None
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    return mallopt
+
+
 def fix_mmap_threshold(size: int = MMAP_THRESHOLD) -> bool:
     """Serve every buffer of at least ``size`` bytes from a mapping of its own, for good; False without glibc.
 
@@ -72,12 +83,8 @@ def fix_mmap_threshold(size: int = MMAP_THRESHOLD) -> bool:
     """
     if not 0 < size <= 32 * 1024 * 1024:
         raise ValueError(f"mmap threshold {size} refused: must be 1 to 33554432 bytes")
-    mallopt: Any = libc_function("mallopt")
-    if mallopt is None:
-        return False
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    mallopt.restype = ctypes.c_int
-    return mallopt(_M_MMAP_THRESHOLD, size) == 1
+    mallopt = _mallopt()
+    return mallopt is not None and mallopt(_M_MMAP_THRESHOLD, size) == 1
 
 
 def start(period: float = PERIOD_S) -> threading.Event | None:
