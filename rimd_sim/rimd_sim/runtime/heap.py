@@ -48,14 +48,19 @@ OS_NAME = "rimd-heap"
 
 
 @cache
-def _malloc_trim() -> Callable[[int], int] | None:
-    """The C library's ``malloc_trim`` (glibc's), its argument typed, or None without one."""
-    trim: Any = libc_function("malloc_trim")   # a ctypes function: its argument and result types are set here
-    if trim is None:
+def _glibc(name: str, *argtypes: Any) -> Callable[..., int] | None:
+    """The C library's function ``name`` (glibc's), its arguments typed and its result an int; None without one."""
+    function: Any = libc_function(name)   # a ctypes function: its argument and result types are set here
+    if function is None:
         return None
-    trim.argtypes = [ctypes.c_size_t]
-    trim.restype = ctypes.c_int
-    return trim
+    function.argtypes = list(argtypes)
+    function.restype = ctypes.c_int
+    return function
+
+
+def _malloc_trim() -> Callable[[int], int] | None:
+    """The C library's ``malloc_trim(size_t pad)``, or None without one."""
+    return _glibc("malloc_trim", ctypes.c_size_t)
 
 
 def return_free_pages() -> bool:
@@ -64,15 +69,9 @@ def return_free_pages() -> bool:
     return trim is not None and trim(0) == 1
 
 
-@cache
 def _mallopt() -> Callable[[int, int], int] | None:
-    """The C library's ``mallopt`` (glibc's), its arguments typed, or None without one."""
-    mallopt: Any = libc_function("mallopt")   # a ctypes function: its argument and result types are set here
-    if mallopt is None:
-        return None
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    mallopt.restype = ctypes.c_int
-    return mallopt
+    """The C library's ``mallopt(int param, int value)``, or None without one."""
+    return _glibc("mallopt", ctypes.c_int, ctypes.c_int)
 
 
 def fix_mmap_threshold(size: int = MMAP_THRESHOLD) -> bool:
