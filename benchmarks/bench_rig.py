@@ -32,6 +32,11 @@ run``: each channel's min and max sample per 5 ms, docs/rerun.md) and then every
 --rerun-full-rate``), and the whole rig's CPU of the two is printed side by side (the display stream's figures are
 the ones recorded for report.py); ``--rerun full`` measures full rate only.
 
+With ``--block-rate R``, the composed rig runs once more after the default ones, with ``--set block_rate=R``
+(every sample as before, in fewer and longer blocks), and its whole rig's CPU is printed against the default's:
+most of the rig's CPU is paid per block, not per sample (a pass of Python code in the simulator, the recorder and the
+bridge), so this is the lever for a lighter rig, at the cost of longer blocks (a consumer gets data later).
+
 With ``--compare DIR`` (another checkout, set up: a worktree of an older commit), the rig of --only's layout
 (default composed) of this tree and of DIR's package run alternately (ABBA...), --rounds times each, in one run, and the
 whole rig's CPU is printed per run, as medians and as the median ratio DIR / this: on a shared machine whose speed
@@ -39,7 +44,7 @@ drifts within hours, a before/after figure that means something.
 
 Run (after ``source env.sh``, from the repository root; the machine otherwise idle):
     python benchmarks/bench_rig.py [--seconds 120] [--json rig.json] [--keep] [--only composed|separate]
-                                   [--rerun display|full|both] [--compare DIR [--rounds 3]]
+                                   [--rerun display|full|both] [--block-rate R] [--compare DIR [--rounds 3]]
 The exit status is 0 whenever the rigs ran and were measured, whatever the verdicts.
 """
 
@@ -158,7 +163,8 @@ def stop_external(proc: subprocess.Popen, tmp: Path) -> dict:
 
 def report(result: dict) -> None:
     run, procs, flow = result["run"], result["processes"], result["traffic"]
-    options = " ".join((*LAYOUTS[run['layout']], *STREAMS[run.get('rerun_stream', 'display')]))
+    options = " ".join((*LAYOUTS[run["layout"]], *STREAMS[run.get("rerun_stream", "display")],
+                        *run.get("settings", ())))
     print(f"\n{run['layout']}, Rerun {run.get('rerun_stream', 'display')}: the default rig (`rimd rig"
           f"{' ' + options if options else ''}`, "
           f"config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
@@ -193,13 +199,13 @@ def report(result: dict) -> None:
 
 
 def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path | None = None,
-            stream: str = "display") -> dict:
+            stream: str = "display", settings: tuple[str, ...] = ()) -> dict:
     """One rig of ``layout`` (composed or separate) with the external subscriber, measured; its figures.
 
     ``tree``: the checkout whose package runs (default this one; :func:`bench_soak.start_rig`). ``stream``: the
-    Rerun bridge's (:data:`STREAMS`).
+    Rerun bridge's (:data:`STREAMS`). ``settings``: more options of ``rimd rig`` (``--set NAME=VALUE``).
     """
-    options = (*LAYOUTS[layout], *STREAMS[stream])
+    options = (*LAYOUTS[layout], *STREAMS[stream], *settings)
     from rimd_sim.io.reader import RecordingError
 
     with soak.RigRun.open(f"bench_rig_{layout}_", args.keep) as run:
@@ -231,7 +237,8 @@ def measure(layout: str, args: argparse.Namespace, block_rate: float, tree: Path
         finally:
             counts = stop_external(external, tmp)
         data_seconds = time.monotonic() - started   # about the simulated time recorded (real time)
-        result: dict = {"run": {"layout": layout, "rerun_stream": stream, "seconds": wall, "warmup": args.warmup,
+        result: dict = {"run": {"layout": layout, "rerun_stream": stream, "settings": list(settings),
+                                "seconds": wall, "warmup": args.warmup,
                                 "period": args.period, "domain_id": run.domain_id, "rig_exit_status": status,
                                 "from_sample_0": from_sample_0, "tmp": str(tmp)}}
         result["processes"] = {name: soak.process_figures(s) for name, s in series.items()}
@@ -292,6 +299,19 @@ def compare(args: argparse.Namespace, block_rate: float) -> dict:
     return {"layout": layout, "runs": runs, "totals": totals, "ratios": ratios}
 
 
+def by_block_rate(args: argparse.Namespace, default_rate: float, default: dict | None) -> dict:
+    """The composed rig at ``args.block_rate`` blocks/s, printed against ``default`` (the same at the config's rate)."""
+    rate = args.block_rate
+    result = measure("composed", args, rate, stream=args.rerun, settings=("--set", f"block_rate={rate:g}"))
+    total = rig_total(result["processes"])[0]
+    print(f"\nthe whole composed rig at {rate:g} blocks/s: {total:.1f} % of one core", end="")
+    if default is not None:
+        base = rig_total(default["processes"])[0]
+        print(f" against {base:.1f} % at {default_rate:g} blocks/s, in this run (ratio {total / base:.2f})", end="")
+    print()
+    return result
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=120.0, help="measured wall time per rig (default 120)")
@@ -303,12 +323,18 @@ def main() -> None:
     parser.add_argument("--rerun", choices=(*STREAMS, "both"), default="display",
                         help="the Rerun bridge's stream: display (default, as make run), full (every sample: "
                              "rimd rig --rerun-full-rate), or both, one after the other, compared")
+    parser.add_argument("--block-rate", type=float, default=None, metavar="R",
+                        help="also measure the composed rig at R blocks/s (rimd rig --set block_rate=R), in this run")
     soak.add_rig_arguments(parser)
     args = parser.parse_args()
     if args.seconds <= 0 or args.period <= 0 or args.warmup < 0 or args.rounds < 1:
         parser.error("--seconds, --period and --rounds must be positive, --warmup not negative")
     if args.compare is not None and args.rerun == "both":
         parser.error("--compare measures one stream: --rerun display or full")
+    if args.block_rate is not None and (args.compare is not None or args.rerun == "both"):
+        parser.error("--block-rate goes with neither --compare nor --rerun both")
+    if args.block_rate is not None and not 1 <= args.block_rate <= 10_000:
+        parser.error(f"--block-rate must be 1 to 10000 blocks/s (as the config's block_rate), not {args.block_rate:g}")
     if args.compare is not None:
         from bench_latency import check_tree
 
@@ -336,8 +362,15 @@ def main() -> None:
         composed, separate = (rig_total(results[n]["processes"])[0] for n in ("composed", "separate"))
         print(f"\nthe whole rig, composed against separate processes, in this run: {composed:.1f} % against "
               f"{separate:.1f} % of one core ({composed - separate:+.1f} points)")
-    if args.rerun == "display":   # the rig as make run starts it
-        record_figures(results)
+    if args.block_rate is not None:
+        results["block_rate"] = by_block_rate(args, block_rate, results.get("composed"))
+    if args.rerun == "display":   # the rig as make run starts it, then the same at --block-rate
+        record_figures({layout: results[layout] for layout in layouts})
+        if args.block_rate is not None:
+            from _figures import record
+
+            record("rig", f"composed at {args.block_rate:g} blocks/s: whole rig",
+                   rig_total(results["block_rate"]["processes"])[0], "%")
     soak.write_json(results, args.json)
 
 

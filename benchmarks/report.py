@@ -106,7 +106,7 @@ class Bench:
 BENCHES = (
     Bench("core", "bench_core.py", ("--seconds", "30")),
     Bench("structural", "bench_structural.py", ("--seconds", "30")),
-    Bench("rig", "bench_rig.py", ("--seconds", "60", "--warmup", "10")),
+    Bench("rig", "bench_rig.py", ("--seconds", "60", "--warmup", "10", "--block-rate", "50")),
     Bench("faults", "bench_faults.py"),
     Bench("lockstep", "bench_lockstep.py", ("--seconds", "12", "--warmup", "5")),
     Bench("lockstep_join", "bench_lockstep_join.py", ("--runs", "3")),
