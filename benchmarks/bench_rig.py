@@ -165,7 +165,8 @@ def report(result: dict) -> None:
     run, procs, flow = result["run"], result["processes"], result["traffic"]
     options = " ".join((*LAYOUTS[run["layout"]], *STREAMS[run.get("rerun_stream", "display")],
                         *run.get("settings", ())))
-    print(f"\n{run['layout']}, Rerun {run.get('rerun_stream', 'display')}: the default rig (`rimd rig"
+    print(f"\n{run['layout']}, Rerun {run.get('rerun_stream', 'display')}: the "
+          f"{'rig' if run.get('settings') else 'default rig'} (`rimd rig"
           f"{' ' + options if options else ''}`, "
           f"config/rimd.yaml) at real time: {run['seconds']:.1f} s measured after "
           f"{run['warmup']:g} s of warm-up, from sample 0 "
